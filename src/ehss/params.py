@@ -1,0 +1,803 @@
+"""Parameter sets of the electro-hydraulic servo system (EHSS).
+
+One actuator channel of the shaking table / loading rig is described by frozen,
+keyword-only dataclasses in SI units: servo valve, actuator and fluid, load, sensors,
+the three controllers and the timing of the digital controller. :class:`RigParams`
+holds them all and exposes the derived quantities of the paper's linear model
+(eqs 3–8) as properties.
+
+Two presets exist:
+
+``"default"``
+    The consistent set of the paper's clean reading (PAPER.md §5): 250 kg carried by one
+    actuator (1000 kg table + 1000 kg payload shared by 8 actuators), which with the
+    printed Vt, βe and Ap gives ωh ≈ 32 Hz; a total flow-pressure coefficient
+    Kce = 1.44e-11 m³/(s·Pa) that gives ζh ≈ 0.35; the Moog G761-3004 valve modelled by its
+    rating (38 L/min at 7 MPa valve drop) at Ps = 21 MPa; 1 kHz control rate.
+``"paper"``
+    Table 1 and Table 3 exactly as printed (mt = 5000 kg, Kc = 2e-12 m³/(s·Pa),
+    Kq = 0.00145 (m³/s)/V, the Table 3 gains). It is kept for comparison; taken
+    literally it gives ωh ≈ 7.2 Hz and ζh ≈ 0.12, not the printed 32 Hz / 0.35.
+
+Parameter sets round-trip through TOML (:func:`load_params`, :func:`save_params`);
+variants are made with :func:`dataclasses.replace`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from ehss.errors import ParameterError
+
+__all__ = [
+    "ValveParams",
+    "ActuatorParams",
+    "LoadParams",
+    "SensorParams",
+    "PositionPidParams",
+    "TvcParams",
+    "ForcePidParams",
+    "TimingParams",
+    "RigLimits",
+    "RigParams",
+    "PRESETS",
+    "preset",
+    "load_params",
+    "save_params",
+    "params_to_dict",
+    "params_from_dict",
+    "describe_params",
+]
+
+GRAVITY_M_S2 = 9.80665
+LITRE_PER_MIN_M3_S = 1e-3 / 60.0
+
+
+# --------------------------------------------------------------------------- checks
+def _finite(obj: Any, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ParameterError(
+                f"{type(obj).__name__}.{name}={value!r} must be a real number"
+            )
+        if not math.isfinite(value):
+            raise ParameterError(f"{type(obj).__name__}.{name}={value!r} must be finite")
+
+
+def _positive(obj: Any, *names: str) -> None:
+    _finite(obj, *names)
+    for name in names:
+        value = getattr(obj, name)
+        if value <= 0:
+            raise ParameterError(f"{type(obj).__name__}.{name}={value!r} must be > 0")
+
+
+def _non_negative(obj: Any, *names: str) -> None:
+    _finite(obj, *names)
+    for name in names:
+        value = getattr(obj, name)
+        if value < 0:
+            raise ParameterError(f"{type(obj).__name__}.{name}={value!r} must be >= 0")
+
+
+def _unit(name: str) -> str:
+    """Unit of a field, read from its name's suffix (used for printing)."""
+    suffixes = {
+        "_m3_s_pa": "m³/(s·Pa)",
+        "_m3_s_v": "(m³/s)/V",
+        "_m3_s": "m³/s",
+        "_m3": "m³",
+        "_m2": "m²",
+        "_kg_m3": "kg/m³",
+        "_kg": "kg",
+        "_pa": "Pa",
+        "_n_s_m": "N·s/m",
+        "_n_m": "N/m",
+        "_n": "N",
+        "_m_s2": "m/s²",
+        "_m_s": "m/s",
+        "_m": "m",
+        "_rad_s": "rad/s",
+        "_hz": "Hz",
+        "_s": "s",
+        "_v_per_m": "V/m",
+        "_v_per_m_s": "V/(m/s)",
+        "_v_per_m_s2": "V/(m/s²)",
+        "_v_per_n": "V/N",
+        "_v_per_m_per_s": "V/(m·s)",
+        "_v_per_n_per_s": "V/(N·s)",
+        "_v_s_per_n": "V·s/N",
+        "_v_s_per_m": "V·s/m",
+        "_v": "V",
+        "_bits": "bit",
+    }
+    for suffix in sorted(suffixes, key=len, reverse=True):
+        if name.endswith(suffix):
+            return suffixes[suffix]
+    return "-"
+
+
+# --------------------------------------------------------------------------- plant
+@dataclass(frozen=True, kw_only=True)
+class ValveParams:
+    """Two-stage servo valve (Moog G761-3004), eqs (1)–(4).
+
+    The spool position is normalised, u ∈ [−1, 1]; the command is a voltage with
+    ``command_full_scale_v`` giving full spool. Flow follows the valve's rating
+    (PAPER.md §5) instead of the paper's inconsistent Kq:
+
+    .. math:: Q = Q_r\\,u\\,\\sqrt{(P_s - \\operatorname{sgn}(u) P_L)/\\Delta p_r}
+
+    Attributes
+    ----------
+    rated_flow_m3_s : float
+        Qr, flow at full spool and the rated valve drop (38 L/min).
+    rated_pressure_drop_pa : float
+        Δp_r, total valve drop at which Qr is rated (7 MPa, both lands).
+    natural_freq_hz : float
+        ωv/2π of the second-order spool dynamics, eq (1).
+    damping : float
+        ζv of eq (1).
+    null_leakage_m3_s_pa : float
+        Kc at null, eq (4): laminar leakage across each metering land. A critically
+        lapped orifice has Kc = 0 at null; real spools leak, and this is the
+        operating-point Kc of the linear model.
+    deadband : float
+        Overlap as a fraction of full spool stroke (0 = critically lapped).
+    null_bias : float
+        Spool offset at zero command, fraction of full stroke.
+    command_full_scale_v : float
+        Command voltage giving u = 1 (Kv = 1/command_full_scale_v in eq (1)).
+    saturate : bool
+        Limit the spool to [−1, 1].
+    """
+
+    rated_flow_m3_s: float = 38.0 * LITRE_PER_MIN_M3_S
+    rated_pressure_drop_pa: float = 7.0e6
+    natural_freq_hz: float = 120.0
+    damping: float = 0.7
+    null_leakage_m3_s_pa: float = 1.44e-11
+    deadband: float = 0.0
+    null_bias: float = 0.0
+    command_full_scale_v: float = 10.0
+    saturate: bool = True
+
+    def __post_init__(self) -> None:
+        _positive(
+            self,
+            "rated_flow_m3_s",
+            "rated_pressure_drop_pa",
+            "natural_freq_hz",
+            "damping",
+            "command_full_scale_v",
+        )
+        _non_negative(self, "null_leakage_m3_s_pa", "deadband")
+        _finite(self, "null_bias")
+        if self.deadband >= 0.5:
+            raise ParameterError(f"ValveParams.deadband={self.deadband!r} must be < 0.5")
+        if abs(self.null_bias) >= 0.5:
+            raise ParameterError(f"ValveParams.null_bias={self.null_bias!r} must be in (-0.5, 0.5)")
+
+    @property
+    def gain_per_v(self) -> float:
+        """Kv of eq (1): normalised spool per volt of command."""
+        return 1.0 / self.command_full_scale_v
+
+    @property
+    def omega_rad_s(self) -> float:
+        """ωv of eq (1), rad/s."""
+        return 2.0 * math.pi * self.natural_freq_hz
+
+
+@dataclass(frozen=True, kw_only=True)
+class ActuatorParams:
+    """Double-rod actuator and hydraulic fluid, eqs (2)–(7).
+
+    Attributes
+    ----------
+    piston_area_m2 : float
+        Ap, annulus area: π/4 (0.07² − 0.05²) = 1.885e-3 m² (70 mm bore, 50 mm rod).
+    total_volume_m3 : float
+        Vt, total compressed volume of both chambers and lines.
+    bulk_modulus_pa : float
+        βe, effective bulk modulus.
+    supply_pressure_pa, return_pressure_pa : float
+        Ps (assumed 21 MPa; not printed) and the tank pressure.
+    internal_leakage_m3_s_pa, external_leakage_m3_s_pa : float
+        Cip and Cep of eq (5); Ctc = Cip + Cep/2.
+    oil_density_kg_m3 : float
+        ρ of eqs (3)–(4); used when Kq is expressed as Cd·w·√(Δp/ρ).
+    stroke_m : float
+        Half stroke: the piston may move in [−stroke_m, +stroke_m] (Table 2, ±100 mm).
+    """
+
+    piston_area_m2: float = math.pi / 4.0 * (0.07**2 - 0.05**2)
+    total_volume_m3: float = 0.96e-3
+    bulk_modulus_pa: float = 6.9e8
+    supply_pressure_pa: float = 21.0e6
+    return_pressure_pa: float = 0.0
+    internal_leakage_m3_s_pa: float = 4.6e-17
+    external_leakage_m3_s_pa: float = 4.6e-17
+    oil_density_kg_m3: float = 870.0
+    stroke_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        _positive(
+            self,
+            "piston_area_m2",
+            "total_volume_m3",
+            "bulk_modulus_pa",
+            "supply_pressure_pa",
+            "oil_density_kg_m3",
+            "stroke_m",
+        )
+        _non_negative(
+            self, "return_pressure_pa", "internal_leakage_m3_s_pa", "external_leakage_m3_s_pa"
+        )
+        if self.return_pressure_pa >= self.supply_pressure_pa:
+            raise ParameterError(
+                f"ActuatorParams.return_pressure_pa={self.return_pressure_pa!r} must be below "
+                f"supply_pressure_pa={self.supply_pressure_pa!r}"
+            )
+        # Each chamber holds Vt/2 at mid-stroke; the piston must not sweep it empty.
+        if self.piston_area_m2 * self.stroke_m >= 0.5 * self.total_volume_m3:
+            raise ParameterError(
+                f"ActuatorParams: piston_area_m2*stroke_m="
+                f"{self.piston_area_m2 * self.stroke_m:.3g} m³ must be below half of "
+                f"total_volume_m3={self.total_volume_m3!r} (a chamber would empty)"
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class LoadParams:
+    """Moving mass, damping, stiffness and the optional nonlinear load effects, eq (6).
+
+    Attributes
+    ----------
+    mass_kg : float
+        mt, mass carried by one actuator (table + payload shared by 8 actuators).
+    damping_n_s_m : float
+        Bp, viscous damping.
+    stiffness_n_m : float
+        K of eq (6) in position and acceleration tests (0 for the free table).
+    specimen_stiffness_n_m : float
+        K of eq (6) when the force loop is closed on a clamped specimen / load cell
+        (Table 1: 2e7 N/m).
+    coulomb_friction_n, stribeck_friction_n, stribeck_velocity_m_s : float
+        Friction Fc + (Fs − Fc)… in the Stribeck form
+        F = sgn(v)[Fc + Fs exp(−(v/vs)²)]; 0 switches friction off.
+    clearance_m : float
+        Total joint clearance (backlash) between rod and table; 0 switches it off.
+    """
+
+    mass_kg: float = 250.0
+    damping_n_s_m: float = 25_000.0
+    stiffness_n_m: float = 0.0
+    specimen_stiffness_n_m: float = 2.0e7
+    coulomb_friction_n: float = 0.0
+    stribeck_friction_n: float = 0.0
+    stribeck_velocity_m_s: float = 0.005
+    clearance_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        _positive(self, "mass_kg", "stribeck_velocity_m_s")
+        _non_negative(
+            self,
+            "damping_n_s_m",
+            "stiffness_n_m",
+            "specimen_stiffness_n_m",
+            "coulomb_friction_n",
+            "stribeck_friction_n",
+            "clearance_m",
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorParams:
+    """LVDT, accelerometer, load cell and converters (PAPER.md §7).
+
+    Each sensor maps its full-scale range to ±10 V on a ``adc_bits`` converter; noise is
+    white with the given RMS in SI units. A noise of 0 and ``quantize=False`` make the
+    sensors ideal.
+
+    Attributes
+    ----------
+    lvdt_range_m : float
+        Displacement at 10 V (±100 mm gives an LSB of about 3 µm at 16 bit).
+    accel_range_m_s2 : float
+        Acceleration at 10 V (±5 g gives an LSB of about 0.15 mg).
+    force_range_n : float
+        Force at 10 V (±1.5 t gives an LSB of about 0.45 N).
+    lvdt_noise_m, accel_noise_m_s2, force_noise_n : float
+        RMS white noise.
+    accel_highpass_hz : float
+        Corner of the accelerometer's AC coupling (first-order high-pass); 0 = DC coupled.
+    adc_bits, dac_bits : int
+        Converter resolutions over ±10 V.
+    quantize : bool
+        Apply ADC and DAC quantisation.
+    """
+
+    lvdt_range_m: float = 0.1
+    accel_range_m_s2: float = 5.0 * GRAVITY_M_S2
+    force_range_n: float = 1500.0 * GRAVITY_M_S2
+    lvdt_noise_m: float = 2.0e-6
+    accel_noise_m_s2: float = 0.01
+    force_noise_n: float = 0.5
+    accel_highpass_hz: float = 0.5
+    adc_bits: int = 16
+    dac_bits: int = 16
+    quantize: bool = True
+
+    def __post_init__(self) -> None:
+        _positive(self, "lvdt_range_m", "accel_range_m_s2", "force_range_n")
+        _non_negative(
+            self, "lvdt_noise_m", "accel_noise_m_s2", "force_noise_n", "accel_highpass_hz"
+        )
+        for name in ("adc_bits", "dac_bits"):
+            bits = getattr(self, name)
+            if not isinstance(bits, int) or isinstance(bits, bool) or not 2 <= bits <= 32:
+                raise ParameterError(f"SensorParams.{name}={bits!r} must be an integer in [2, 32]")
+
+
+# --------------------------------------------------------------------------- control
+@dataclass(frozen=True, kw_only=True)
+class PositionPidParams:
+    """PID on LVDT displacement, eq (9) (Kd of eq (9) is ``kp_v_per_m``).
+
+    u = kp·e + ki·∫e + kd·D(e), with D a derivative filtered by a first-order low-pass at
+    ``derivative_filter_hz``; the integrator stops when the output saturates at
+    ``output_limit_v`` (anti-windup by conditional integration).
+    """
+
+    kp_v_per_m: float = 700.0
+    ki_v_per_m_per_s: float = 0.0
+    kd_v_s_per_m: float = 0.0
+    derivative_filter_hz: float = 200.0
+    output_limit_v: float = 10.0
+
+    def __post_init__(self) -> None:
+        _positive(self, "kp_v_per_m", "derivative_filter_hz", "output_limit_v")
+        _non_negative(self, "ki_v_per_m_per_s", "kd_v_s_per_m")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TvcParams:
+    """Three-variable controller of the acceleration loop, eqs (10)–(13) and Fig. 6.
+
+    Attributes
+    ----------
+    kg : float
+        Kg of eq (10), acceleration generator gain.
+    generator_omega_rad_s, generator_damping : float
+        ωn and ζn of eq (10): ωg = 2ζn ωn, δg = ωn².
+    kdf_v_per_m, kvf_v_per_m_s, kaf_v_per_m_s2 : float
+        Feedback gains on displacement error, synthesised velocity and acceleration.
+    kdr_v_per_m, kvr_v_per_m_s, kar_v_per_m_s2 : float
+        Feed-forward gains of eq (12) on the generated displacement, velocity and
+        acceleration references.
+    velocity_crossover_hz : float
+        Crossover of the complementary filters that blend the differentiated LVDT
+        (below) with the integrated accelerometer (above) into the velocity feedback.
+    output_limit_v : float
+        Drive saturation.
+    """
+
+    kg: float = 1.0
+    generator_omega_rad_s: float = 3.14
+    generator_damping: float = 0.7
+    kdf_v_per_m: float = 700.0
+    kvf_v_per_m_s: float = 0.0
+    kaf_v_per_m_s2: float = 0.0
+    kdr_v_per_m: float = 700.0
+    kvr_v_per_m_s: float = 0.0
+    kar_v_per_m_s2: float = 0.0
+    velocity_crossover_hz: float = 5.0
+    output_limit_v: float = 10.0
+
+    def __post_init__(self) -> None:
+        _positive(self, "kg", "generator_omega_rad_s", "generator_damping", "velocity_crossover_hz",
+                  "output_limit_v")
+        _finite(self, "kdf_v_per_m", "kvf_v_per_m_s", "kaf_v_per_m_s2", "kdr_v_per_m",
+                "kvr_v_per_m_s", "kar_v_per_m_s2")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ForcePidParams:
+    """PID on load-cell force, eqs (14)–(15) (Gcf of eq (15))."""
+
+    kp_v_per_n: float = 1.0e-4
+    ki_v_per_n_per_s: float = 0.0
+    kd_v_s_per_n: float = 0.0
+    derivative_filter_hz: float = 200.0
+    output_limit_v: float = 10.0
+
+    def __post_init__(self) -> None:
+        _positive(self, "kp_v_per_n", "derivative_filter_hz", "output_limit_v")
+        _non_negative(self, "ki_v_per_n_per_s", "kd_v_s_per_n")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TimingParams:
+    """Sample rates of the digital controller and of the plant integration.
+
+    The plant is integrated with fixed steps at ``internal_rate_hz``, which must be an
+    integer multiple of ``control_rate_hz`` (the xPC target's sample rate; not printed in
+    the paper, 1 kHz fits its identified models). ``delay_samples`` control periods pass
+    between sampling the sensors and applying the drive (zero-order hold).
+    """
+
+    control_rate_hz: float = 1000.0
+    internal_rate_hz: float = 10_000.0
+    delay_samples: int = 1
+
+    def __post_init__(self) -> None:
+        _positive(self, "control_rate_hz", "internal_rate_hz")
+        ratio = self.internal_rate_hz / self.control_rate_hz
+        if ratio < 1 or abs(ratio - round(ratio)) > 1e-9:
+            raise ParameterError(
+                f"TimingParams: internal_rate_hz={self.internal_rate_hz!r} must be an integer "
+                f"multiple of control_rate_hz={self.control_rate_hz!r}"
+            )
+        if not isinstance(self.delay_samples, int) or isinstance(self.delay_samples, bool) or not (
+            0 <= self.delay_samples <= 100
+        ):
+            raise ParameterError(
+                f"TimingParams.delay_samples={self.delay_samples!r} must be an integer in [0, 100]"
+            )
+
+    @property
+    def substeps(self) -> int:
+        """Plant integration steps per control period."""
+        return int(round(self.internal_rate_hz / self.control_rate_hz))
+
+    @property
+    def dt_s(self) -> float:
+        """Control period, s."""
+        return 1.0 / self.control_rate_hz
+
+
+@dataclass(frozen=True, kw_only=True)
+class RigLimits:
+    """Performance limits of the rig (Table 2) that a test must respect."""
+
+    max_velocity_m_s: float = 0.2
+    max_acceleration_m_s2: float = 1.0 * GRAVITY_M_S2
+    max_force_n: float = 1500.0 * GRAVITY_M_S2
+
+    def __post_init__(self) -> None:
+        _positive(self, "max_velocity_m_s", "max_acceleration_m_s2", "max_force_n")
+
+
+@dataclass(frozen=True, kw_only=True)
+class RigParams:
+    """Everything that defines one simulated actuator channel and its controllers.
+
+    Derived quantities of the linear model are properties; see eqs (3)–(8).
+
+    Examples
+    --------
+    >>> import ehss
+    >>> p = ehss.preset("default")
+    >>> round(p.hydraulic_freq_hz, 1), round(p.hydraulic_damping, 2)
+    (32.2, 0.35)
+    """
+
+    name: str = "default"
+    valve: ValveParams = field(default_factory=ValveParams)
+    actuator: ActuatorParams = field(default_factory=ActuatorParams)
+    load: LoadParams = field(default_factory=LoadParams)
+    sensors: SensorParams = field(default_factory=SensorParams)
+    position: PositionPidParams = field(default_factory=PositionPidParams)
+    acceleration: TvcParams = field(default_factory=TvcParams)
+    force: ForcePidParams = field(default_factory=ForcePidParams)
+    timing: TimingParams = field(default_factory=TimingParams)
+    limits: RigLimits = field(default_factory=RigLimits)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.name == "name":
+                if not isinstance(self.name, str):
+                    raise ParameterError(f"RigParams.name={self.name!r} must be a string")
+                continue
+            expected = f.default_factory  # type: ignore[misc]
+            value = getattr(self, f.name)
+            if not isinstance(value, expected):  # type: ignore[arg-type]
+                raise ParameterError(
+                    f"RigParams.{f.name} must be a {expected.__name__}, "  # type: ignore[union-attr]
+                    f"got {type(value).__name__}"
+                )
+
+    # ----------------------------------------------------------- valve and flow
+    @property
+    def flow_gain_m3_s(self) -> float:
+        """Kq of eq (3) at null, per unit spool: Qr √(Ps/Δp_r) (m³/s)."""
+        a, v = self.actuator, self.valve
+        return v.rated_flow_m3_s * math.sqrt(
+            (a.supply_pressure_pa - a.return_pressure_pa) / v.rated_pressure_drop_pa
+        )
+
+    @property
+    def flow_gain_m3_s_v(self) -> float:
+        """Kq of eq (3) per volt of valve command, (m³/s)/V."""
+        return self.flow_gain_m3_s * self.valve.gain_per_v
+
+    @property
+    def total_leakage_m3_s_pa(self) -> float:
+        """Ctc = Cip + Cep/2 of eq (5)."""
+        a = self.actuator
+        return a.internal_leakage_m3_s_pa + 0.5 * a.external_leakage_m3_s_pa
+
+    @property
+    def kce_m3_s_pa(self) -> float:
+        """Kce = Kc + Ctc of eq (5), total flow-pressure coefficient."""
+        return self.valve.null_leakage_m3_s_pa + self.total_leakage_m3_s_pa
+
+    # ----------------------------------------------------------- position model, eq (7)
+    @property
+    def velocity_gain_m_s(self) -> float:
+        """K0 = Kq/Ap of eq (7), per unit spool (m/s)."""
+        return self.flow_gain_m3_s / self.actuator.piston_area_m2
+
+    @property
+    def hydraulic_stiffness_n_m(self) -> float:
+        """Kh = 4 βe Ap² / Vt = mt ωh² (eq 8; the paper's "mt ωh" is a typo)."""
+        a = self.actuator
+        return 4.0 * a.bulk_modulus_pa * a.piston_area_m2**2 / a.total_volume_m3
+
+    @property
+    def hydraulic_omega_rad_s(self) -> float:
+        """ωh = √(4 βe Ap² / (Vt mt)) of eq (7)."""
+        return math.sqrt(self.hydraulic_stiffness_n_m / self.load.mass_kg)
+
+    @property
+    def hydraulic_freq_hz(self) -> float:
+        """ωh / 2π."""
+        return self.hydraulic_omega_rad_s / (2.0 * math.pi)
+
+    @property
+    def hydraulic_damping(self) -> float:
+        """ζh = (Kce/Ap)√(βe mt/Vt) + (Bp/4Ap)√(Vt/(βe mt)), eq (7) with the Bp term."""
+        a, m = self.actuator, self.load.mass_kg
+        be, vt, ap = a.bulk_modulus_pa, a.total_volume_m3, a.piston_area_m2
+        return (self.kce_m3_s_pa / ap) * math.sqrt(be * m / vt) + (
+            self.load.damping_n_s_m / (4.0 * ap)
+        ) * math.sqrt(vt / (be * m))
+
+    # ----------------------------------------------------------- force model, eq (8)
+    @property
+    def mechanical_omega_rad_s(self) -> float:
+        """ωm = √(K/mt) of eq (8), with K the specimen stiffness."""
+        return math.sqrt(self.load.specimen_stiffness_n_m / self.load.mass_kg)
+
+    @property
+    def mechanical_damping(self) -> float:
+        """ζm = Bp / (2√(K mt)) of eq (8); inf when K = 0."""
+        k = self.load.specimen_stiffness_n_m
+        if k == 0:
+            return math.inf
+        return self.load.damping_n_s_m / (2.0 * math.sqrt(k * self.load.mass_kg))
+
+    @property
+    def _stiffness_ratio(self) -> float:
+        return self.load.specimen_stiffness_n_m / self.hydraulic_stiffness_n_m
+
+    @property
+    def force_omega0_rad_s(self) -> float:
+        """ω0 = ωh √(1 + K/Kh) of eq (8)."""
+        return self.hydraulic_omega_rad_s * math.sqrt(1.0 + self._stiffness_ratio)
+
+    @property
+    def force_damping0(self) -> float:
+        """ζ0 = [4βe Kce / (Vt (1 + K/Kh)) + Bp/mt] / (2 ω0) of eq (8)."""
+        a = self.actuator
+        num = 4.0 * a.bulk_modulus_pa * self.kce_m3_s_pa / (
+            a.total_volume_m3 * (1.0 + self._stiffness_ratio)
+        ) + self.load.damping_n_s_m / self.load.mass_kg
+        return num / (2.0 * self.force_omega0_rad_s)
+
+    @property
+    def force_omega_r_rad_s(self) -> float:
+        """ωr = Kce K / [Ap² (1 + K/Kh)] of eq (8)."""
+        a = self.actuator
+        return (
+            self.kce_m3_s_pa
+            * self.load.specimen_stiffness_n_m
+            / (a.piston_area_m2**2 * (1.0 + self._stiffness_ratio))
+        )
+
+    @property
+    def max_actuator_force_n(self) -> float:
+        """Stall force Ap (Ps − Pr)."""
+        a = self.actuator
+        return a.piston_area_m2 * (a.supply_pressure_pa - a.return_pressure_pa)
+
+    @property
+    def max_velocity_m_s(self) -> float:
+        """No-load velocity at full spool, K0 (the valve's limit, not Table 2's)."""
+        return self.velocity_gain_m_s
+
+    def derived(self) -> dict[str, tuple[float, str, str]]:
+        """Derived quantities as ``{name: (value, unit, paper symbol / equation)}``."""
+        return {
+            "flow_gain_m3_s_v": (self.flow_gain_m3_s_v, "(m³/s)/V", "Kq, eq (3)"),
+            "kce_m3_s_pa": (self.kce_m3_s_pa, "m³/(s·Pa)", "Kce, eq (5)"),
+            "velocity_gain_m_s": (self.velocity_gain_m_s, "m/s", "K0 = Kq/Ap, eq (7)"),
+            "hydraulic_freq_hz": (self.hydraulic_freq_hz, "Hz", "ωh/2π, eq (7)"),
+            "hydraulic_damping": (self.hydraulic_damping, "-", "ζh, eq (7)"),
+            "hydraulic_stiffness_n_m": (self.hydraulic_stiffness_n_m, "N/m", "Kh, eq (8)"),
+            "mechanical_omega_rad_s": (self.mechanical_omega_rad_s, "rad/s", "ωm, eq (8)"),
+            "mechanical_damping": (self.mechanical_damping, "-", "ζm, eq (8)"),
+            "force_omega0_rad_s": (self.force_omega0_rad_s, "rad/s", "ω0, eq (8)"),
+            "force_damping0": (self.force_damping0, "-", "ζ0, eq (8)"),
+            "force_omega_r_rad_s": (self.force_omega_r_rad_s, "rad/s", "ωr, eq (8)"),
+            "max_actuator_force_n": (self.max_actuator_force_n, "N", "Ap (Ps − Pr)"),
+        }
+
+
+# --------------------------------------------------------------------------- presets
+def _paper_preset() -> RigParams:
+    """Table 1 and Table 3 exactly as printed.
+
+    Kq = 0.00145 (m³/s)/V is expressed through the valve rating: with a 10 V full-scale
+    command and Ps = 21 MPa, Qr = 10 V · Kq / √(Ps/Δp_r).
+    """
+    kq_per_v = 0.00145
+    ps, dpr = 21.0e6, 7.0e6
+    rated_flow = kq_per_v * 10.0 / math.sqrt(ps / dpr)
+    return RigParams(
+        name="paper",
+        valve=ValveParams(rated_flow_m3_s=rated_flow, null_leakage_m3_s_pa=2.0e-12),
+        actuator=ActuatorParams(
+            piston_area_m2=1.88e-3,
+            total_volume_m3=0.96e-3,
+            bulk_modulus_pa=6.9e8,
+            internal_leakage_m3_s_pa=4.6e-17,
+            external_leakage_m3_s_pa=4.6e-17,
+        ),
+        load=LoadParams(mass_kg=5000.0, damping_n_s_m=25_000.0, specimen_stiffness_n_m=2.0e7),
+        position=PositionPidParams(kp_v_per_m=1.2),
+        acceleration=TvcParams(
+            kg=0.85,
+            generator_omega_rad_s=3.14,
+            generator_damping=0.7,
+            kdf_v_per_m=24.5,
+            kvf_v_per_m_s=1.0,
+            kaf_v_per_m_s2=0.025,
+            kdr_v_per_m=1.0,
+            kvr_v_per_m_s=0.84,
+            kar_v_per_m_s2=0.00053,
+        ),
+    )
+
+
+PRESETS: dict[str, str] = {
+    "default": "consistent set of PAPER.md §5 (250 kg per actuator, ωh ≈ 32 Hz, ζh ≈ 0.35)",
+    "paper": "Table 1 and Table 3 exactly as printed (ωh ≈ 7.2 Hz, ζh ≈ 0.12)",
+}
+
+
+def preset(name: str = "default") -> RigParams:
+    """Return a named parameter set (see :data:`PRESETS`).
+
+    Raises
+    ------
+    ParameterError
+        If ``name`` is not a known preset.
+    """
+    if name == "default":
+        return RigParams()
+    if name == "paper":
+        return _paper_preset()
+    raise ParameterError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
+
+
+# --------------------------------------------------------------------------- TOML
+def params_to_dict(params: RigParams) -> dict[str, Any]:
+    """Nested plain dict (TOML/JSON-ready) of a parameter set."""
+    return dataclasses.asdict(params)
+
+
+def params_from_dict(data: dict[str, Any], *, base: RigParams | None = None) -> RigParams:
+    """Build a parameter set from a (possibly partial) nested dict.
+
+    Missing sections and keys keep the values of ``base`` (the default preset when not
+    given; a top-level ``preset = "paper"`` key chooses another base).
+
+    Raises
+    ------
+    ParameterError
+        For unknown sections or keys and for values that fail validation.
+    """
+    if not isinstance(data, dict):
+        raise ParameterError(f"parameters must be a table, got {type(data).__name__}")
+    data = dict(data)
+    if base is None:
+        base = preset(str(data.pop("preset", "default")))
+    else:
+        data.pop("preset", None)
+    changes: dict[str, Any] = {}
+    sections = {f.name: f for f in fields(RigParams)}
+    for key, value in data.items():
+        if key not in sections:
+            raise ParameterError(f"unknown parameter section {key!r}; known: {sorted(sections)}")
+        if key == "name":
+            changes["name"] = value
+            continue
+        if not isinstance(value, dict):
+            raise ParameterError(f"parameter section [{key}] must be a table")
+        current = getattr(base, key)
+        known = {f.name: f for f in fields(current)}
+        for sub in value:
+            if sub not in known:
+                raise ParameterError(
+                    f"unknown parameter {key}.{sub}; known: {sorted(known)}"
+                )
+        coerced = {}
+        for sub, v in value.items():
+            ref = getattr(current, sub)
+            # TOML writes 1.0 as 1.0 but users write 250 for 250.0: accept ints for floats.
+            if isinstance(ref, float) and isinstance(v, int) and not isinstance(v, bool):
+                v = float(v)
+            coerced[sub] = v
+        try:
+            changes[key] = dataclasses.replace(current, **coerced)
+        except TypeError as exc:  # pragma: no cover - guarded by the key check above
+            raise ParameterError(f"[{key}]: {exc}") from None
+    return dataclasses.replace(base, **changes)
+
+
+def save_params(params: RigParams, path: str | Path) -> Path:
+    """Write a parameter set as TOML (written to a temporary file, then renamed)."""
+    import tomli_w
+
+    path = Path(path)
+    text = tomli_w.dumps(params_to_dict(params))
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+    return path
+
+
+def load_params(path: str | Path) -> RigParams:
+    """Read a (possibly partial) parameter set from TOML.
+
+    Raises
+    ------
+    ParameterError
+        If the file cannot be read or parsed, or holds unknown or invalid parameters.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ParameterError(f"parameter file {str(path)!r} does not exist") from None
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ParameterError(f"cannot read parameter file {str(path)!r}: {exc}") from None
+    try:
+        return params_from_dict(data)
+    except ParameterError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
+
+
+def describe_params(params: RigParams) -> list[tuple[str, str, str, str]]:
+    """Rows ``(section, name, value, unit)`` for printing, derived quantities last."""
+    rows: list[tuple[str, str, str, str]] = [("", "name", params.name, "")]
+    for f in fields(params):
+        if f.name == "name":
+            continue
+        section = getattr(params, f.name)
+        for sf in fields(section):
+            value = getattr(section, sf.name)
+            text = f"{value:.6g}" if isinstance(value, float) else str(value)
+            rows.append((f.name, sf.name, text, _unit(sf.name)))
+    for name, (value, unit, symbol) in params.derived().items():
+        rows.append(("derived", f"{name} ({symbol})", f"{value:.6g}", unit))
+    return rows
