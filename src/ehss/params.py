@@ -371,6 +371,16 @@ class PositionPidParams:
 class TvcParams:
     """Three-variable controller of the acceleration loop, eqs (10)–(13) and Fig. 6.
 
+    The acceleration reference a_r passes through the acceleration generator
+    GAR(s) = Kg / (s² + ωg s + δg) of eq (10), giving the displacement reference r_d and
+    its derivatives v_d = s r_d, a_d = s² r_d. The drive is
+
+    .. math:: u = K_{df}\\,(K_{dr} r_d + K_{vr} v_d + K_{ar} a_d - y) - K_{vf} \\hat v - K_{af} a
+
+    with y the LVDT displacement, a the (AC-coupled) accelerometer signal and v̂ the
+    velocity blended from both by complementary filters,
+    v̂ = (ωc s y + a) / (s + ωc), ωc = 2π ``velocity_crossover_hz``.
+
     Attributes
     ----------
     kg : float
@@ -379,9 +389,9 @@ class TvcParams:
         ωn and ζn of eq (10): ωg = 2ζn ωn, δg = ωn².
     kdf_v_per_m, kvf_v_per_m_s, kaf_v_per_m_s2 : float
         Feedback gains on displacement error, synthesised velocity and acceleration.
-    kdr_v_per_m, kvr_v_per_m_s, kar_v_per_m_s2 : float
-        Feed-forward gains of eq (12) on the generated displacement, velocity and
-        acceleration references.
+    kdr, kvr_s, kar_s2 : float
+        Feed-forward B(s) = Kdr + Kvr s + Kar s² of eq (12), applied to the generated
+        displacement reference before the displacement error (dimensionless, s, s²).
     velocity_crossover_hz : float
         Crossover of the complementary filters that blend the differentiated LVDT
         (below) with the integrated accelerometer (above) into the velocity feedback.
@@ -395,17 +405,17 @@ class TvcParams:
     kdf_v_per_m: float = 700.0
     kvf_v_per_m_s: float = 0.0
     kaf_v_per_m_s2: float = 0.0
-    kdr_v_per_m: float = 700.0
-    kvr_v_per_m_s: float = 0.0
-    kar_v_per_m_s2: float = 0.0
+    kdr: float = 1.0
+    kvr_s: float = 0.0
+    kar_s2: float = 0.0
     velocity_crossover_hz: float = 5.0
     output_limit_v: float = 10.0
 
     def __post_init__(self) -> None:
         _positive(self, "kg", "generator_omega_rad_s", "generator_damping", "velocity_crossover_hz",
                   "output_limit_v")
-        _finite(self, "kdf_v_per_m", "kvf_v_per_m_s", "kaf_v_per_m_s2", "kdr_v_per_m",
-                "kvr_v_per_m_s", "kar_v_per_m_s2")
+        _finite(self, "kdf_v_per_m", "kvf_v_per_m_s", "kaf_v_per_m_s2", "kdr", "kvr_s",
+                "kar_s2")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -670,9 +680,9 @@ def _paper_preset() -> RigParams:
             kdf_v_per_m=24.5,
             kvf_v_per_m_s=1.0,
             kaf_v_per_m_s2=0.025,
-            kdr_v_per_m=1.0,
-            kvr_v_per_m_s=0.84,
-            kar_v_per_m_s2=0.00053,
+            kdr=1.0,
+            kvr_s=0.84,
+            kar_s2=0.00053,
         ),
     )
 

@@ -1,0 +1,1 @@
+"""Digital controllers of the three loops and their default tunings."""

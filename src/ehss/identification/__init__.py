@@ -1,0 +1,1 @@
+"""ARMAX models and their identification (RELS, batch least squares, order selection)."""

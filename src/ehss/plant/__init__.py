@@ -1,0 +1,1 @@
+"""Nonlinear model of one actuator channel: servo valve, actuator, load and sensors."""
