@@ -1,0 +1,564 @@
+"""Read measured or simulated records: named float64 columns from CSV, MATLAB, HDF5, NPZ.
+
+Every problem with a file becomes a :class:`~ehss.errors.DataError` that names the file,
+the column and, where it applies, the first bad row counted as a user counts rows in a
+spreadsheet: data row 1 is the first row after the header.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import zipfile
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ehss.errors import DataError
+
+__all__ = ["Table", "read_columns", "sample_rate", "SUPPORTED_SUFFIXES"]
+
+#: File name endings understood by :func:`read_columns`.
+SUPPORTED_SUFFIXES = (".csv", ".txt", ".dat", ".tsv", ".mat", ".h5", ".hdf5", ".npz")
+
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Table(Mapping[str, np.ndarray]):
+    """Named, equally long float64 columns read from one file.
+
+    Behaves as a read-only mapping ``name -> ndarray, shape (n_rows,)``; asking for an
+    unknown column raises :class:`DataError` listing the available ones.
+
+    Attributes
+    ----------
+    path : Path
+        The file the columns were read from.
+    columns : dict of str to ndarray
+        The columns, each float64, contiguous, finite and of length ``n_rows``.
+    time_column : str or None
+        Name of the time column (seconds) if the file had one, else None.
+    """
+
+    path: Path
+    columns: dict[str, np.ndarray] = field(repr=False)
+    time_column: str | None = None
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.columns[name]
+        except KeyError:
+            raise DataError(_unknown_column(self.path, name, list(self.columns))) from None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.columns)
+
+    def __len__(self) -> int:
+        return len(self.columns)
+
+    @property
+    def n_rows(self) -> int:
+        """Number of data rows (samples)."""
+        return len(next(iter(self.columns.values()))) if self.columns else 0
+
+    @property
+    def time(self) -> np.ndarray | None:
+        """The time column in seconds, or None if the file had none."""
+        return None if self.time_column is None else self.columns[self.time_column]
+
+
+def read_columns(
+    path: str | Path,
+    columns: Sequence[str] | None = None,
+    *,
+    time_column: str | None = "t",
+) -> Table:
+    """Read named numeric columns from a CSV, MATLAB, HDF5 or NumPy ``.npz`` file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file. The format follows the name ending: ``.csv``/``.txt``/``.dat``/``.tsv``
+        (one header row of names; comma, semicolon, tab or space separated, sniffed from
+        the header; lines starting with ``#`` before the header are comments), ``.mat``
+        (MATLAB v5 through :func:`scipy.io.loadmat`, v7.3 through h5py), ``.h5``/``.hdf5``
+        (datasets by name; nested paths such as ``"run1/u"`` allowed) and ``.npz``.
+    columns : sequence of str, optional
+        The columns to read. None reads every numeric vector in the file.
+    time_column : str or None, default "t"
+        Name of the time column (seconds). It is read as well when the file has it, and is
+        then available as :attr:`Table.time`; a file without it is not an error here (pass
+        the sample rate to :func:`sample_rate` instead).
+
+    Returns
+    -------
+    Table
+        The columns as float64 arrays of equal length.
+
+    Raises
+    ------
+    DataError
+        If the file is missing, unreadable or garbled; a column is unknown (the message
+        lists the available ones); a cell is not a number or is NaN/inf (the message gives
+        the first bad data row, 1-based); the columns have unequal lengths; or there are no
+        data rows.
+
+    Examples
+    --------
+    >>> table = read_columns("run.csv", ["u", "y"])        # doctest: +SKIP
+    >>> fs = sample_rate(table)                             # doctest: +SKIP
+    """
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{str(path)!r}: no such file")
+    if path.is_dir():
+        raise DataError(f"{str(path)!r}: is a folder, not a data file")
+    if columns is not None:
+        if isinstance(columns, str):
+            columns = [columns]
+        columns = list(dict.fromkeys(columns))
+        if not columns:
+            raise DataError(f"{str(path)!r}: no columns requested")
+    wanted = None if columns is None else list(columns)
+    if wanted is not None and time_column and time_column not in wanted:
+        optional_time = time_column
+    else:
+        optional_time = None
+
+    suffix = path.suffix.lower()
+    if suffix in (".csv", ".txt", ".dat", ".tsv"):
+        raw = _read_csv(path, wanted, optional_time)
+    elif suffix == ".mat":
+        raw = _read_mat(path, wanted, optional_time)
+    elif suffix in (".h5", ".hdf5"):
+        raw = _read_hdf5(path, wanted, optional_time, transpose=False)
+    elif suffix == ".npz":
+        raw = _read_npz(path, wanted, optional_time)
+    else:
+        raise DataError(
+            f"{str(path)!r}: unknown file type {suffix or '(none)'!r}; "
+            f"accepted: {', '.join(SUPPORTED_SUFFIXES)}"
+        )
+    table = _finish(path, raw)
+    has_time = bool(time_column) and time_column in table.columns
+    return Table(path=path, columns=table.columns, time_column=time_column if has_time else None)
+
+
+def sample_rate(
+    data: Table | np.ndarray | Sequence[float] | None,
+    fs: float | None = None,
+    *,
+    rtol: float = 1e-2,
+) -> float:
+    """Sample rate in Hz from a time column or from ``fs``, and check that they agree.
+
+    Parameters
+    ----------
+    data : Table, array_like of float or None
+        A table (its time column is used if it has one) or a time vector in seconds.
+    fs : float, optional
+        The sample rate given by the user (Hz).
+    rtol : float, default 0.01
+        Relative tolerance on each time step (against the median step), and between the
+        rate from the time column and ``fs``.
+
+    Returns
+    -------
+    float
+        The sample rate in Hz: ``fs`` if given, else ``(n - 1) / (t[-1] - t[0])``.
+
+    Raises
+    ------
+    DataError
+        If the time steps are uneven (the message names the first uneven data row) or not
+        increasing, if the time column and ``fs`` disagree, or if neither is available.
+    """
+    where = ""
+    if isinstance(data, Table):
+        where = f"{str(data.path)!r}: "
+        name = data.time_column
+        t = data.time
+    elif data is None:
+        name, t = None, None
+    else:
+        name = "t"
+        t = np.asarray(data, dtype=np.float64)
+    if fs is not None:
+        fs = float(fs)
+        if not math.isfinite(fs) or fs <= 0:
+            raise DataError(f"sample rate {fs=} Hz must be a positive finite number")
+    if t is None:
+        if fs is None:
+            raise DataError(f"{where}no time column to get the sample rate from; pass --fs HZ")
+        return fs
+    fs_t = _rate_from_time(t, where, name or "t", rtol)
+    if fs is not None:
+        if abs(fs_t - fs) > rtol * fs:
+            raise DataError(
+                f"{where}the time column {name!r} gives a sample rate of {fs_t:.6g} Hz but "
+                f"--fs is {fs:.6g} Hz; drop one or make them agree"
+            )
+        return fs
+    return fs_t
+
+
+def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
+    if t.ndim != 1 or t.size < 2:
+        raise DataError(f"{where}time column {name!r} needs at least 2 samples")
+    if not np.all(np.isfinite(t)):
+        row = int(np.flatnonzero(~np.isfinite(t))[0]) + 1
+        raise DataError(f"{where}time column {name!r}: non-finite value at data row {row}")
+    steps = np.diff(t)
+    dt = float(np.median(steps))
+    if not dt > 0:
+        raise DataError(f"{where}time column {name!r} is not increasing")
+    bad = np.flatnonzero(np.abs(steps - dt) > rtol * dt)
+    if bad.size:
+        k = int(bad[0])
+        raise DataError(
+            f"{where}time column {name!r} is unevenly sampled: the step from data row {k + 1} "
+            f"to row {k + 2} is {steps[k]:.6g} s, the typical step is {dt:.6g} s"
+        )
+    return (t.size - 1) / float(t[-1] - t[0])
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+@dataclass(frozen=True)
+class _Raw:
+    """Columns as read, before the common checks (lengths, finiteness, float64)."""
+
+    columns: dict[str, np.ndarray]
+
+
+def _unknown_column(path: Path, name: str, available: list[str]) -> str:
+    shown = ", ".join(repr(a) for a in available[:30])
+    if len(available) > 30:
+        shown += f", ... ({len(available)} in all)"
+    return f"{str(path)!r}: no column {name!r}; available: {shown or '(none)'}"
+
+
+def _finish(path: Path, raw: _Raw) -> Table:
+    cols = raw.columns
+    if not cols:
+        raise DataError(f"{str(path)!r}: no numeric columns found")
+    lengths = {name: a.shape[0] for name, a in cols.items()}
+    if len(set(lengths.values())) > 1:
+        desc = ", ".join(f"{n!r}: {k}" for n, k in lengths.items())
+        raise DataError(f"{str(path)!r}: columns have unequal lengths ({desc})")
+    if next(iter(lengths.values())) == 0:
+        raise DataError(f"{str(path)!r}: no data rows")
+    out: dict[str, np.ndarray] = {}
+    for name, a in cols.items():
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        finite = np.isfinite(a)
+        if not finite.all():
+            row = int(np.flatnonzero(~finite)[0])
+            raise DataError(
+                f"{str(path)!r}: column {name!r} has a non-finite value ({float(a[row])!r}) "
+                f"at data row {row + 1}"
+            )
+        a.flags.writeable = False
+        out[name] = a
+    return Table(path=path, columns=out)
+
+
+def _select(
+    path: Path,
+    available: list[str],
+    wanted: list[str] | None,
+    optional: str | None,
+) -> list[str]:
+    if wanted is None:
+        return list(available)
+    for name in wanted:
+        if name not in available:
+            raise DataError(_unknown_column(path, name, available))
+    names = list(wanted)
+    if optional is not None and optional in available:
+        names.insert(0, optional)
+    return names
+
+
+# ---- CSV -------------------------------------------------------------------------------
+
+def _read_text(path: Path) -> str:
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise DataError(f"{str(path)!r}: cannot read: {exc.strerror or exc}") from None
+    if b"\x00" in data[:4096]:
+        raise DataError(f"{str(path)!r}: not a text CSV file (binary content)")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        try:
+            return data.decode("latin-1")
+        except UnicodeDecodeError:  # pragma: no cover - latin-1 decodes any byte
+            raise DataError(f"{str(path)!r}: not a readable text file") from None
+
+
+def _split_fn(header: str):
+    if "," in header:
+        delim = ","
+    elif ";" in header:
+        delim = ";"
+    elif "\t" in header:
+        delim = "\t"
+    else:
+        delim = None
+    if delim is None:
+        return None, lambda line: line.split()
+    def split(line: str) -> list[str]:
+        return next(csv.reader([line], delimiter=delim))
+    return delim, split
+
+
+def _read_csv(path: Path, wanted: list[str] | None, optional: str | None) -> _Raw:
+    text = _read_text(path)
+    lines = text.splitlines()
+    i = 0
+    while i < len(lines) and (not lines[i].strip() or lines[i].lstrip().startswith("#")):
+        i += 1
+    if i == len(lines):
+        raise DataError(f"{str(path)!r}: empty file (no header row)")
+    delim, split = _split_fn(lines[i])
+    header = [h.strip().strip('"').strip("'").strip() for h in split(lines[i])]
+    if any(not h for h in header):
+        k = header.index("")
+        raise DataError(
+            f"{str(path)!r}: the header row has an empty name in field {k + 1}; "
+            "the first row must name every column"
+        )
+    if _looks_numeric(header):
+        raise DataError(
+            f"{str(path)!r}: the first row holds numbers, not column names; "
+            "add a header row naming the columns"
+        )
+    if len(set(header)) != len(header):
+        dup = next(h for h in header if header.count(h) > 1)
+        raise DataError(f"{str(path)!r}: column name {dup!r} appears twice in the header")
+    names = _select(path, header, wanted, optional)
+    idx = [header.index(n) for n in names]
+    data_lines = lines[i + 1 :]
+    # Trailing blank lines are not rows.
+    while data_lines and not data_lines[-1].strip():
+        data_lines.pop()
+    if not data_lines:
+        raise DataError(f"{str(path)!r}: no data rows after the header")
+    # Fast path: numpy parses the whole block; on any failure, a slow pass finds the cell.
+    try:
+        with np.errstate(all="ignore"):
+            block = np.loadtxt(
+                data_lines,
+                delimiter=delim,
+                usecols=idx,
+                dtype=np.float64,
+                ndmin=2,
+                comments=None,
+                quotechar='"' if delim else None,
+            )
+        if block.shape != (len(data_lines), len(idx)):
+            raise ValueError("shape")
+        n_fields_ok = _fields_consistent(data_lines, split, len(header))
+    except ValueError:
+        block = None
+        n_fields_ok = False
+    if block is None or not n_fields_ok:
+        _diagnose_csv(path, data_lines, split, header, names, idx)
+        raise DataError(f"{str(path)!r}: cannot parse the data rows")  # pragma: no cover
+    return _Raw({n: block[:, j].copy() for j, n in enumerate(names)})
+
+
+def _looks_numeric(header: list[str]) -> bool:
+    try:
+        [float(h) for h in header]
+    except ValueError:
+        return False
+    return True
+
+
+def _fields_consistent(data_lines: list[str], split, n: int) -> bool:
+    # loadtxt with usecols ignores extra fields; a short or long row still means the
+    # columns do not line up, so check the count on a cheap sample (first and last rows)
+    # and fully when the file is small.
+    sample = data_lines if len(data_lines) <= 20000 else data_lines[:100] + data_lines[-100:]
+    return all(len(split(line)) == n for line in sample)
+
+
+def _diagnose_csv(path, data_lines, split, header, names, idx) -> None:
+    n = len(header)
+    for r, line in enumerate(data_lines, start=1):
+        fields = split(line)
+        if not line.strip():
+            raise DataError(f"{str(path)!r}: data row {r} is empty")
+        if len(fields) != n:
+            raise DataError(
+                f"{str(path)!r}: data row {r} has {len(fields)} fields, the header has {n} "
+                "(unequal column lengths or a stray separator)"
+            )
+        for name, j in zip(names, idx, strict=True):
+            cell = fields[j].strip()
+            try:
+                float(cell)
+            except ValueError:
+                shown = cell if cell else "(empty)"
+                raise DataError(
+                    f"{str(path)!r}: column {name!r}, data row {r}: {shown!r} is not a number"
+                ) from None
+
+
+# ---- MATLAB / HDF5 / NPZ ------------------------------------------------------------------
+
+
+def _as_vector(path: Path, name: str, value) -> np.ndarray | None:
+    """A 1-D float array from a stored array, or None if it is not a numeric vector."""
+    a = np.asarray(value)
+    if a.dtype.kind not in "biuf":
+        return None
+    if a.ndim == 0:
+        return None
+    if a.ndim > 1:
+        if sum(s != 1 for s in a.shape) > 1:
+            return None
+        a = a.reshape(-1)
+    return a.astype(np.float64, copy=False)
+
+
+def _vector_or_error(path: Path, name: str, value) -> np.ndarray:
+    a = _as_vector(path, name, value)
+    if a is None:
+        shape = "x".join(str(s) for s in np.shape(value)) or "scalar"
+        kind = getattr(np.asarray(value).dtype, "kind", "?")
+        what = "numeric" if kind in "biuf" else f"non-numeric ({np.asarray(value).dtype})"
+        raise DataError(
+            f"{str(path)!r}: {name!r} is a {shape} {what} array, not a numeric vector"
+        )
+    return a
+
+
+def _read_mat(path: Path, wanted, optional) -> _Raw:
+    with open(path, "rb") as fh:
+        head = fh.read(1024)
+    if _is_hdf5(path, head):
+        return _read_hdf5(path, wanted, optional, transpose=True)
+    import scipy.io
+
+    try:
+        content = scipy.io.loadmat(path, simplify_cells=True)
+    except NotImplementedError:  # pragma: no cover - v7.3 without HDF5 signature
+        return _read_hdf5(path, wanted, optional, transpose=True)
+    except Exception as exc:  # scipy raises many types on garbage
+        raise DataError(f"{str(path)!r}: not a readable MATLAB file ({exc})") from None
+    flat = _flatten_mapping({k: v for k, v in content.items() if not k.startswith("__")})
+    return _pick(path, flat, wanted, optional)
+
+
+def _flatten_mapping(obj: Mapping, prefix: str = "") -> dict:
+    out = {}
+    for key, value in obj.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(_flatten_mapping(value, prefix=f"{name}/"))
+        else:
+            out[name] = value
+    return out
+
+
+def _pick(path: Path, flat: dict, wanted, optional) -> _Raw:
+    if wanted is None:
+        cols = {}
+        for name, value in flat.items():
+            a = _as_vector(path, name, value)
+            if a is not None:
+                cols[name] = a
+        return _Raw(cols)
+    names = _select(path, list(flat), wanted, optional)
+    return _Raw({n: _vector_or_error(path, n, flat[n]) for n in names})
+
+
+def _is_hdf5(path: Path, head: bytes | None = None) -> bool:
+    if head is None:
+        with open(path, "rb") as fh:
+            head = fh.read(1024)
+    # The superblock sits at 0, 512, 1024, ... (MATLAB v7.3 puts a 512-byte header first).
+    return head.startswith(_HDF5_SIGNATURE) or head[512:520] == _HDF5_SIGNATURE
+
+
+def _read_hdf5(path: Path, wanted, optional, *, transpose: bool) -> _Raw:
+    import h5py
+
+    try:
+        fh = h5py.File(path, "r")
+    except OSError as exc:
+        raise DataError(f"{str(path)!r}: not a readable HDF5 file ({exc})") from None
+    with fh:
+        names: list[str] = []
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and not name.startswith("#"):
+                names.append(name)
+
+        fh.visititems(visit)
+        if wanted is None:
+            cols = {}
+            for name in names:
+                ds = fh[name]
+                if ds.dtype.kind in "biuf" and _is_vector_shape(ds.shape):
+                    # MATLAB's char/logical arrays carry a MATLAB_class attribute; keep
+                    # only numeric classes.
+                    if transpose and _matlab_class(ds) not in _MATLAB_NUMERIC:
+                        continue
+                    cols[name] = _load_ds(ds, transpose)
+            return _Raw(cols)
+        chosen = _select(path, names, wanted, optional)
+        return _Raw(
+            {n: _vector_or_error(path, n, _load_ds(fh[n], transpose)) for n in chosen}
+        )
+
+
+_MATLAB_NUMERIC = {
+    None, "double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32",
+    "int64", "uint64",
+}
+
+
+def _matlab_class(ds) -> str | None:
+    value = ds.attrs.get("MATLAB_class")
+    if value is None:
+        return None
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _is_vector_shape(shape: tuple[int, ...]) -> bool:
+    return len(shape) >= 1 and sum(s != 1 for s in shape) <= 1
+
+
+def _load_ds(ds, transpose: bool) -> np.ndarray:
+    a = ds[()]
+    # MATLAB v7.3 stores column-major arrays, so an N-by-1 column arrives as shape (1, N);
+    # transposing restores MATLAB's view (only matters for the error message on matrices).
+    return a.T if transpose and np.ndim(a) >= 2 else a
+
+
+def _read_npz(path: Path, wanted, optional) -> _Raw:
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise DataError(f"{str(path)!r}: not an .npz archive")
+    with archive:
+        try:
+            if wanted is None:
+                flat = {k: archive[k] for k in archive.files}
+            else:
+                names = _select(path, list(archive.files), wanted, optional)
+                flat = {k: archive[k] for k in names}
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
+    return _pick(path, flat, wanted, optional)

@@ -1,0 +1,276 @@
+"""Reading columns from every supported format, and every way a file can be bad."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+import scipy.io
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numpy.testing import assert_array_equal
+
+from ehss.errors import DataError
+from ehss.io import Table, read_columns, sample_rate, write_csv
+
+
+@pytest.fixture
+def record(rng):
+    n = 257
+    return {
+        "t": np.arange(n) / 1000.0,
+        "u": rng.standard_normal(n),
+        "y": rng.standard_normal(n) * 1e-3,
+    }
+
+
+def _write_mat73(path, columns):
+    """A MATLAB v7.3 file as MATLAB writes it: 512-byte user block, column vectors
+    stored transposed (N-by-1 in MATLAB is (1, N) in HDF5), MATLAB_class attributes."""
+    with h5py.File(path, "w", userblock_size=512) as fh:
+        for name, values in columns.items():
+            ds = fh.create_dataset(name, data=np.asarray(values)[None, :])
+            ds.attrs["MATLAB_class"] = np.bytes_("double")
+        fh.create_dataset("label", data=np.array([[104], [105]], dtype=np.uint16))
+        fh["label"].attrs["MATLAB_class"] = np.bytes_("char")
+    with open(path, "r+b") as fh:
+        head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1 00:00:00 2024"
+        fh.write(head.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02" + b"IM")
+
+
+# ---------------------------------------------------------------------------- round trips
+
+
+def test_csv_round_trip_is_exact(tmp_path, record):
+    path = tmp_path / "run.csv"
+    write_csv(path, record, header_comment="rig A\nposition loop")
+    table = read_columns(path, ["u", "y"])
+    assert isinstance(table, Table)
+    assert list(table) == ["t", "u", "y"]  # time column is read along
+    assert table.time_column == "t"
+    for name in record:
+        assert_array_equal(table[name], record[name])  # repr round trip is exact
+    assert table.n_rows == 257
+    assert sample_rate(table) == pytest.approx(1000.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("sep", [";", "\t", " ", "   "])
+def test_csv_delimiters_are_sniffed(tmp_path, sep):
+    path = tmp_path / "run.txt"
+    path.write_text(f"t{sep}u{sep}y\n0{sep}1.5{sep}-2\n0.5{sep}2.5{sep}3e-3\n")
+    table = read_columns(path, ["y"])
+    assert_array_equal(table["y"], [-2.0, 3e-3])
+    assert_array_equal(table["t"], [0.0, 0.5])
+
+
+def test_csv_quoted_header_and_bom(tmp_path):
+    path = tmp_path / "excel.csv"
+    path.write_bytes('\ufeff"time","drive"\r\n0,1\r\n1,2\r\n'.encode())
+    table = read_columns(path, time_column="time")
+    assert table.time_column == "time"
+    assert_array_equal(table["drive"], [1.0, 2.0])
+
+
+def test_mat_v5_round_trip(tmp_path, record):
+    path = tmp_path / "run.mat"
+    # MATLAB keeps vectors as 2-D: columns N-by-1 and rows 1-by-N must both read.
+    scipy.io.savemat(path, {"t": record["t"][:, None], "u": record["u"], "y": record["y"]})
+    table = read_columns(path, ["u", "y"])
+    for name in record:
+        assert_array_equal(table[name], record[name])
+
+
+def test_mat_v5_struct_fields_by_path(tmp_path, record):
+    path = tmp_path / "runs.mat"
+    scipy.io.savemat(path, {"run1": {"u": record["u"], "y": record["y"]}})
+    table = read_columns(path, ["run1/u", "run1/y"])
+    assert_array_equal(table["run1/y"], record["y"])
+    assert table.time_column is None
+
+
+def test_mat_v73_round_trip(tmp_path, record):
+    path = tmp_path / "run73.mat"
+    _write_mat73(path, record)
+    table = read_columns(path, ["u", "y"])
+    for name in record:
+        assert_array_equal(table[name], record[name])
+    assert sorted(read_columns(path)) == ["t", "u", "y"]  # the char array is skipped
+
+
+def test_hdf5_nested_paths(tmp_path, record):
+    path = tmp_path / "runs.h5"
+    with h5py.File(path, "w") as fh:
+        grp = fh.create_group("run1")
+        for name, values in record.items():
+            grp.create_dataset(name, data=values)
+    table = read_columns(path, ["run1/u", "run1/y"], time_column="run1/t")
+    assert table.time_column == "run1/t"
+    assert_array_equal(table["run1/u"], record["u"])
+    assert sample_rate(table) == pytest.approx(1000.0, rel=1e-12)
+
+
+def test_npz_round_trip(tmp_path, record):
+    path = tmp_path / "run.npz"
+    np.savez(path, **record)
+    table = read_columns(path, ["u", "y"])
+    for name in record:
+        assert_array_equal(table[name], record[name])
+    assert table["u"].dtype == np.float64 and table["u"].flags.c_contiguous
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64), min_size=1,
+                max_size=40))
+def test_csv_round_trip_any_float(tmp_path_factory, values):
+    path = tmp_path_factory.mktemp("rt") / "x.csv"
+    write_csv(path, {"x": values})
+    assert_array_equal(read_columns(path, ["x"])["x"], np.asarray(values))
+
+
+# ------------------------------------------------------------------------------ bad input
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(DataError, match=r"nope\.csv'.*no such file"):
+        read_columns(tmp_path / "nope.csv", ["u"])
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".mat", ".h5", ".npz"])
+def test_garbled_file(tmp_path, suffix):
+    path = tmp_path / f"junk{suffix}"
+    path.write_bytes(bytes(range(256)) * 8)
+    with pytest.raises(DataError, match=r"junk"):
+        read_columns(path, ["u"])
+
+
+def test_unknown_suffix(tmp_path):
+    path = tmp_path / "run.xlsx"
+    path.write_text("x")
+    with pytest.raises(DataError, match=r"unknown file type '\.xlsx'"):
+        read_columns(path, ["u"])
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz", ".h5"])
+def test_unknown_column_lists_available(tmp_path, record, suffix):
+    path = tmp_path / f"run{suffix}"
+    if suffix == ".csv":
+        write_csv(path, record)
+    elif suffix == ".npz":
+        np.savez(path, **record)
+    else:
+        with h5py.File(path, "w") as fh:
+            for k, v in record.items():
+                fh[k] = v
+    with pytest.raises(DataError, match=r"no column 'x'; available: 't', 'u', 'y'"):
+        read_columns(path, ["u", "x"])
+
+
+def test_non_numeric_cell_names_row_and_column(tmp_path):
+    path = tmp_path / "run.csv"
+    path.write_text("t,u,y\n0,1,2\n0.001,1,2\n0.002,abc,2\n")
+    with pytest.raises(DataError, match=r"column 'u', data row 3: 'abc' is not a number"):
+        read_columns(path, ["u", "y"])
+
+
+def test_empty_cell(tmp_path):
+    path = tmp_path / "run.csv"
+    path.write_text("u,y\n1,2\n,2\n")
+    with pytest.raises(DataError, match=r"column 'u', data row 2: '\(empty\)' is not a number"):
+        read_columns(path, ["u", "y"])
+
+
+@pytest.mark.parametrize("bad", ["nan", "inf", "-inf", "NaN"])
+def test_non_finite_cell(tmp_path, bad):
+    path = tmp_path / "run.csv"
+    path.write_text(f"u,y\n1,2\n3,4\n5,{bad}\n")
+    with pytest.raises(DataError, match=r"column 'y' has a non-finite value .* data row 3"):
+        read_columns(path, ["u", "y"])
+
+
+def test_non_finite_in_npz(tmp_path):
+    path = tmp_path / "run.npz"
+    np.savez(path, u=np.array([1.0, np.nan]), y=np.zeros(2))
+    with pytest.raises(DataError, match=r"'u' has a non-finite value \(nan\) at data row 2"):
+        read_columns(path, ["u", "y"])
+
+
+def test_short_csv_row(tmp_path):
+    path = tmp_path / "run.csv"
+    path.write_text("u,y\n1,2\n3\n")
+    with pytest.raises(DataError, match=r"data row 2 has 1 fields, the header has 2"):
+        read_columns(path, ["u", "y"])
+
+
+def test_unequal_lengths_npz(tmp_path):
+    path = tmp_path / "run.npz"
+    np.savez(path, u=np.zeros(5), y=np.zeros(4))
+    with pytest.raises(DataError, match=r"unequal lengths \('u': 5, 'y': 4\)"):
+        read_columns(path, ["u", "y"])
+
+
+def test_empty_files(tmp_path):
+    path = tmp_path / "empty.csv"
+    path.write_text("")
+    with pytest.raises(DataError, match=r"empty file"):
+        read_columns(path, ["u"])
+    path.write_text("u,y\n")
+    with pytest.raises(DataError, match=r"no data rows"):
+        read_columns(path, ["u"])
+    npz = tmp_path / "empty.npz"
+    np.savez(npz, u=np.zeros(0))
+    with pytest.raises(DataError, match=r"no data rows"):
+        read_columns(npz, ["u"])
+
+
+def test_header_missing(tmp_path):
+    path = tmp_path / "run.csv"
+    path.write_text("1,2\n3,4\n")
+    with pytest.raises(DataError, match=r"first row holds numbers"):
+        read_columns(path, ["u"])
+
+
+def test_matrix_is_not_a_column(tmp_path):
+    path = tmp_path / "run.mat"
+    scipy.io.savemat(path, {"m": np.zeros((3, 4))})
+    with pytest.raises(DataError, match=r"'m' is a 3x4 numeric array, not a numeric vector"):
+        read_columns(path, ["m"])
+
+
+# ----------------------------------------------------------------------------- sample rate
+
+
+def test_sample_rate_from_fs_only():
+    assert sample_rate(None, 500) == 500.0
+
+
+def test_sample_rate_needs_something(tmp_path):
+    path = tmp_path / "run.csv"
+    write_csv(path, {"u": [1.0, 2.0]})
+    with pytest.raises(DataError, match=r"pass --fs"):
+        sample_rate(read_columns(path))
+
+
+def test_sample_rate_disagreement():
+    t = np.arange(100) / 1000.0
+    assert sample_rate(t, 1000.0) == 1000.0
+    with pytest.raises(DataError, match=r"1000 Hz but --fs is 500 Hz"):
+        sample_rate(t, 500.0)
+
+
+def test_uneven_time_names_row(tmp_path):
+    t = np.arange(20) / 1000.0
+    t[12:] += 0.001  # one sample dropped between data rows 12 and 13
+    path = tmp_path / "run.csv"
+    write_csv(path, {"t": t, "u": np.zeros(20)})
+    with pytest.raises(DataError, match=r"unevenly sampled: the step from data row 12 to row 13"):
+        sample_rate(read_columns(path))
+
+
+def test_time_not_increasing():
+    with pytest.raises(DataError, match=r"not increasing"):
+        sample_rate(np.zeros(5))
+
+
+def test_bad_fs_value():
+    with pytest.raises(DataError, match=r"fs=-1.0"):
+        sample_rate(None, -1)
