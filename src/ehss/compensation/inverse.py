@@ -1,0 +1,506 @@
+"""Inverse-model feed-forward design: ZPETC and ZMETC with preview and a band limit.
+
+An identified closed loop (reference → measured output) is the ARMAX deterministic part
+
+.. math:: G(q^{-1}) = q^{-d}\\,\\frac{B(q^{-1})}{A(q^{-1})}
+
+of eq (16) of the paper. Its inverse is what the identification is for: a drive
+``u = G^{-1} r`` makes the loop output follow the reference ``r``. Two things stop a naive
+inversion: the delay ``q^{-d}`` (inverting it needs future samples) and zeros of ``B``
+outside or near the unit circle (their inverse is unstable or rings). Because the whole
+drive file is known in advance, the delay is inverted exactly by *preview* (a non-causal
+advance), and the bad zeros are handled by one of two classic approximations:
+
+* **ZPETC** (Tomizuka 1987, zero-phase-error tracking controller). Factor
+  ``B = k B_s B_u`` into cancellable zeros ``B_s`` (inside the unit circle and well damped)
+  and the rest ``B_u`` of degree ``s``. The inverse is
+
+  .. math:: F(q) = q^{d+s}\\,\\frac{A(q^{-1})\\,B_u^*(q^{-1})}{k\\,B_s(q^{-1})\\,B_u(1)^2},
+
+  with ``B_u^*`` the coefficient-reversed ``B_u``. The overall response
+  ``G F = B_u(q^{-1}) B_u(q) / B_u(1)^2`` has zero phase at every frequency, unit gain at DC
+  and the magnitude ``|B_u(e^{jω})|^2 / B_u(1)^2``.
+* **ZMETC** (zero-magnitude-error tracking controller). Unstable zeros are mirrored inside
+  the unit circle, ``B_u → B_u^*``:
+
+  .. math:: F(q) = q^{d+p}\\,\\frac{A(q^{-1})}{k\\,B_s(q^{-1})\\,B_u^*(q^{-1})},
+
+  so that ``G F = q^{p} B_u(q^{-1}) / B_u^*(q^{-1})`` is an all-pass: the magnitude is
+  exactly 1 and a phase error remains. The extra preview ``p`` is the integer advance that
+  best cancels the all-pass's linear phase (over the band, or at DC without a band).
+
+Leading exact zeros of ``b`` are extra delay and are added to the preview. The band limit
+is a zero-phase raised-cosine taper applied by FFT to the reference before the inversion:
+unity inside ``[lo, hi]``, smoothly to zero at ``lo/2`` and at ``cutoff_hz``, exactly zero
+beyond, so the inverse cannot amplify noise above the identified band.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.fft
+import scipy.signal
+
+from ehss.errors import DataError, ParameterError
+
+__all__ = [
+    "InverseModel",
+    "METHODS",
+    "design_inverse",
+    "design_inverse_tf",
+    "band_taper",
+    "zpetc_magnitude",
+    "zmetc_phase",
+]
+
+METHODS = ("zpetc", "zmetc")
+
+#: Zeros closer than this to the unit circle cannot be inverted nor mirrored.
+_UNIT_CIRCLE_TOL = 1e-9
+
+
+# --------------------------------------------------------------------------- helpers
+def _poly_from_roots_ascending(roots: np.ndarray) -> np.ndarray:
+    """Coefficients ``[1, c1, .., cm]`` of ``prod(1 - r q^-1)`` in ascending powers of q^-1."""
+    if roots.size == 0:
+        return np.ones(1)
+    c = np.poly(roots)
+    return np.ascontiguousarray(np.real_if_close(c, tol=1e6).real, dtype=float)
+
+
+def _eval_ascending(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Evaluate ``sum coef[i] x**i`` (``x = e^{-jωdt}`` gives a polynomial in q^-1)."""
+    return np.polynomial.polynomial.polyval(x, coef)
+
+
+def _zero_damping(z: np.ndarray, ) -> np.ndarray:
+    """Damping ratio of the continuous mode ``s = ln z / dt`` of each zero (dt cancels)."""
+    s = np.log(z.astype(complex))
+    mag = np.abs(s)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        zeta = np.where(mag > 0, -s.real / np.where(mag > 0, mag, 1.0), 1.0)
+    return zeta
+
+
+def band_taper(freq_hz: np.ndarray, band_hz: tuple[float, float] | None,
+               cutoff_hz: float | None) -> np.ndarray:
+    """Real, zero-phase gain of the band limit (raised-cosine edges).
+
+    Unity on ``[lo, hi]``; from ``hi`` to ``cutoff_hz`` a raised cosine down to exactly 0;
+    below ``lo`` a raised cosine from 1 at ``lo`` to 0 at ``lo/2`` (only when ``lo > 0``).
+    """
+    f = np.abs(np.asarray(freq_hz, dtype=float))
+    if band_hz is None:
+        return np.ones_like(f)
+    lo, hi = band_hz
+    w = np.ones_like(f)
+    if cutoff_hz is not None and cutoff_hz > hi:
+        x = np.clip((f - hi) / (cutoff_hz - hi), 0.0, 1.0)
+        w *= 0.5 * (1.0 + np.cos(np.pi * x))
+    if lo > 0.0:
+        x = np.clip((lo - f) / (0.5 * lo), 0.0, 1.0)
+        w *= 0.5 * (1.0 + np.cos(np.pi * x))
+    return w
+
+
+def zpetc_magnitude(b_u: np.ndarray, freq_hz: np.ndarray, dt: float) -> np.ndarray:
+    """Analytic ZPETC overall gain ``|B_u(e^{-jω dt})|^2 / B_u(1)^2`` (zero phase)."""
+    x = np.exp(-2j * np.pi * np.asarray(freq_hz, dtype=float) * dt)
+    return np.abs(_eval_ascending(b_u, x)) ** 2 / np.sum(b_u) ** 2
+
+
+def zmetc_phase(b_u: np.ndarray, extra_preview: int, freq_hz: np.ndarray,
+                dt: float) -> np.ndarray:
+    """Analytic ZMETC overall phase (rad): ``arg(B_u(e^{-jωdt}) / B_u^*(e^{-jωdt})) + ω dt p``."""
+    w = 2.0 * np.pi * np.asarray(freq_hz, dtype=float) * dt
+    x = np.exp(-1j * w)
+    ratio = _eval_ascending(b_u, x) / _eval_ascending(b_u[::-1], x)
+    return np.angle(ratio * np.exp(1j * w * extra_preview))
+
+
+# --------------------------------------------------------------------------- result
+@dataclass(frozen=True, kw_only=True)
+class InverseModel:
+    """A designed feed-forward inverse of a closed-loop model (ZPETC or ZMETC).
+
+    The drive is ``u(k) = v(k + preview)``, ``v = lfilter(num, den, r_band)``, with
+    ``r_band`` the band-limited reference.
+
+    Attributes
+    ----------
+    method : {"zpetc", "zmetc"}
+    num, den : ndarray
+        Causal filter in ascending powers of q^-1 (``den[0] == 1``).
+    preview : int
+        Samples of advance (non-causal part): model delay + leading zero b's + ``s`` (ZPETC)
+        or + the all-pass advance (ZMETC).
+    dt : float
+        Sample period (s).
+    b_u : ndarray
+        The uncancelled factor ``B_u`` (ascending powers of q^-1, ``[1.]`` if none).
+    extra_preview : int
+        Advance beyond the model delay for ``B_u`` (``s`` for ZPETC).
+    band_hz : (float, float) or None
+        Pass band ``(lo, hi)`` of the band limit; ``None`` for no band limit.
+    cutoff_hz : float or None
+        Above this frequency the band limit is exactly zero.
+    cancelled_zeros, uncancelled_zeros, poles : ndarray
+        Zeros cancelled exactly, zeros handled by the ZPETC/ZMETC factor, model poles.
+    model_delay : int
+        Total model delay (``delay`` plus leading zero b's).
+    """
+
+    method: str
+    num: np.ndarray
+    den: np.ndarray
+    preview: int
+    dt: float
+    b_u: np.ndarray
+    extra_preview: int
+    band_hz: tuple[float, float] | None = None
+    cutoff_hz: float | None = None
+    cancelled_zeros: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    uncancelled_zeros: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    poles: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    model_delay: int = 0
+
+    @property
+    def fs(self) -> float:
+        """Sample rate (Hz)."""
+        return 1.0 / self.dt
+
+    # ---------------------------------------------------------------- responses
+    def band_response(self, freq_hz: np.ndarray) -> np.ndarray:
+        """Real gain of the band limit at ``freq_hz``."""
+        return band_taper(freq_hz, self.band_hz, self.cutoff_hz)
+
+    def frequency_response(self, freq_hz: np.ndarray, *, band: bool = True) -> np.ndarray:
+        """Complex response of the inverse: ``e^{jω dt preview} num/den`` (× band limit).
+
+        Parameters
+        ----------
+        freq_hz : array_like
+            Frequencies (Hz).
+        band : bool
+            Include the band limit (default).
+        """
+        f = np.asarray(freq_hz, dtype=float)
+        w = 2.0 * np.pi * f * self.dt
+        x = np.exp(-1j * w)
+        h = _eval_ascending(self.num, x) / _eval_ascending(self.den, x)
+        h = h * np.exp(1j * w * self.preview)
+        if band:
+            h = h * self.band_response(f)
+        return h
+
+    def design_response(self, freq_hz: np.ndarray) -> np.ndarray:
+        """Analytic overall response ``G·F`` the design aims at (no band limit).
+
+        ZPETC: ``|B_u|^2 / B_u(1)^2`` (real, non-negative); ZMETC: ``e^{jφ}`` with φ from
+        :func:`zmetc_phase`.
+        """
+        f = np.asarray(freq_hz, dtype=float)
+        if self.method == "zpetc":
+            return zpetc_magnitude(self.b_u, f, self.dt).astype(complex)
+        return np.exp(1j * zmetc_phase(self.b_u, self.extra_preview, f, self.dt))
+
+    # ---------------------------------------------------------------- apply
+    def apply(self, reference: Any, *, preview: int | None = None) -> np.ndarray:
+        """Drive that makes the modelled loop follow ``reference``.
+
+        Parameters
+        ----------
+        reference : array_like, shape (n_samples,)
+            Reference sampled at ``1/dt``. For an exact result it should start at rest
+            (zero over the first ``preview`` samples); after its end it is held at its
+            last value for the preview.
+        preview : int, optional
+            Future reference samples the compensator may use. ``None`` (default) means the
+            whole file is known and the full designed preview is used. With less preview
+            the drive is causal up to that advance and the tracking lags by the
+            difference.
+
+        Returns
+        -------
+        drive : ndarray, shape (n_samples,)
+
+        Raises
+        ------
+        DataError
+            Empty, non-1-D or non-finite reference.
+        ParameterError
+            Negative ``preview``.
+        """
+        r = _as_reference(reference)
+        advance = self.preview
+        if preview is not None:
+            if isinstance(preview, bool) or not isinstance(preview, (int, np.integer)) \
+                    or preview < 0:
+                raise ParameterError(f"preview={preview!r} must be a non-negative integer")
+            advance = min(int(preview), self.preview)
+        if self.band_hz is not None:
+            r = _fft_band_limit(r, self.dt, self.band_hz, self.cutoff_hz)
+        # r(k) held at its last value after the end: the preview needs r(N..N+p-1).
+        r_ext = np.concatenate([r, np.full(advance, r[-1])])
+        v = scipy.signal.lfilter(self.num, self.den, r_ext)
+        # u(k) = v(k + preview): the non-causal advance that inverts q^-d (and q^-s).
+        return np.ascontiguousarray(v[advance:])
+
+
+# --------------------------------------------------------------------------- design
+def _as_reference(reference: Any) -> np.ndarray:
+    data = getattr(reference, "values", None)
+    if data is None:
+        data = getattr(reference, "data", reference)
+    try:
+        r = np.asarray(data, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"reference must be a 1-D array of numbers: {exc}") from None
+    if r.ndim != 1:
+        raise DataError(f"reference must be 1-D, got shape {r.shape}")
+    if r.size == 0:
+        raise DataError("reference is empty")
+    bad = np.flatnonzero(~np.isfinite(r))
+    if bad.size:
+        raise DataError(
+            f"reference has {bad.size} non-finite value(s), first at sample {int(bad[0])}"
+        )
+    return np.ascontiguousarray(r)
+
+
+def _fft_band_limit(r: np.ndarray, dt: float, band_hz: tuple[float, float],
+                    cutoff_hz: float | None) -> np.ndarray:
+    """Zero-phase band limit by FFT with constant-extended padding (no wrap-around)."""
+    lo, hi = band_hz
+    widths = [w for w in ((cutoff_hz - hi) if cutoff_hz else 0.0, 0.5 * lo) if w > 0]
+    width = min(widths) if widths else 1.0 / (r.size * dt)
+    # The taper's impulse response decays within a few 1/width: pad by 8/width each side.
+    npad = int(min(max(math.ceil(8.0 / (width * dt)), 16), 4 * r.size + 16))
+    x = np.concatenate([np.full(npad, r[0]), r, np.full(npad, r[-1])])
+    n = scipy.fft.next_fast_len(x.size + npad, real=True)
+    # Pad the circular buffer with a smooth return from r[-1] to r[0] (half cosine).
+    gap = n - x.size
+    ramp = r[-1] + (r[0] - r[-1]) * 0.5 * (1.0 - np.cos(np.pi * np.arange(gap) / max(gap, 1)))
+    x = np.concatenate([x, ramp])
+    spec = scipy.fft.rfft(x)
+    spec *= band_taper(scipy.fft.rfftfreq(n, dt), band_hz, cutoff_hz)
+    y = scipy.fft.irfft(spec, n)
+    return np.ascontiguousarray(y[npad:npad + r.size])
+
+
+def _check_band(band_hz: Any, cutoff_hz: float | None, fs: float
+                ) -> tuple[tuple[float, float] | None, float | None]:
+    if band_hz is None:
+        if cutoff_hz is not None:
+            raise ParameterError("cutoff_hz needs band_hz")
+        return None, None
+    try:
+        lo, hi = (float(v) for v in band_hz)
+    except (TypeError, ValueError):
+        raise ParameterError(f"band_hz={band_hz!r} must be a pair (lo, hi) in Hz") from None
+    nyq = 0.5 * fs
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi < nyq):
+        raise ParameterError(
+            f"band_hz=({lo:g}, {hi:g}) must satisfy 0 <= lo < hi < fs/2 = {nyq:g} Hz"
+        )
+    if cutoff_hz is None:
+        cutoff_hz = min(1.5 * hi, hi + 0.5 * (nyq - hi))
+    cutoff_hz = float(cutoff_hz)
+    if not hi < cutoff_hz <= nyq:
+        raise ParameterError(f"cutoff_hz={cutoff_hz:g} must be in (hi={hi:g}, fs/2={nyq:g}] Hz")
+    return (lo, hi), cutoff_hz
+
+
+def design_inverse_tf(
+    b: Any,
+    a: Any,
+    *,
+    delay: int,
+    dt: float,
+    method: str = "zpetc",
+    band_hz: tuple[float, float] | None = None,
+    cutoff_hz: float | None = None,
+    max_zero_radius: float = 0.999,
+    min_zero_damping: float = 0.1,
+    fast_zero_radius: float = 0.5,
+) -> InverseModel:
+    """Design the inverse of ``G = q^-delay B(q^-1)/A(q^-1)`` (ZPETC or ZMETC).
+
+    Parameters
+    ----------
+    b : array_like, shape (nb + 1,)
+        ``[b0 .. b_nb]``, ``b_i`` multiplies ``u(k - delay - i)``.
+    a : array_like, shape (na + 1,)
+        ``[1, a1 .. a_na]``; must be stable.
+    delay : int
+        Model delay ``d >= 0`` (samples).
+    dt : float
+        Sample period (s).
+    method : {"zpetc", "zmetc"}
+        How the uncancellable zeros are handled (see the module notes).
+    band_hz : (lo, hi), optional
+        Pass band of the zero-phase band limit (Hz); ``None`` for none.
+    cutoff_hz : float, optional
+        Where the high-side taper reaches zero; default ``min(1.5 hi, (hi + fs/2)/2)``.
+    max_zero_radius : float
+        Zeros with ``|z|`` above this are never cancelled exactly.
+    min_zero_damping : float
+        Zeros whose continuous-equivalent mode ``ln(z)/dt`` has a damping ratio below this
+        are badly damped and not cancelled (ZPETC) ...
+    fast_zero_radius : float
+        ... unless ``|z| <= fast_zero_radius`` (their mode dies out within a few samples).
+        ZMETC cancels every zero inside the unit circle and mirrors only the unstable ones.
+
+    Returns
+    -------
+    InverseModel
+
+    Raises
+    ------
+    ParameterError
+        Unstable poles (the message names the max pole radius), ``b`` all zero, non-finite
+        coefficients, zeros on the unit circle, a bad method, band or dt.
+    """
+    if method not in METHODS:
+        raise ParameterError(f"method={method!r} must be one of {METHODS}")
+    try:
+        b = np.atleast_1d(np.asarray(b, dtype=float)).ravel()
+        a = np.atleast_1d(np.asarray(a, dtype=float)).ravel()
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"model coefficients must be numbers: {exc}") from None
+    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+        raise ParameterError(f"model dt={dt!r} must be a positive number of seconds")
+    if isinstance(delay, bool) or not isinstance(delay, (int, np.integer)) or delay < 0:
+        raise ParameterError(f"model delay={delay!r} must be a non-negative integer")
+    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
+        raise ParameterError("model coefficients must be finite (got NaN or inf in a or b)")
+    if a.size == 0 or a[0] == 0.0:
+        raise ParameterError(f"model a={a.tolist()!r} must start with a non-zero a0 (normally 1)")
+    a = a / a[0]
+    scale = np.max(np.abs(b)) if b.size else 0.0
+    if scale == 0.0:
+        raise ParameterError("model b is all zero: the model has no input path to invert")
+    band, cutoff = _check_band(band_hz, cutoff_hz, 1.0 / dt)
+
+    # Poles must be stable: A(q^-1) goes into the numerator of the inverse, but an
+    # unstable model means the identification failed and its inverse is meaningless.
+    poles = np.roots(a) if a.size > 1 else np.zeros(0, complex)
+    if poles.size:
+        rmax = float(np.max(np.abs(poles)))
+        if rmax >= 1.0:
+            raise ParameterError(
+                f"model is unstable: max pole radius {rmax:.6g} >= 1; an unstable closed-loop "
+                "model cannot be inverted (re-identify it, e.g. with more data or a lower order)"
+            )
+
+    # Leading exact zeros of b are extra delay; trailing exact zeros only lower the degree.
+    nz = np.flatnonzero(b != 0.0)
+    lead = int(nz[0])
+    b = b[nz[0]:nz[-1] + 1]
+    zeros = np.roots(b) if b.size > 1 else np.zeros(0, complex)
+    radius = np.abs(zeros)
+    on_circle = np.abs(radius - 1.0) < _UNIT_CIRCLE_TOL
+    if np.any(on_circle):
+        z = zeros[on_circle][0]
+        f = abs(np.angle(z)) / (2 * np.pi * dt)
+        raise ParameterError(
+            f"model has a zero on the unit circle (|z|={abs(z):.12g}, {f:.4g} Hz): "
+            "it can be neither inverted nor mirrored"
+        )
+    if method == "zmetc":
+        good = radius < 1.0
+    else:
+        damping = _zero_damping(zeros)
+        good = (radius <= max_zero_radius) & (
+            (damping >= min_zero_damping) | (radius <= fast_zero_radius)
+        )
+    z_s, z_u = zeros[good], zeros[~good]
+    # Keep complex pairs together (np.roots returns exact conjugates for real b).
+    b_s = _poly_from_roots_ascending(z_s)
+    # B_u: unstable roots as (q^-1 - 1/z) (bounded for huge z), the others as (1 - z q^-1).
+    out = np.abs(z_u) > 1.0
+    b_u = np.polynomial.polynomial.polymul(
+        _poly_from_roots_ascending(1.0 / z_u[out])[::-1], _poly_from_roots_ascending(z_u[~out])
+    )
+    b_u = np.atleast_1d(b_u)
+    # k: least-squares fit of b = k * B_s * B_u (exact up to rounding).
+    prod = np.polynomial.polynomial.polymul(b_s, b_u)
+    k = float(np.dot(prod, b) / np.dot(prod, prod))
+    s = b_u.size - 1
+
+    if method == "zpetc":
+        bu1 = float(np.sum(b_u))
+        if abs(bu1) < 1e-8 * float(np.max(np.abs(b_u))):
+            raise ParameterError(
+                "ZPETC gain B_u(1) is zero: an uncancelled zero sits at z = 1; use "
+                "method='zmetc' or a model without a DC zero"
+            )
+        # F = q^(d+s) A B_u^* / (k B_s B_u(1)^2)
+        num = np.polynomial.polynomial.polymul(a, b_u[::-1]) / (k * bu1 * bu1)
+        den = b_s
+        extra = s
+    else:
+        # F = q^(d+p) A / (k B_s B_u^*), B_u^* = reversed B_u (zeros mirrored to 1/z).
+        num = a / k
+        den = np.polynomial.polynomial.polymul(b_s, b_u[::-1])
+        extra = _allpass_advance(b_u, dt, band)
+    den0 = den[0]
+    num, den = num / den0, den / den0
+    return InverseModel(
+        method=method,
+        num=np.ascontiguousarray(num, dtype=float),
+        den=np.ascontiguousarray(den, dtype=float),
+        preview=int(delay) + lead + int(extra),
+        dt=float(dt),
+        b_u=np.ascontiguousarray(b_u, dtype=float),
+        extra_preview=int(extra),
+        band_hz=band,
+        cutoff_hz=cutoff,
+        cancelled_zeros=z_s,
+        uncancelled_zeros=z_u,
+        poles=poles,
+        model_delay=int(delay) + lead,
+    )
+
+
+def _allpass_advance(b_u: np.ndarray, dt: float, band: tuple[float, float] | None) -> int:
+    """Integer advance that best removes the linear phase of ``B_u / B_u^*``."""
+    if b_u.size == 1:
+        return 0
+    if band is None:
+        f = np.linspace(0.0, 0.02, 9)[1:] / dt  # near DC: the DC group delay
+    else:
+        f = np.linspace(max(band[0], 1e-3 * band[1]), band[1], 64)
+    w = 2 * np.pi * f * dt
+    x = np.exp(-1j * w)
+    phi = np.unwrap(np.angle(_eval_ascending(b_u, x) / _eval_ascending(b_u[::-1], x)))
+    # least squares: phi + w p ≈ 0
+    p = -float(np.dot(phi, w) / np.dot(w, w))
+    return max(0, int(round(p)))
+
+
+def design_inverse(model: Any, *, method: str = "zpetc",
+                   band_hz: tuple[float, float] | None = None,
+                   cutoff_hz: float | None = None, **options: Any) -> InverseModel:
+    """Design the inverse of an identified closed-loop model (an ``ArmaxModel``).
+
+    Only the deterministic part ``q^-delay B/A`` is used; ``model`` needs the attributes
+    ``b``, ``a``, ``delay`` and ``dt``. Options are those of :func:`design_inverse_tf`.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> m = SimpleNamespace(a=[1.0, -0.5], b=[0.5], delay=1, dt=1e-3)
+    >>> inv = design_inverse(m)
+    >>> inv.preview, inv.num.tolist(), inv.den.tolist()
+    (1, [2.0, -1.0], [1.0])
+    """
+    for name in ("b", "a", "delay", "dt"):
+        if not hasattr(model, name):
+            raise TypeError(f"model must have attributes b, a, delay, dt (missing {name!r})")
+    return design_inverse_tf(model.b, model.a, delay=model.delay, dt=model.dt, method=method,
+                             band_hz=band_hz, cutoff_hz=cutoff_hz, **options)
