@@ -82,19 +82,21 @@ def compensate(
     >>> compensate(m, [0.0, 0.0, 1.0, 1.0]).tolist()
     [0.0, 2.0, 1.0, 1.0]
     """
-    if isinstance(model, InverseModel):
-        inverse = model
-    else:
-        inverse = design_inverse(model, method=method, band_hz=band_hz, **options)
+    model_dt = getattr(model, "dt", None)
     given = reference_rate(reference)
     if given is None:
         given = fs
     elif fs is not None and not math.isclose(given, fs, rel_tol=_RATE_RTOL):
         raise DataError(f"reference sample rate {given:g} Hz differs from fs={fs:g} Hz")
-    if given is not None and not math.isclose(given, inverse.fs, rel_tol=_RATE_RTOL):
+    if given is not None and model_dt is not None and model_dt > 0 \
+            and not math.isclose(given * model_dt, 1.0, rel_tol=_RATE_RTOL):
         raise DataError(
-            f"reference is sampled at {given:g} Hz but the model at {inverse.fs:g} Hz "
-            f"(dt={inverse.dt:g} s); resample the reference or identify at its rate"
+            f"reference is sampled at {given:g} Hz but the model at {1.0 / model_dt:g} Hz "
+            f"(dt={model_dt:g} s); resample the reference or identify at its rate"
         )
+    if isinstance(model, InverseModel):
+        inverse = model
+    else:
+        inverse = design_inverse(model, method=method, band_hz=band_hz, **options)
     r = _as_reference(_signal_values(reference))
     return inverse.apply(r, preview=preview)

@@ -1,0 +1,99 @@
+"""``ehss compensate``: files in, drive out; bad input is one line and exit 2, no file."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import scipy.signal
+from numpy.testing import assert_allclose
+
+from ehss.cli import main
+from ehss.io import read_columns, write_csv
+
+DT = 1e-3
+
+
+def _write_model(path, *, a=(1.0, -1.5, 0.7), b=(0.1, 0.05), delay=2, dt=DT):
+    path.write_text(json.dumps({"a": list(a), "b": list(b), "c": [1.0], "delay": delay,
+                                "dt": dt}))
+    return path
+
+
+def _write_reference(path, r, fs=1 / DT, name="reference"):
+    write_csv(path, {"t": np.arange(r.size) / fs, name: r})
+    return path
+
+
+@pytest.fixture
+def reference(rng):
+    r = scipy.signal.lfilter([0.05], [1, -0.95], rng.standard_normal(1000))
+    r[:20] = 0.0
+    return r
+
+
+def test_compensate_writes_drive_that_inverts_the_model(tmp_path, reference):
+    model = _write_model(tmp_path / "m.json")
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 0
+    table = read_columns(out, ["t", "reference", "drive"])
+    assert list(table.columns) == ["t", "reference", "drive"]
+    assert_allclose(table["reference"], reference, rtol=0, atol=0)  # repr round trip
+    y = scipy.signal.lfilter([0.0, 0.0, 0.1, 0.05], [1.0, -1.5, 0.7], table["drive"])
+    # Minimum-phase model (zero at -0.5): exact inverse up to rounding.
+    assert_allclose(y, reference, rtol=0, atol=1e-10)
+
+
+def test_compensate_options(tmp_path, reference):
+    model = _write_model(tmp_path / "m.json", b=(0.1, 0.25))  # zero at -2.5
+    ref = _write_reference(tmp_path / "r.csv", reference, name="acc")
+    for method in ("zpetc", "zmetc"):
+        out = tmp_path / f"{method}.csv"
+        code = main(["compensate", str(model), str(ref), "--out", str(out), "--column", "acc",
+                     "--method", method, "--band", "0", "100"])
+        assert code == 0
+        assert np.all(np.isfinite(read_columns(out, ["drive"])["drive"]))
+
+
+@pytest.mark.parametrize(
+    ("model_kw", "ref_kw", "extra", "match"),
+    [
+        ({"a": (1.0, -1.2)}, {}, [], "max pole radius 1.2"),
+        ({"b": (0.0, 0.0)}, {}, [], "all zero"),
+        ({"dt": 2e-3}, {}, [], "500 Hz"),
+        ({}, {"name": "other"}, [], "reference"),
+        ({}, {}, ["--fs", "2000"], "2000"),
+    ],
+)
+def test_bad_input_exit_2_one_line_no_output(tmp_path, reference, capsys, model_kw, ref_kw,
+                                             extra, match):
+    model = _write_model(tmp_path / "m.json", **model_kw)
+    ref = _write_reference(tmp_path / "r.csv", reference, **ref_kw)
+    out = tmp_path / "drive.csv"
+    code = main(["compensate", str(model), str(ref), "--out", str(out), *extra])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1, err
+    assert match in err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["drive.csv", "m.json", "r.csv"][1:]
+
+
+def test_non_finite_reference(tmp_path, capsys):
+    model = _write_model(tmp_path / "m.json")
+    ref = tmp_path / "r.csv"
+    ref.write_text("t,reference\n0.0,0.0\n0.001,nan\n")
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_missing_model_file(tmp_path, reference, capsys):
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(tmp_path / "none.json"), str(ref), "--out", str(out)]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert not out.exists()
