@@ -1,0 +1,124 @@
+"""Discrete coefficients of the digital controllers (position PID, force PID, TVC).
+
+The laws run at the control rate fs = 1/dt on sampled sensor signals:
+
+* PID (position, eq (9); force, eq (15)): u = kp e + I + D, I += ki e dt with
+  conditional integration, D[k] = τ/(τ+dt) D[k−1] − kd/(τ+dt)(y[k] − y[k−1]),
+  τ = 1/(2π f_D) (derivative on measurement, backward Euler).
+* TVC (eqs (10)–(12), Fig. 6): generator GAR(s) = Kg/(s² + ωg s + δg) discretised exactly
+  with a zero-order hold (:func:`generator_zoh`), complementary velocity filter
+  v̂ = (ωc s y + a)/(s + ωc) discretised with the bilinear transform
+  (:func:`complementary_velocity_tustin`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.linalg
+
+from ehss.control import _kernels as K
+from ehss.params import ForcePidParams, PositionPidParams, TvcParams
+
+__all__ = [
+    "pid_coefficients",
+    "generator_zoh",
+    "complementary_velocity_tustin",
+    "tvc_coefficients",
+]
+
+
+def pid_coefficients(pid: PositionPidParams | ForcePidParams, dt_s: float) -> np.ndarray:
+    """Coefficient vector ``[kp, ki·dt, τ/(τ+dt), kd/(τ+dt), limit]`` of a PID.
+
+    Parameters
+    ----------
+    pid : PositionPidParams or ForcePidParams
+        Gains in V per metre (position) or V per newton (force).
+    dt_s : float
+        Control period, s.
+
+    Returns
+    -------
+    ndarray, shape (5,)
+    """
+    if isinstance(pid, PositionPidParams):
+        kp, ki, kd = pid.kp_v_per_m, pid.ki_v_per_m_per_s, pid.kd_v_s_per_m
+    else:
+        kp, ki, kd = pid.kp_v_per_n, pid.ki_v_per_n_per_s, pid.kd_v_s_per_n
+    tau = 1.0 / (2.0 * math.pi * pid.derivative_filter_hz)
+    c = np.empty(K.N_PID)
+    c[K.PID_KP] = kp
+    c[K.PID_KI_DT] = ki * dt_s
+    c[K.PID_D_POLE] = tau / (tau + dt_s)
+    c[K.PID_D_GAIN] = kd / (tau + dt_s)
+    c[K.PID_LIMIT] = pid.output_limit_v
+    return c
+
+
+def generator_zoh(kg: float, omega_g: float, delta_g: float, dt_s: float):
+    """Exact ZOH discretisation of the acceleration generator, eq (10).
+
+    State [r_d, v_d] with ṙ_d = v_d, v̇_d = Kg a_r − ωg v_d − δg r_d.
+
+    Returns
+    -------
+    phi : ndarray, shape (2, 2)
+        e^{A dt}.
+    gamma : ndarray, shape (2,)
+        ∫₀^dt e^{Aτ} dτ B.
+
+    Notes
+    -----
+    Computed from the exponential of the augmented matrix [[A, B], [0, 0]] dt.
+    """
+    m = np.zeros((3, 3))
+    m[0, 1] = 1.0
+    m[1, 0] = -delta_g
+    m[1, 1] = -omega_g
+    m[1, 2] = kg
+    e = scipy.linalg.expm(m * dt_s)
+    return e[:2, :2].copy(), e[:2, 2].copy()
+
+
+def complementary_velocity_tustin(omega_c: float, dt_s: float) -> tuple[float, float, float]:
+    """Tustin form of v̂ = (ωc s y + a)/(s + ωc) (Fig. 6 velocity synthesis).
+
+    With c = 2/dt:
+    v̂[k] = p v̂[k−1] + b_y (y[k] − y[k−1]) + b_a (a[k] + a[k−1]),
+    p = (c − ωc)/(c + ωc), b_y = ωc c/(c + ωc), b_a = 1/(c + ωc).
+
+    Returns
+    -------
+    (p, b_y, b_a) : tuple of float
+    """
+    c = 2.0 / dt_s
+    return (c - omega_c) / (c + omega_c), omega_c * c / (c + omega_c), 1.0 / (c + omega_c)
+
+
+def tvc_coefficients(tvc: TvcParams, dt_s: float) -> np.ndarray:
+    """Coefficient vector of the three-variable controller (layout ``TVC_*``)."""
+    wn = tvc.generator_omega_rad_s
+    wg = 2.0 * tvc.generator_damping * wn
+    dg = wn * wn
+    phi, gam = generator_zoh(tvc.kg, wg, dg, dt_s)
+    pole, by, ba = complementary_velocity_tustin(2.0 * math.pi * tvc.velocity_crossover_hz, dt_s)
+    c = np.empty(K.N_TVC)
+    c[K.TVC_PHI00], c[K.TVC_PHI01] = phi[0]
+    c[K.TVC_PHI10], c[K.TVC_PHI11] = phi[1]
+    c[K.TVC_GAM0], c[K.TVC_GAM1] = gam
+    c[K.TVC_KG] = tvc.kg
+    c[K.TVC_WG] = wg
+    c[K.TVC_DG] = dg
+    c[K.TVC_KDF] = tvc.kdf_v_per_m
+    c[K.TVC_KVF] = tvc.kvf_v_per_m_s
+    c[K.TVC_KAF] = tvc.kaf_v_per_m_s2
+    c[K.TVC_KDR] = tvc.kdr
+    c[K.TVC_KVR] = tvc.kvr_s
+    c[K.TVC_KAR] = tvc.kar_s2
+    c[K.TVC_VF_POLE] = pole
+    c[K.TVC_VF_Y] = by
+    c[K.TVC_VF_A] = ba
+    c[K.TVC_LIMIT] = tvc.output_limit_v
+    return c
