@@ -1,0 +1,641 @@
+"""Validation of identified models: fit figures, frequency-response error, residual tests.
+
+The paper judges each identified closed loop by eye against the measured time response and
+the Hanning-window frequency response (Figs 13–15). This module puts numbers on the same
+comparisons:
+
+- :func:`frf_error`: magnitude (dB) and phase (deg) error of the model against an H1
+  estimate (:mod:`ehss.frequency`) over a band, where the coherence is high enough;
+- :func:`nrmse_fit`, :func:`simulation_fit`, :func:`prediction_fit`: the "fit" percentage
+  of MATLAB's System Identification Toolbox, for simulation and k-step prediction;
+- :func:`residual_tests`: whiteness of the one-step residuals (per-lag bounds and the
+  Ljung–Box portmanteau test) and their independence from the input;
+- :func:`validate`: all of the above on held-out data, bundled in a
+  :class:`ValidationReport`.
+
+The model is any object with the :class:`~ehss.identification.model.ArmaxModel` methods
+``frequency_response(freq_hz)``, ``simulate(u)``, ``predict(u, y, horizon)``,
+``is_stable()`` and ``poles()``.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import scipy.signal
+import scipy.stats
+
+from ehss.errors import DataError, ParameterError
+from ehss.frequency import FrequencyResponse, _check_band, h1_estimate
+
+__all__ = [
+    "FrfError",
+    "ResidualTests",
+    "ValidationReport",
+    "frf_error",
+    "nrmse_fit",
+    "simulation_fit",
+    "prediction_fit",
+    "residual_tests",
+    "ljung_box",
+    "validate",
+]
+
+
+class _Model(Protocol):  # the part of ArmaxModel used here
+    def frequency_response(self, freq_hz: np.ndarray) -> np.ndarray: ...
+    def simulate(self, u: np.ndarray) -> np.ndarray: ...
+    def predict(self, u: np.ndarray, y: np.ndarray, horizon: int = 1) -> np.ndarray: ...
+    def is_stable(self) -> bool: ...
+    def poles(self) -> np.ndarray: ...
+
+
+# ------------------------------------------------------------------------------ FRF error
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrfError:
+    """Error of a model's frequency response against an H1 estimate.
+
+    Attributes
+    ----------
+    band_hz : tuple of float
+        The band ``(lo, hi)`` compared, Hz.
+    min_coherence : float
+        Points with a lower coherence were left out.
+    n_points : int
+        Number of frequency points used (0: nothing to compare, all errors NaN).
+    max_magnitude_db, rms_magnitude_db : float
+        Largest and RMS of ``|20 log10 |G| - 20 log10 |H1||`` in dB.
+    weighted_rms_magnitude_db : float
+        RMS magnitude error weighted by the coherence.
+    max_phase_deg, rms_phase_deg : float
+        Largest and RMS absolute phase error in degrees, each wrapped to ±180°.
+    """
+
+    band_hz: tuple[float, float]
+    min_coherence: float
+    n_points: int
+    max_magnitude_db: float
+    rms_magnitude_db: float
+    weighted_rms_magnitude_db: float
+    max_phase_deg: float
+    rms_phase_deg: float
+
+    def summary(self) -> dict[str, Any]:
+        """Plain floats/ints for JSON."""
+        return {
+            "band_hz": [float(self.band_hz[0]), float(self.band_hz[1])],
+            "min_coherence": float(self.min_coherence),
+            "n_points": int(self.n_points),
+            "max_magnitude_db": float(self.max_magnitude_db),
+            "rms_magnitude_db": float(self.rms_magnitude_db),
+            "weighted_rms_magnitude_db": float(self.weighted_rms_magnitude_db),
+            "max_phase_deg": float(self.max_phase_deg),
+            "rms_phase_deg": float(self.rms_phase_deg),
+        }
+
+
+def frf_error(
+    model: _Model,
+    frf: FrequencyResponse,
+    *,
+    band_hz: tuple[float, float],
+    min_coherence: float = 0.9,
+) -> FrfError:
+    """Magnitude and phase error of ``model`` against the estimate ``frf`` over a band.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+        Anything with ``frequency_response(freq_hz) -> complex ndarray``.
+    frf : FrequencyResponse
+        The non-parametric estimate (:func:`ehss.frequency.h1_estimate`).
+    band_hz : (float, float)
+        Frequencies ``lo <= f <= hi`` (Hz) to compare.
+    min_coherence : float, default 0.9
+        Points whose coherence is below this are unreliable and left out.
+
+    Returns
+    -------
+    FrfError
+        With ``n_points == 0`` and NaN errors when no point qualifies.
+
+    Notes
+    -----
+    With :math:`G` the model and :math:`H` the estimate, per frequency
+
+    .. math:: e_{dB} = 20\\log_{10}|G| - 20\\log_{10}|H|, \\qquad
+              e_{\\varphi} = \\arg(G\\,\\overline{H}) \\in (-180°, 180°],
+
+    so the phase error needs no unwrapping. The weighted RMS uses :math:`\\gamma^2` as the
+    weight of each point.
+    """
+    lo, hi = _check_band(band_hz)
+    if not 0.0 <= float(min_coherence) <= 1.0:
+        raise ParameterError(f"{min_coherence=} must be in [0, 1]")
+    mask = (frf.freq_hz >= lo) & (frf.freq_hz <= hi) & (frf.coherence >= min_coherence)
+    mask &= np.abs(frf.response) > 0
+    n = int(mask.sum())
+    if n == 0:
+        nan = float("nan")
+        return FrfError(band_hz=(lo, hi), min_coherence=float(min_coherence), n_points=0,
+                        max_magnitude_db=nan, rms_magnitude_db=nan,
+                        weighted_rms_magnitude_db=nan, max_phase_deg=nan, rms_phase_deg=nan)
+    f = frf.freq_hz[mask]
+    h = frf.response[mask]
+    w = frf.coherence[mask]
+    g = np.asarray(model.frequency_response(f), dtype=np.complex128)
+    if g.shape != f.shape:
+        raise ParameterError(f"model.frequency_response returned shape {g.shape}, "
+                             f"expected {f.shape}")
+    with np.errstate(divide="ignore"):
+        # e_dB = 20 log10 |G| - 20 log10 |H|
+        e_db = 20.0 * np.log10(np.abs(g)) - 20.0 * np.log10(np.abs(h))
+    # e_phi = arg(G conj(H)), wrapped to (-180, 180] by construction
+    e_ph = np.degrees(np.angle(g * np.conj(h)))
+    return FrfError(
+        band_hz=(lo, hi),
+        min_coherence=float(min_coherence),
+        n_points=n,
+        max_magnitude_db=float(np.max(np.abs(e_db))),
+        rms_magnitude_db=float(np.sqrt(np.mean(e_db**2))),
+        weighted_rms_magnitude_db=float(np.sqrt(np.sum(w * e_db**2) / np.sum(w))),
+        max_phase_deg=float(np.max(np.abs(e_ph))),
+        rms_phase_deg=float(np.sqrt(np.mean(e_ph**2))),
+    )
+
+
+# ----------------------------------------------------------------------------- fit figures
+
+
+def nrmse_fit(y, yhat) -> float:
+    """Normalised fit in percent, as MATLAB's ``compare``/``goodnessOfFit('NRMSE')``.
+
+    .. math:: \\mathrm{fit} = 100\\left(1 - \\frac{\\lVert y - \\hat y\\rVert}
+              {\\lVert y - \\bar y\\rVert}\\right)
+
+    100 is a perfect match, 0 is no better than the mean of ``y``, and it is negative (and
+    unbounded) for worse predictions. A diverging ``yhat`` gives ``-inf``.
+
+    Raises
+    ------
+    DataError
+        If the shapes differ, ``y`` is constant or ``y`` is non-finite.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    yhat = np.asarray(yhat, dtype=np.float64)
+    if y.shape != yhat.shape or y.ndim != 1:
+        raise DataError(f"y and yhat must be 1-D of the same length, got {y.shape} "
+                        f"and {yhat.shape}")
+    if y.size == 0 or not np.all(np.isfinite(y)):
+        raise DataError("y must be non-empty and finite")
+    if not np.all(np.isfinite(yhat)):
+        return -math.inf
+    den = np.linalg.norm(y - np.mean(y))
+    if den == 0.0:
+        raise DataError("y is constant: the fit is undefined")
+    with np.errstate(over="ignore"):
+        num = np.linalg.norm(y - yhat)
+    return float(100.0 * (1.0 - num / den)) if math.isfinite(num) else -math.inf
+
+
+def simulation_fit(model: _Model, u, y, *, start: int = 0) -> float:
+    """Fit (percent, :func:`nrmse_fit`) of the noise-free simulation ``B/A u`` to ``y``.
+
+    The model is simulated over the whole record from rest and scored from sample
+    ``start`` on, so a held-out part starts from the state the earlier part left.
+    An unstable model's simulation diverges and scores ``-inf``.
+    """
+    u, y = _pair(u, y)
+    start = _check_start(start, y.size)
+    with np.errstate(over="ignore", invalid="ignore"):
+        yhat = np.asarray(model.simulate(u), dtype=np.float64)
+    return nrmse_fit(y[start:], yhat[start:])
+
+
+def prediction_fit(model: _Model, u, y, horizon: int = 1, *, start: int = 0) -> float:
+    """Fit (percent) of the ``horizon``-step-ahead ARMAX prediction of ``y``."""
+    u, y = _pair(u, y)
+    start = _check_start(start, y.size)
+    horizon = _pos_int(horizon, "horizon")
+    with np.errstate(over="ignore", invalid="ignore"):
+        yhat = np.asarray(model.predict(u, y, horizon=horizon), dtype=np.float64)
+    return nrmse_fit(y[start:], yhat[start:])
+
+
+# --------------------------------------------------------------------------- residual tests
+
+
+@dataclass(frozen=True, kw_only=True)
+class ResidualTests:
+    """Whiteness and input-independence tests of one-step prediction residuals.
+
+    Attributes
+    ----------
+    n_samples : int
+        Residuals used.
+    alpha : float
+        Significance level of the tests.
+    lags : ndarray of int, shape (max_lag + 1,)
+        ``0 .. max_lag`` for :attr:`autocorrelation`.
+    autocorrelation : ndarray, shape (max_lag + 1,)
+        Normalised residual autocorrelation :math:`\\hat\\rho_e(\\tau)` (1 at lag 0).
+    autocorrelation_bound : float
+        Per-lag bound :math:`z_{1-\\alpha/2}/\\sqrt N` under whiteness.
+    ljung_box_q, ljung_box_p : float
+        Ljung–Box statistic over lags 1..max_lag and its p-value (:math:`\\chi^2_{m}`).
+    white : bool
+        Whiteness accepted: ``ljung_box_p >= alpha``.
+    cross_lags : ndarray of int, shape (2 max_lag + 1,)
+        ``-max_lag .. max_lag`` for :attr:`cross_correlation`.
+    cross_correlation : ndarray, shape (2 max_lag + 1,)
+        Normalised :math:`\\hat\\rho_{eu}(\\tau) = \\sum_k e(k) u(k-\\tau) / (N \\sigma_e
+        \\sigma_u)`; positive lags are past inputs.
+    cross_bound : float
+        Bound on :math:`|\\hat\\rho_{eu}|` (Bonferroni over the lags, see
+        :func:`residual_tests`).
+    independent : bool
+        Independence accepted: every :math:`|\\hat\\rho_{eu}(\\tau)| \\le` ``cross_bound``.
+    residuals : ndarray, shape (n_samples,)
+        The residuals themselves.
+    """
+
+    n_samples: int
+    alpha: float
+    lags: np.ndarray = field(repr=False)
+    autocorrelation: np.ndarray = field(repr=False)
+    autocorrelation_bound: float
+    ljung_box_q: float
+    ljung_box_p: float
+    white: bool
+    cross_lags: np.ndarray = field(repr=False)
+    cross_correlation: np.ndarray = field(repr=False)
+    cross_bound: float
+    independent: bool
+    residuals: np.ndarray = field(repr=False)
+
+    @property
+    def passed(self) -> bool:
+        """Both tests accepted."""
+        return bool(self.white and self.independent)
+
+    @property
+    def n_lags_outside(self) -> int:
+        """Lags 1..max_lag whose autocorrelation is outside the per-lag bound."""
+        return int(np.sum(np.abs(self.autocorrelation[1:]) > self.autocorrelation_bound))
+
+    def summary(self) -> dict[str, Any]:
+        """Plain values for JSON."""
+        return {
+            "n_samples": int(self.n_samples),
+            "alpha": float(self.alpha),
+            "max_lag": int(self.lags[-1]),
+            "ljung_box_q": float(self.ljung_box_q),
+            "ljung_box_p": float(self.ljung_box_p),
+            "white": bool(self.white),
+            "autocorrelation_lags_outside": self.n_lags_outside,
+            "max_abs_cross_correlation": float(np.max(np.abs(self.cross_correlation))),
+            "cross_bound": float(self.cross_bound),
+            "independent": bool(self.independent),
+        }
+
+
+def ljung_box(x, max_lag: int) -> tuple[float, float]:
+    """Ljung–Box statistic and p-value of ``x`` over lags ``1..max_lag``.
+
+    .. math:: Q = N(N+2)\\sum_{k=1}^{m} \\frac{\\hat\\rho_k^2}{N-k}, \\qquad
+              p = P(\\chi^2_m > Q),
+
+    with :math:`\\hat\\rho_k = \\sum_{t=k}^{N-1} x'_t x'_{t-k} / \\sum_t x'^2_t`,
+    :math:`x' = x - \\bar x`.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    max_lag = _pos_int(max_lag, "max_lag")
+    n = x.size
+    if n <= max_lag + 1:
+        raise DataError(f"{n} samples are too few for {max_lag} lags")
+    rho = _autocorr(x - x.mean(), max_lag)
+    k = np.arange(1, max_lag + 1)
+    q = float(n * (n + 2) * np.sum(rho[1:] ** 2 / (n - k)))
+    return q, float(scipy.stats.chi2.sf(q, max_lag))
+
+
+def residual_tests(
+    model: _Model,
+    u,
+    y,
+    *,
+    max_lag: int = 25,
+    alpha: float = 0.01,
+    start: int = 0,
+) -> ResidualTests:
+    """Whiteness and input-independence tests of the one-step prediction residuals.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+        Anything with ``predict(u, y, horizon=1)``.
+    u, y : array_like, shape (n_samples,)
+        Input and measured output.
+    max_lag : int, default 25
+        Largest lag tested.
+    alpha : float, default 0.01
+        Significance level.
+    start : int, default 0
+        Residuals before this sample (e.g. the estimation part) are not tested; the
+        prediction still runs over the whole record so its state is warm.
+
+    Returns
+    -------
+    ResidualTests
+
+    Notes
+    -----
+    The residuals are :math:`e(k) = y(k) - \\hat y(k|k-1)`. Whiteness is accepted when the
+    Ljung–Box p-value is at least ``alpha``; the per-lag autocorrelations and their bound
+    :math:`\\pm z_{1-\\alpha/2}/\\sqrt N` are returned for plotting. For independence, if
+    :math:`e` is white and independent of :math:`u`,
+    :math:`\\operatorname{var}\\hat\\rho_{eu}(\\tau) = \\frac1N\\sum_k \\rho_e(k)\\rho_u(k)`
+    (Ljung, *System Identification*, 2nd ed., §16.6); the sum is estimated over
+    :math:`|k| \\le` ``max_lag`` (this widens the bound when the residuals are coloured,
+    as MATLAB's ``resid`` does) and a Bonferroni correction over the
+    :math:`2\\,\\text{max\\_lag}+1` lags keeps the test at level ``alpha``.
+    """
+    u, y = _pair(u, y)
+    max_lag = _pos_int(max_lag, "max_lag")
+    if not 0.0 < float(alpha) < 1.0:
+        raise ParameterError(f"{alpha=} must be in (0, 1)")
+    start = _check_start(start, y.size)
+    with np.errstate(over="ignore", invalid="ignore"):
+        yhat = np.asarray(model.predict(u, y, horizon=1), dtype=np.float64)
+    e = y[start:] - yhat[start:]
+    uu = u[start:]
+    n = e.size
+    if n < max(2 * max_lag + 2, 10):
+        raise DataError(f"{n} residuals are too few for residual tests up to lag {max_lag}")
+    if not np.all(np.isfinite(e)):
+        raise DataError("the one-step predictions are not finite (is the C polynomial stable?)")
+    e0 = e - e.mean()
+    u0 = uu - uu.mean()
+    if not np.any(e0) or not np.any(u0):
+        raise DataError("the residuals or the input are constant: nothing to test")
+
+    rho_e = _autocorr(e0, max_lag)
+    z = float(scipy.stats.norm.ppf(1.0 - alpha / 2.0))
+    bound = z / math.sqrt(n)
+    q, p = ljung_box(e, max_lag)
+
+    # ρ_eu(τ) = Σ_k e(k) u(k−τ) / (N σ_e σ_u), τ = −max_lag..max_lag
+    full = scipy.signal.correlate(e0, u0, mode="full", method="fft")
+    mid = n - 1  # index of τ = 0 in the full correlation
+    cross = full[mid - max_lag : mid + max_lag + 1] / math.sqrt(np.dot(e0, e0) * np.dot(u0, u0))
+    rho_u = _autocorr(u0, max_lag)
+    # var ρ_eu ≈ (1/N) Σ_{|k|≤m} ρ_e(k) ρ_u(k); never below the white-residual value 1/N
+    p_sum = max(1.0, float(rho_e[0] * rho_u[0] + 2.0 * np.dot(rho_e[1:], rho_u[1:])))
+    n_tests = 2 * max_lag + 1
+    z_bonf = float(scipy.stats.norm.ppf(1.0 - alpha / (2.0 * n_tests)))
+    cross_bound = z_bonf * math.sqrt(p_sum / n)
+    return ResidualTests(
+        n_samples=n,
+        alpha=float(alpha),
+        lags=np.arange(max_lag + 1),
+        autocorrelation=rho_e,
+        autocorrelation_bound=bound,
+        ljung_box_q=q,
+        ljung_box_p=p,
+        white=bool(p >= alpha),
+        cross_lags=np.arange(-max_lag, max_lag + 1),
+        cross_correlation=cross,
+        cross_bound=cross_bound,
+        independent=bool(np.all(np.abs(cross) <= cross_bound)),
+        residuals=e,
+    )
+
+
+# ------------------------------------------------------------------------------- validate
+
+
+@dataclass(frozen=True, kw_only=True)
+class ValidationReport:
+    """Everything :func:`validate` measured about one model on one record.
+
+    Attributes
+    ----------
+    n_estimation, n_validation : int
+        Samples before / in the held-out part.
+    fs : float
+        Sample rate, Hz.
+    stable : bool
+        All poles strictly inside the unit circle.
+    max_pole_radius : float
+        Largest pole modulus.
+    simulation_fit_pct : float
+        :func:`simulation_fit` on the held-out part (``-inf`` if the simulation diverges).
+    prediction_fit_pct : dict of int to float
+        :func:`prediction_fit` on the held-out part, by horizon.
+    frf : FrequencyResponse
+        H1 estimate from the held-out part.
+    frf_error : FrfError or None
+        Model against ``frf`` (None when no band was given).
+    residuals : ResidualTests
+        Tests of the one-step residuals on the held-out part.
+    simulated : ndarray, shape (n_samples,)
+        The model's simulated output over the whole record (for plots).
+    """
+
+    n_estimation: int
+    n_validation: int
+    fs: float
+    stable: bool
+    max_pole_radius: float
+    simulation_fit_pct: float
+    prediction_fit_pct: dict[int, float]
+    frf: FrequencyResponse = field(repr=False)
+    frf_error: FrfError | None
+    residuals: ResidualTests = field(repr=False)
+    simulated: np.ndarray = field(repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain floats, ints and bools for JSON (non-finite fits become None on write)."""
+        return {
+            "n_estimation": int(self.n_estimation),
+            "n_validation": int(self.n_validation),
+            "fs_hz": float(self.fs),
+            "stable": bool(self.stable),
+            "max_pole_radius": float(self.max_pole_radius),
+            "simulation_fit_pct": float(self.simulation_fit_pct),
+            "prediction_fit_pct": {str(k): float(v) for k, v in
+                                   self.prediction_fit_pct.items()},
+            "frf_error": None if self.frf_error is None else self.frf_error.summary(),
+            "frf": {"nperseg": int(self.frf.nperseg), "n_averages": int(self.frf.n_averages),
+                    "resolution_hz": float(self.frf.resolution_hz)},
+            "residuals": self.residuals.summary(),
+        }
+
+    def format(self) -> str:
+        """A few lines for the terminal."""
+        r = self.residuals
+        lines = [
+            f"validation on {self.n_validation} held-out samples "
+            f"({self.n_validation / self.fs:.3g} s; estimation used {self.n_estimation})",
+            f"  stable: {'yes' if self.stable else 'NO'} "
+            f"(max pole radius {self.max_pole_radius:.6f})",
+            f"  simulation fit: {_pct(self.simulation_fit_pct)}",
+        ]
+        for k, v in self.prediction_fit_pct.items():
+            lines.append(f"  {k}-step prediction fit: {_pct(v)}")
+        e = self.frf_error
+        if e is not None:
+            lo, hi = e.band_hz
+            if e.n_points:
+                lines.append(
+                    f"  frequency response {lo:g}-{hi:g} Hz ({e.n_points} points with "
+                    f"coherence >= {e.min_coherence:g}): magnitude error max "
+                    f"{e.max_magnitude_db:.3f} dB, rms {e.rms_magnitude_db:.3f} dB; "
+                    f"phase error max {e.max_phase_deg:.2f} deg, rms {e.rms_phase_deg:.2f} deg"
+                )
+            else:
+                lines.append(f"  frequency response {lo:g}-{hi:g} Hz: no point with "
+                             f"coherence >= {e.min_coherence:g}")
+        lines.append(
+            f"  residuals white: {'yes' if r.white else 'no'} (Ljung-Box Q={r.ljung_box_q:.4g}, "
+            f"p={r.ljung_box_p:.3g}); independent of input: "
+            f"{'yes' if r.independent else 'no'}"
+        )
+        return "\n".join(lines)
+
+
+def validate(
+    model: _Model,
+    u,
+    y,
+    *,
+    fs: float,
+    band_hz: tuple[float, float] | None = None,
+    holdout: float | None = 0.3,
+    min_coherence: float = 0.9,
+    horizons: tuple[int, ...] = (1,),
+    max_lag: int = 25,
+    alpha: float = 0.01,
+    nperseg: int | None = None,
+) -> ValidationReport:
+    """Validate ``model`` on the held-out end of a record.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+        The identified model (estimated on the first ``1 - holdout`` of the record).
+    u, y : array_like, shape (n_samples,)
+        The whole record: input and measured output.
+    fs : float
+        Sample rate, Hz.
+    band_hz : (float, float), optional
+        Band for :func:`frf_error`; None skips the frequency-response error.
+    holdout : float or None, default 0.3
+        Fraction of the record at its end used for validation. None (or 0) validates on
+        the whole record, for data kept apart from the estimation.
+    min_coherence : float, default 0.9
+        Passed to :func:`frf_error`.
+    horizons : tuple of int, default (1,)
+        Prediction horizons for :func:`prediction_fit`.
+    max_lag, alpha : int, float
+        Passed to :func:`residual_tests`.
+    nperseg : int, optional
+        Passed to :func:`ehss.frequency.h1_estimate`.
+
+    Returns
+    -------
+    ValidationReport
+
+    Raises
+    ------
+    DataError
+        If the held-out part is too short to validate.
+    """
+    u, y = _pair(u, y)
+    if holdout is None or holdout == 0:
+        start = 0
+    else:
+        holdout = float(holdout)
+        if not 0.0 < holdout < 1.0:
+            raise ParameterError(f"{holdout=} must be in (0, 1)")
+        start = int(round(y.size * (1.0 - holdout)))
+    n_val = y.size - start
+    if n_val < 64:
+        raise DataError(f"the held-out part has {n_val} samples; at least 64 are needed "
+                        "(use a longer record or a larger holdout)")
+    poles = np.asarray(model.poles())
+    max_radius = float(np.max(np.abs(poles))) if poles.size else 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        simulated = np.asarray(model.simulate(u), dtype=np.float64)
+    sim_fit = nrmse_fit(y[start:], simulated[start:])
+    pred = {int(h): prediction_fit(model, u, y, int(h), start=start) for h in horizons}
+    frf = h1_estimate(u[start:], y[start:], fs, nperseg=nperseg)
+    err = None
+    if band_hz is not None:
+        err = frf_error(model, frf, band_hz=band_hz, min_coherence=min_coherence)
+    res = residual_tests(model, u, y, max_lag=max_lag, alpha=alpha, start=start)
+    return ValidationReport(
+        n_estimation=start,
+        n_validation=n_val,
+        fs=float(fs),
+        stable=bool(model.is_stable()),
+        max_pole_radius=max_radius,
+        simulation_fit_pct=sim_fit,
+        prediction_fit_pct=pred,
+        frf=frf,
+        frf_error=err,
+        residuals=res,
+        simulated=simulated,
+    )
+
+
+# -------------------------------------------------------------------------------- helpers
+
+
+def _pct(v: float) -> str:
+    return f"{v:.2f} %" if math.isfinite(v) else "diverges (unstable model)"
+
+
+def _autocorr(x0: np.ndarray, max_lag: int) -> np.ndarray:
+    """ρ(k) = Σ_{t≥k} x0(t) x0(t−k) / Σ x0², k = 0..max_lag, for zero-mean x0."""
+    full = scipy.signal.correlate(x0, x0, mode="full", method="fft")
+    mid = x0.size - 1
+    r = full[mid : mid + max_lag + 1]
+    return r / r[0]
+
+
+def _pair(u, y) -> tuple[np.ndarray, np.ndarray]:
+    u = np.ascontiguousarray(u, dtype=np.float64)
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    if u.ndim != 1 or y.ndim != 1 or u.size != y.size:
+        raise DataError(f"u and y must be 1-D of the same length, got shapes {u.shape} "
+                        f"and {y.shape}")
+    for name, a in (("u", u), ("y", y)):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise DataError(f"{name} has a non-finite value at sample "
+                            f"{int(np.flatnonzero(bad)[0]) + 1}")
+    return u, y
+
+
+def _pos_int(x, name: str) -> int:
+    try:
+        v = operator.index(x)
+    except TypeError:
+        raise ParameterError(f"{name}={x!r} must be an integer") from None
+    if v < 1:
+        raise ParameterError(f"{name}={v} must be >= 1")
+    return v
+
+
+def _check_start(start, n: int) -> int:
+    start = operator.index(start)
+    if not 0 <= start < n:
+        raise ParameterError(f"{start=} must be in [0, {n})")
+    return start

@@ -1,0 +1,219 @@
+"""Fit figures, frequency-response error and residual tests against analytic answers."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import scipy.signal
+import scipy.stats
+
+from ehss.errors import DataError, ParameterError
+from ehss.frequency import FrequencyResponse
+from ehss.identification.model import ArmaxModel
+from ehss.io import to_jsonable
+from ehss.validation import (
+    frf_error,
+    ljung_box,
+    nrmse_fit,
+    prediction_fit,
+    residual_tests,
+    simulation_fit,
+    validate,
+)
+
+FS = 1000.0
+
+
+@pytest.fixture
+def true_model():
+    # A y = q^-1 B u + C e with a resonance at ~40 Hz: stable, stably invertible C.
+    r, th = 0.95, 2 * np.pi * 40 / FS
+    a = [1.0, -2 * r * np.cos(th), r * r]
+    return ArmaxModel(a=a, b=[0.02, 0.015], c=[1.0, 0.5], delay=1, dt=1 / FS)
+
+
+def _armax_data(model, rng, n=20_000, sigma_e=0.01):
+    u = rng.standard_normal(n)
+    e = sigma_e * rng.standard_normal(n)
+    y = model.simulate(u) + scipy.signal.lfilter(model.c, model.a, e)
+    return u, y, e
+
+
+# ------------------------------------------------------------------------------ nrmse_fit
+
+
+def test_nrmse_fit_analytic():
+    y = np.array([1.0, -1.0, 1.0, -1.0])
+    assert nrmse_fit(y, y) == 100.0
+    assert nrmse_fit(y, np.zeros(4)) == 0.0  # the mean predictor
+    assert nrmse_fit(y, 0.5 * y) == pytest.approx(50.0, abs=1e-12)
+    assert nrmse_fit(y, -y) == pytest.approx(-100.0, abs=1e-12)
+    assert nrmse_fit(y, np.array([np.inf, 0, 0, 0])) == -math.inf
+    with pytest.raises(DataError, match="constant"):
+        nrmse_fit(np.ones(4), np.zeros(4))
+    with pytest.raises(DataError, match="same length"):
+        nrmse_fit(y, y[:3])
+
+
+# ------------------------------------------------------------------------------ frf_error
+
+
+def test_frf_error_exact_offsets(true_model):
+    f = np.linspace(1.0, 200.0, 200)
+    g = true_model.frequency_response(f)
+    coh = np.ones_like(f)
+    coh[::4] = 0.5  # a quarter of the points are unreliable
+    # The "measurement" is the model times 1 dB and -10°: the error is exactly that.
+    h = g * 10 ** (-1 / 20) * np.exp(1j * np.radians(10.0))
+    frf = FrequencyResponse(freq_hz=f, response=h, coherence=coh, n_averages=10, nperseg=1000,
+                            fs=FS)
+    err = frf_error(true_model, frf, band_hz=(10.0, 100.0))
+    n_band = np.sum((f >= 10) & (f <= 100))
+    assert err.n_points == n_band - np.sum((f >= 10) & (f <= 100) & (coh < 0.9))
+    # float64 rounding of the offsets only
+    assert err.max_magnitude_db == pytest.approx(1.0, abs=1e-9)
+    assert err.rms_magnitude_db == pytest.approx(1.0, abs=1e-9)
+    assert err.weighted_rms_magnitude_db == pytest.approx(1.0, abs=1e-9)
+    assert err.max_phase_deg == pytest.approx(10.0, abs=1e-9)
+    assert err.rms_phase_deg == pytest.approx(10.0, abs=1e-9)
+    assert json.dumps(err.summary())
+
+
+def test_frf_error_phase_is_wrapped(true_model):
+    f = np.array([5.0, 10.0])
+    g = true_model.frequency_response(f)
+    # 355° off is 5° off.
+    frf = FrequencyResponse(freq_hz=f, response=g * np.exp(1j * np.radians(355.0)),
+                            coherence=np.ones(2), n_averages=1, nperseg=8, fs=FS)
+    assert frf_error(true_model, frf, band_hz=(0, 20)).max_phase_deg == pytest.approx(5.0)
+
+
+def test_frf_error_no_points(true_model):
+    frf = FrequencyResponse(freq_hz=np.array([1.0, 2.0]), response=np.ones(2, complex),
+                            coherence=np.array([0.1, 0.2]), n_averages=1, nperseg=8, fs=FS)
+    err = frf_error(true_model, frf, band_hz=(0, 10))
+    assert err.n_points == 0 and math.isnan(err.max_magnitude_db)
+    with pytest.raises(ParameterError, match="min_coherence"):
+        frf_error(true_model, frf, band_hz=(0, 10), min_coherence=2)
+    with pytest.raises(ParameterError, match="lo <= hi"):
+        frf_error(true_model, frf, band_hz=(10, 0))
+
+
+# --------------------------------------------------------------------- simulation/prediction
+
+
+def test_simulation_fit_of_true_model_noise_free(true_model, rng):
+    u = rng.standard_normal(5000)
+    y = true_model.simulate(u)
+    assert simulation_fit(true_model, u, y) == pytest.approx(100.0, abs=1e-10)
+    assert simulation_fit(true_model, u, y, start=4000) == pytest.approx(100.0, abs=1e-10)
+
+
+def test_prediction_fit_matches_innovation(true_model, rng):
+    u, y, e = _armax_data(true_model, rng)
+    # The one-step predictor of the true model leaves exactly the innovation (after the
+    # transient of 1/C, |0.5|^k, long gone by sample 100).
+    fit = prediction_fit(true_model, u, y, 1, start=100)
+    expected = 100 * (1 - np.linalg.norm(e[100:]) / np.linalg.norm(y[100:] - y[100:].mean()))
+    assert fit == pytest.approx(expected, abs=1e-9)
+    # Predicting further ahead is never better here.
+    assert prediction_fit(true_model, u, y, 5, start=100) < fit
+
+
+# ------------------------------------------------------------------------- residual tests
+
+
+def test_ljung_box_by_hand():
+    x = np.array([0.3, -1.2, 0.8, 0.1, -0.5, 1.1, -0.9, 0.4, 0.0, -0.2])
+    m = 3
+    n = x.size
+    d = x - x.mean()
+    den = sum(v * v for v in d)
+    q = 0.0
+    for k in range(1, m + 1):
+        rk = sum(d[t] * d[t - k] for t in range(k, n)) / den
+        q += rk * rk / (n - k)
+    q *= n * (n + 2)
+    got_q, got_p = ljung_box(x, m)
+    assert got_q == pytest.approx(q, rel=1e-12)  # same sums, different order
+    assert got_p == pytest.approx(scipy.stats.chi2.sf(q, m), rel=1e-12)
+
+
+def test_residuals_of_true_model_pass(true_model, rng):
+    u, y, _ = _armax_data(true_model, rng)
+    res = residual_tests(true_model, u, y, start=100)
+    assert res.white and res.independent and res.passed
+    assert res.ljung_box_p > 0.01
+    assert res.autocorrelation[0] == 1.0
+    assert res.lags.size == 26 and res.cross_lags.size == 51
+    assert res.autocorrelation_bound == pytest.approx(
+        scipy.stats.norm.ppf(0.995) / np.sqrt(res.n_samples))
+    assert json.dumps(res.summary())
+
+
+def test_coloured_residuals_fail(true_model, rng):
+    u, y, _ = _armax_data(true_model, rng, sigma_e=0.05)
+    # Ignoring C (an output-error guess with C = 1) leaves C-coloured residuals.
+    wrong = ArmaxModel(a=true_model.a, b=true_model.b, c=[1.0], delay=1, dt=1 / FS)
+    res = residual_tests(wrong, u, y, start=100)
+    assert not res.white and res.ljung_box_p < 1e-10
+    assert res.n_lags_outside >= 1
+
+
+def test_input_correlated_residuals_fail(true_model, rng):
+    u, y, _ = _armax_data(true_model, rng)
+    wrong = ArmaxModel(a=true_model.a, b=0.8 * true_model.b, c=true_model.c, delay=1,
+                       dt=1 / FS)
+    res = residual_tests(wrong, u, y, start=100)
+    assert not res.independent
+    assert np.argmax(np.abs(res.cross_correlation)) - 25 >= 1  # past inputs
+
+
+def test_residual_argument_checks(true_model, rng):
+    u = rng.standard_normal(30)
+    with pytest.raises(DataError, match="too few"):
+        residual_tests(true_model, u, u, max_lag=25)
+    with pytest.raises(ParameterError, match="alpha"):
+        residual_tests(true_model, u, u, alpha=1.5)
+    with pytest.raises(ParameterError, match="max_lag"):
+        residual_tests(true_model, u, u, max_lag=0)
+
+
+# ------------------------------------------------------------------------------- validate
+
+
+def test_validate_bundle(true_model, rng):
+    u, y, _ = _armax_data(true_model, rng, sigma_e=0.001)
+    rep = validate(true_model, u, y, fs=FS, band_hz=(1, 100), holdout=0.3, horizons=(1, 10))
+    assert rep.n_estimation == 14_000 and rep.n_validation == 6_000
+    assert rep.stable and rep.max_pole_radius == pytest.approx(0.95)
+    assert rep.simulation_fit_pct > 95 and set(rep.prediction_fit_pct) == {1, 10}
+    assert rep.frf_error.n_points > 50
+    # H1 of nearly noise-free data against the true response: leakage-limited, < 0.5 dB
+    assert rep.frf_error.max_magnitude_db < 0.5
+    assert rep.residuals.white
+    summary = to_jsonable(rep.summary())
+    assert json.loads(json.dumps(summary))["residuals"]["white"] is True
+    text = rep.format()
+    assert "simulation fit" in text and "Ljung-Box" in text
+
+
+def test_validate_unstable_model_does_not_blow_up(true_model, rng):
+    u, y, _ = _armax_data(true_model, rng, n=4000)
+    unstable = ArmaxModel(a=[1.0, -1.5], b=[0.1], c=[1.0], delay=1, dt=1 / FS)
+    rep = validate(unstable, u, y, fs=FS, band_hz=(1, 100))
+    assert not rep.stable
+    assert rep.simulation_fit_pct == -math.inf
+    assert "diverges" in rep.format()
+    assert to_jsonable(rep.summary())["simulation_fit_pct"] is None
+
+
+def test_validate_short_holdout(true_model, rng):
+    u = rng.standard_normal(100)
+    with pytest.raises(DataError, match="held-out part has 30 samples"):
+        validate(true_model, u, u, fs=FS)
+    with pytest.raises(ParameterError, match="holdout"):
+        validate(true_model, u, u, fs=FS, holdout=1.5)
