@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ehss.compensation.apply import compensate, reference_rate
+from ehss.compensation.demo import CompensationDemo, demonstrate, plot_demo, write_demo_report
 from ehss.compensation.inverse import (
     METHODS,
     InverseModel,
@@ -12,9 +13,16 @@ from ehss.compensation.inverse import (
     zmetc_phase,
     zpetc_magnitude,
 )
+from ehss.compensation.refine import RefineResult, refine
 
 __all__ = [
     "compensate",
+    "CompensationDemo",
+    "demonstrate",
+    "plot_demo",
+    "write_demo_report",
+    "RefineResult",
+    "refine",
     "reference_rate",
     "METHODS",
     "InverseModel",
