@@ -1,0 +1,368 @@
+"""Numba kernels of recursive extended least squares (RELS), eqs (19)–(22).
+
+The whole estimator state lives in **one** contiguous float64 buffer so that the
+streaming wrapper pays the Python→numba dispatch cost for a single array per sample,
+and so that the batch kernel and the streaming step run literally the same code
+(:func:`_step`). The kernels do no validation; :mod:`ehss.identification.rels` does.
+
+Symbol table (paper → code)
+---------------------------
+=================  ==========  ==============================================
+paper              code        meaning
+=================  ==========  ==============================================
+θ̂(k)               theta       [a1..a_na, b0..b_nb, c1..c_nc]
+ψ̂(k)               psi         [−y(k−1)..−y(k−na), u(k−d)..u(k−d−nb),
+                               ξ̂(k−1)..ξ̂(k−nc)]
+P(k)               P           covariance-like gain matrix, shape (n, n)
+P(k−1)ψ̂(k)         g           shared by eqs (21) and (22)
+λ (printed "r")    lam         forgetting factor
+α                  alpha       P(0) = α I
+ξ̂(k)               xi          a-posteriori residual, eq (19)
+=================  ==========  ==============================================
+
+State buffer layout (``state``, float64)::
+
+    [0:HEADER]            header (orders, settings, counters; see the H_* indices)
+    theta                 n
+    P                     n*n (row major)
+    psi                   n   (regressor of the *next* sample, u-part filled on entry)
+    g                     n   (work: P psi)
+    ul                    d+nb+1 (u delay line, ul[j] = u(k−j))
+    cw                    nc+1 (work: Schur–Cohn test of C)
+
+with n = na + nb + 1 + nc.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__: list[str] = []  # private module: the public API is in rels.py
+
+# header indices
+H_NA = 0
+H_NB = 1
+H_NC = 2
+H_DELAY = 3
+H_LAM = 4
+H_ALPHA = 5
+H_TRMAX = 6
+H_CRADIUS = 7
+H_ENABLED = 8
+H_COUNT = 9
+H_RESETS = 10
+H_CPROJ = 11
+H_TRSCALE = 12
+H_SKIPPED = 13
+H_XI = 14
+H_NV = 15
+HEADER = 16
+
+
+def state_size(na: int, nb: int, nc: int, delay: int) -> int:
+    """Length of the float64 state buffer for the given orders."""
+    n = na + nb + 1 + nc
+    return HEADER + n + n * n + n + n + (delay + nb + 1) + (nc + 1)
+
+
+def state_views(state: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(theta, P, psi, g, ul, cw) views into ``state`` (Python side helper)."""
+    na, nb, nc, d = (int(state[i]) for i in (H_NA, H_NB, H_NC, H_DELAY))
+    n = na + nb + 1 + nc
+    o = HEADER
+    theta = state[o : o + n]
+    o += n
+    P = state[o : o + n * n].reshape(n, n)
+    o += n * n
+    psi = state[o : o + n]
+    o += n
+    g = state[o : o + n]
+    o += n
+    ul = state[o : o + d + nb + 1]
+    o += d + nb + 1
+    cw = state[o : o + nc + 1]
+    return theta, P, psi, g, ul, cw
+
+
+@njit(cache=True)
+def _c_within(c, nc, radius, cw):
+    """True if all roots of z^nc + c1 z^(nc−1) + … + c_nc lie strictly inside ``radius``.
+
+    Cheap sufficient test first (Rouché: Σ|c_i| r^−i < 1 ⇒ stable), then the exact
+    Schur–Cohn step-down (reflection coefficients |k_m| < 1) on q_i = c_i r^−i, which is
+    O(nc²) and allocation free. ``c`` is the c-part of θ (length nc), ``cw`` work (nc+1).
+    """
+    s = 0.0
+    rp = 1.0
+    for i in range(nc):
+        rp /= radius
+        cw[i + 1] = c[i] * rp
+        s += abs(cw[i + 1])
+    if s < 1.0:
+        return True
+    if not np.isfinite(s):
+        return False
+    # Schur–Cohn / Levinson step-down of the monic polynomial [1, q1..qm]
+    for m in range(nc, 0, -1):
+        k = cw[m]
+        if abs(k) >= 1.0:
+            return False
+        den = 1.0 - k * k
+        # q_i <- (q_i − k q_{m−i}) / (1 − k²), i = 1..m−1, done pairwise in place
+        i = 1
+        j = m - 1
+        while i < j:
+            qi = cw[i]
+            qj = cw[j]
+            cw[i] = (qi - k * qj) / den
+            cw[j] = (qj - k * qi) / den
+            i += 1
+            j -= 1
+        if i == j:
+            cw[i] = (cw[i] - k * cw[i]) / den
+    return True
+
+
+@njit(cache=True)
+def _project_c(c, nc, radius):
+    """Move the roots of C(z) = z^nc + c1 z^(nc−1) + … inside ``radius``, in place.
+
+    Roots outside the unit circle are reflected (z → 1/z̄, which keeps |C(e^{jω})| up to
+    a constant, the spectral factor of the same noise spectrum), then any root still
+    beyond ``radius`` is shrunk radially onto it (as MATLAB's recursive estimators do).
+    Uses a complex companion matrix (numba's eigvals does not change domain), so it
+    allocates; it only runs when :func:`_c_within` failed.
+    """
+    comp = np.zeros((nc, nc), dtype=np.complex128)
+    for j in range(nc):
+        comp[0, j] = -c[j]
+    for i in range(1, nc):
+        comp[i, i - 1] = 1.0
+    roots = np.linalg.eigvals(comp)
+    for i in range(nc):
+        r = abs(roots[i])
+        if r > 1.0:
+            roots[i] = 1.0 / np.conj(roots[i])
+            r = abs(roots[i])
+        if r > radius:
+            roots[i] = roots[i] * (radius / r)
+    # rebuild the monic polynomial prod (z − z_i)
+    poly = np.zeros(nc + 1, dtype=np.complex128)
+    poly[0] = 1.0
+    for i in range(nc):
+        for j in range(i + 1, 0, -1):
+            poly[j] = poly[j] - roots[i] * poly[j - 1]
+    for j in range(nc):
+        c[j] = poly[j + 1].real
+
+
+@njit(cache=True)
+def _reset_P(P, n, alpha):
+    """P = α I (eq 22's initial condition)."""
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = 0.0
+        P[i, i] = alpha
+
+
+@njit(cache=True, inline="always")
+def _views(state):
+    """(theta, P, psi, g, ul, cw) views of the state buffer (no copy)."""
+    na = int(state[H_NA])
+    nb = int(state[H_NB])
+    nc = int(state[H_NC])
+    d = int(state[H_DELAY])
+    n = na + nb + 1 + nc
+    nu = d + nb + 1
+    o = HEADER
+    theta = state[o : o + n]
+    o += n
+    P = state[o : o + n * n].reshape((n, n))
+    o += n * n
+    psi = state[o : o + n]
+    o += n
+    g = state[o : o + n]
+    o += n
+    ul = state[o : o + nu]
+    o += nu
+    cw = state[o : o + nc + 1]
+    return theta, P, psi, g, ul, cw
+
+
+@njit(cache=True, inline="always")
+def _step(state, theta, P, psi, g, ul, cw, u, y):
+    """One RELS sample, eqs (19)–(22), with the safeguards. Returns the a-priori error.
+
+    ``u``/``y`` are already scaled and finite (checked by the callers). The array
+    arguments are the views returned by :func:`_views` (taken once per batch).
+    """
+    na = int(state[H_NA])
+    nb = int(state[H_NB])
+    nc = int(state[H_NC])
+    d = int(state[H_DELAY])
+    n = na + nb + 1 + nc
+    nu = d + nb + 1
+
+    # u delay line: ul[j] = u(k−j); ψ's u-part is u(k−d)..u(k−d−nb)
+    for j in range(nu - 1, 0, -1):
+        ul[j] = ul[j - 1]
+    ul[0] = u
+    for j in range(nb + 1):
+        psi[na + j] = ul[d + j]
+
+    # ŷ(k|k−1) = ψ̂ᵀ(k) θ̂(k−1);  e(k) = y(k) − ŷ  (the bracket of eq 20)
+    yhat = 0.0
+    for i in range(n):
+        yhat += psi[i] * theta[i]
+    e = y - yhat
+    state[H_COUNT] += 1.0
+
+    if state[H_ENABLED] != 0.0 and np.isfinite(e):
+        lam = state[H_LAM]
+        alpha = state[H_ALPHA]
+        # g = P(k−1) ψ̂(k), shared by (21) and (22);  s = ψ̂ᵀ P ψ̂
+        # Written as g += P[j, :] ψ_j (rows of the symmetric P as columns): each g_i
+        # still sums j = 0..n−1 in order, as the plain dot product would, but the
+        # inner loop is element-wise and vectorises; a dot-product inner loop is a
+        # serial reduction that (without fastmath) cannot.
+        for i in range(n):
+            g[i] = 0.0
+        for j in range(n):
+            pj = psi[j]
+            for i in range(n):
+                g[i] += P[j, i] * pj
+        s = 0.0
+        for i in range(n):
+            s += psi[i] * g[i]
+        # denominator of (21): λ + ψ̂ᵀ P ψ̂ > 0 whenever P is positive definite.
+        # If it is not (P lost definiteness through rounding) or not finite: reset P.
+        den = lam + s
+        if not (den > 0.0 and np.isfinite(den)):
+            _reset_P(P, n, alpha)
+            state[H_RESETS] += 1.0
+            s = 0.0
+            for i in range(n):
+                g[i] = alpha * psi[i]
+                s += psi[i] * g[i]
+            den = lam + s
+        if den > 0.0 and np.isfinite(den):
+            inv_den = 1.0 / den
+            # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
+            for i in range(n):
+                theta[i] += (g[i] * inv_den) * e
+            # (22) P(k) = [I − K ψ̂ᵀ] P(k−1) / λ  — textbook form, NOT used: rounding makes
+            # it drift from symmetry and, with λ < 1, diverge. Since K ψ̂ᵀ P = g gᵀ / den
+            # for symmetric P, we use the symmetric rank-1 form
+            #     P(k) = (P(k−1) − g gᵀ / den) / λ
+            # computing each entry as (P_ij − (g_i g_j) · inv_den) · inv_lam. IEEE products
+            # commute, so entry (i, j) and (j, i) get bit-identical values: P stays exactly
+            # symmetric by construction (no separate symmetrisation pass needed), and the
+            # full-row loop vectorises, which is faster than a triangle + mirror.
+            inv_lam = 1.0 / lam
+            tr = 0.0
+            dmin = np.inf
+            for i in range(n):
+                gi = g[i]
+                for j in range(n):
+                    P[i, j] = (P[i, j] - (gi * g[j]) * inv_den) * inv_lam
+                pii = P[i, i]
+                tr += pii
+                if pii < dmin:
+                    dmin = pii
+            # guard: a non-positive diagonal means P is no longer positive definite;
+            # a non-finite trace means overflow. Reset P = P(0) and keep θ̂.
+            if not (dmin > 0.0 and np.isfinite(tr)):
+                _reset_P(P, n, alpha)
+                state[H_RESETS] += 1.0
+            elif tr > state[H_TRMAX]:
+                # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the
+                # unexcited directions ("wind-up"); scaling keeps tr P ≤ tr_max.
+                f = state[H_TRMAX] / tr
+                for i in range(n):
+                    for j in range(n):
+                        P[i, j] *= f
+                state[H_TRSCALE] += 1.0
+            # keep C(q⁻¹) stable (inside c_radius), else ξ̂ feedback can blow up
+            if nc > 0:
+                c = theta[na + nb + 1 :]
+                if not _c_within(c, nc, state[H_CRADIUS], cw):
+                    _project_c(c, nc, state[H_CRADIUS])
+                    state[H_CPROJ] += 1.0
+        else:
+            state[H_SKIPPED] += 1.0
+    elif state[H_ENABLED] != 0.0:
+        state[H_SKIPPED] += 1.0
+
+    # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k)   (a-posteriori residual)
+    xi = y
+    for i in range(n):
+        xi -= psi[i] * theta[i]
+    if not np.isfinite(xi):
+        xi = 0.0
+    state[H_XI] = xi
+    # running innovation variance: mean of ξ̂² over the last min(k, 1/(1−λ)) samples
+    cnt = state[H_COUNT]
+    lam = state[H_LAM]
+    if lam < 1.0 and cnt * (1.0 - lam) > 1.0:
+        cnt = 1.0 / (1.0 - lam)
+    nv = state[H_NV] + (xi * xi - state[H_NV]) / cnt
+    if np.isfinite(nv):
+        state[H_NV] = nv
+
+    # shift the regressor for k+1: y-part gets −y(k), c-part gets ξ̂(k)
+    for i in range(na - 1, 0, -1):
+        psi[i] = psi[i - 1]
+    psi[0] = -y
+    o = na + nb + 1
+    for i in range(nc - 1, 0, -1):
+        psi[o + i] = psi[o + i - 1]
+    if nc > 0:
+        psi[o] = xi
+    if not np.isfinite(e):
+        e = 0.0
+    return e
+
+
+@njit(cache=True)
+def rels_run(state, u, y, err, xi_out, hist, hist_every):
+    """Run :func:`_step` over whole records (batch RELS, one compiled loop).
+
+    Parameters
+    ----------
+    state : float64 buffer, updated in place
+    u, y : float64 (N,), scaled, finite
+    err : float64 (N,) out, a-priori prediction errors e(k)
+    xi_out : float64 (N,) out, a-posteriori residuals ξ̂(k) of eq (19)
+    hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
+        (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
+    hist_every : int ≥ 1
+    """
+    theta, P, psi, g, ul, cw = _views(state)
+    n = theta.shape[0]
+    nh = hist.shape[0]
+    r = 0
+    c = 0
+    for k in range(u.shape[0]):
+        err[k] = _step(state, theta, P, psi, g, ul, cw, u[k], y[k])
+        xi_out[k] = state[H_XI]
+        c += 1
+        if c == hist_every:
+            c = 0
+            if r < nh:
+                for i in range(n):
+                    hist[r, i] = theta[i]
+                r += 1
+
+
+@njit(cache=True)
+def rels_step(state, u, y):
+    """Streaming entry point: one sample (scaled), returns the a-priori error.
+
+    Returns NaN only if ``u`` or ``y`` is not finite, in which case the state is left
+    untouched; the Python wrapper turns that into a DataError.
+    """
+    if not (np.isfinite(u) and np.isfinite(y)):
+        return np.nan
+    theta, P, psi, g, ul, cw = _views(state)
+    return _step(state, theta, P, psi, g, ul, cw, u, y)

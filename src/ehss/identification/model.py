@@ -1,0 +1,443 @@
+"""The identified discrete ARMAX model and its conversions (paper eqs 16–18, 23–25).
+
+.. math::
+
+    A(q^{-1}) y(k) = q^{-d} B(q^{-1}) u(k) + C(q^{-1}) \\xi(k)
+
+with ``a = [1, a1..a_na]``, ``b = [b0..b_nb]`` (b_i multiplies u(k−d−i)) and
+``c = [1, c1..c_nc]``. The deterministic part G(z) = z^{−d} B(z^{−1}) / A(z^{−1}).
+
+The paper prints its identified models (eqs 23–25) with 4 significant digits, and
+that rounding destroys them (PAPER.md §5). Models here are therefore stored and
+printed at full float64 precision by default, and :meth:`ArmaxModel.rounding_sensitivity`
+quantifies what rounding would do.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ehss._files import atomic_path
+from ehss.errors import DataError, EhssWarning, ParameterError
+
+__all__ = ["ArmaxModel", "RoundingSensitivity"]
+
+
+def _coeffs(name: str, value: Any, *, monic: bool) -> np.ndarray:
+    arr = np.array(value, dtype=np.float64, copy=True).reshape(-1)
+    if arr.size == 0:
+        raise ParameterError(f"{name}={value!r} must have at least one coefficient")
+    if not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{name}={value!r} must be finite")
+    if monic and arr[0] != 1.0:
+        raise ParameterError(f"{name}={value!r} must start with 1 (monic polynomial)")
+    arr.setflags(write=False)
+    return arr
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return _jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    return obj
+
+
+@dataclass(frozen=True, kw_only=True)
+class RoundingSensitivity:
+    """How far the poles move when the coefficients are rounded.
+
+    Attributes
+    ----------
+    digits : int
+        Significant digits kept.
+    max_pole_shift : float
+        Largest |p_rounded − p| over matched pole pairs.
+    max_relative_shift : float
+        Largest |p_rounded − p| / max(|p|, 1e-12).
+    max_radius : float
+        Max pole radius of the exact model.
+    max_radius_rounded : float
+        Max pole radius after rounding.
+    stability_changed : bool
+        True if rounding changes ``max_radius < 1``.
+    """
+
+    digits: int
+    max_pole_shift: float
+    max_relative_shift: float
+    max_radius: float
+    max_radius_rounded: float
+    stability_changed: bool
+
+    @property
+    def material(self) -> bool:
+        """Relative pole shift above 1 % or a change of stability."""
+        return self.stability_changed or self.max_relative_shift > 0.01
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ArmaxModel:
+    """A discrete ARMAX model ``A y = q^-d B u + C ξ`` sampled every ``dt`` seconds.
+
+    Parameters
+    ----------
+    a : array_like, shape (na+1,)
+        ``[1, a1..a_na]``.
+    b : array_like, shape (nb+1,)
+        ``[b0..b_nb]``; b_i multiplies u(k−delay−i).
+    c : array_like, shape (nc+1,)
+        ``[1, c1..c_nc]``.
+    delay : int
+        Input delay d ≥ 0 in samples.
+    dt : float
+        Sample period in seconds.
+    noise_variance : float
+        Variance of the white innovation ξ (NaN when unknown).
+    covariance : ndarray or None
+        Covariance of θ = [a1..a_na, b0..b_nb, c1..c_nc].
+    meta : dict
+        Free-form extra information (n_samples, forgetting, resets, ...).
+
+    Examples
+    --------
+    >>> m = ArmaxModel(a=[1, -0.5], b=[0.5], c=[1], delay=1, dt=1e-3)
+    >>> float(m.dc_gain())
+    1.0
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray = field(default_factory=lambda: np.ones(1))
+    delay: int = 1
+    dt: float = 1.0
+    noise_variance: float = math.nan
+    covariance: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "a", _coeffs("a", self.a, monic=True))
+        object.__setattr__(self, "b", _coeffs("b", self.b, monic=False))
+        object.__setattr__(self, "c", _coeffs("c", self.c, monic=True))
+        if isinstance(self.delay, bool) or not isinstance(self.delay, (int, np.integer)):
+            raise ParameterError(f"delay={self.delay!r} must be an integer >= 0")
+        if self.delay < 0:
+            raise ParameterError(f"delay={self.delay!r} must be an integer >= 0")
+        object.__setattr__(self, "delay", int(self.delay))
+        dt = self.dt
+        if not isinstance(dt, (int, float, np.floating)) or not (math.isfinite(dt) and dt > 0):
+            raise ParameterError(f"dt={dt!r} must be a finite number > 0 (seconds)")
+        object.__setattr__(self, "dt", float(dt))
+        object.__setattr__(self, "noise_variance", float(self.noise_variance))
+        if self.covariance is not None:
+            cov = np.array(self.covariance, dtype=np.float64, copy=True)
+            n = self.na + self.nb + 1 + self.nc
+            if cov.shape != (n, n):
+                raise ParameterError(
+                    f"covariance shape {cov.shape} must be ({n}, {n}) for these orders"
+                )
+            cov.setflags(write=False)
+            object.__setattr__(self, "covariance", cov)
+        object.__setattr__(self, "meta", dict(self.meta))
+
+    # ------------------------------------------------------------------ orders
+    @property
+    def na(self) -> int:
+        """Order of A."""
+        return self.a.size - 1
+
+    @property
+    def nb(self) -> int:
+        """Order of B (len(b) − 1)."""
+        return self.b.size - 1
+
+    @property
+    def nc(self) -> int:
+        """Order of C."""
+        return self.c.size - 1
+
+    @property
+    def fs(self) -> float:
+        """Sample rate in Hz."""
+        return 1.0 / self.dt
+
+    @property
+    def theta(self) -> np.ndarray:
+        """θ = [a1..a_na, b0..b_nb, c1..c_nc] (eq 18)."""
+        return np.concatenate([self.a[1:], self.b, self.c[1:]])
+
+    # ------------------------------------------------------------------ forms
+    def paper_form(self) -> tuple[np.ndarray, np.ndarray]:
+        """(num, den) in descending powers of z with G(z) = num(z)/den(z), equal lengths.
+
+        G(z) = z^{−d} B(z^{−1}) / A(z^{−1}); both multiplied by z^n, n = max(na, nb + d).
+        """
+        n = max(self.na, self.nb + self.delay)
+        num = np.zeros(n + 1)
+        num[self.delay : self.delay + self.nb + 1] = self.b
+        den = np.zeros(n + 1)
+        den[: self.na + 1] = self.a
+        return num, den
+
+    @classmethod
+    def from_paper_form(
+        cls, num: Any, den: Any, *, dt: float, c: Any = (1.0,), **kwargs: Any
+    ) -> ArmaxModel:
+        """Inverse of :meth:`paper_form` (den must be monic in its leading coefficient)."""
+        num = np.asarray(num, dtype=np.float64).reshape(-1)
+        den = np.asarray(den, dtype=np.float64).reshape(-1)
+        if den.size == 0 or den[0] == 0:
+            raise ParameterError(f"den={den!r} must have a non-zero leading coefficient")
+        if num.size > den.size:
+            raise ParameterError("num must not be longer than den (the model must be causal)")
+        num = np.concatenate([np.zeros(den.size - num.size), num]) / den[0]
+        den = den / den[0]
+        nz = np.flatnonzero(num)
+        if nz.size == 0:
+            delay, b = 0, np.zeros(1)
+        else:
+            delay = int(nz[0])
+            b = np.trim_zeros(num[delay:], "b")
+        a = np.trim_zeros(den, "b")
+        return cls(a=a, b=b, c=c, delay=delay, dt=dt, **kwargs)
+
+    def poles(self) -> np.ndarray:
+        """Poles of G(z) (roots of den in :meth:`paper_form`)."""
+        return np.roots(self.paper_form()[1])
+
+    def zeros(self) -> np.ndarray:
+        """Finite zeros of G(z)."""
+        num = self.paper_form()[0]
+        if not np.any(num):
+            return np.zeros(0, dtype=complex)
+        return np.roots(num)
+
+    def dc_gain(self) -> float:
+        """G(1) = ΣB / ΣA (±inf for a pole at z = 1)."""
+        sa, sb = float(np.sum(self.a)), float(np.sum(self.b))
+        if sa == 0.0:
+            return math.copysign(math.inf, sb) if sb != 0 else math.nan
+        return sb / sa
+
+    def max_pole_radius(self) -> float:
+        """Largest |pole| (0 for a FIR model)."""
+        p = self.poles()
+        return float(np.max(np.abs(p))) if p.size else 0.0
+
+    def is_stable(self) -> bool:
+        """True if all poles lie strictly inside the unit circle."""
+        return self.max_pole_radius() < 1.0
+
+    def check(self, *, warn: bool = True) -> bool:
+        """Return :meth:`is_stable`; warn with EhssWarning if the model is unstable."""
+        ok = self.is_stable()
+        if not ok and warn:
+            warnings.warn(
+                f"identified model is unstable: max pole radius {self.max_pole_radius():.6g} "
+                ">= 1; do not use it as a plant or invert it without care",
+                EhssWarning,
+                stacklevel=2,
+            )
+        return ok
+
+    # ------------------------------------------------------------------ responses
+    def frequency_response(self, freq_hz: Any) -> np.ndarray:
+        """G(e^{jω dt}) = e^{−jω dt d} B/A at the given frequencies (Hz)."""
+        f = np.asarray(freq_hz, dtype=np.float64)
+        zi = np.exp(-2j * np.pi * f * self.dt)  # z^-1
+        num = np.polyval(self.b[::-1], zi)
+        den = np.polyval(self.a[::-1], zi)
+        return zi**self.delay * num / den
+
+    def simulate(self, u: Any) -> np.ndarray:
+        """Noise-free output B/A u with zero initial conditions."""
+        from scipy.signal import lfilter
+
+        u = np.asarray(u, dtype=np.float64)
+        bd = np.concatenate([np.zeros(self.delay), self.b])
+        return lfilter(bd, self.a, u)
+
+    def predict(self, u: Any, y: Any, horizon: int = 1) -> np.ndarray:
+        """k-step-ahead ARMAX predictor ŷ(k | k − horizon), zero initial conditions.
+
+        With C = A F + q^{−h} G (F of degree h−1, the first h terms of C/A):
+        ŷ(k|k−h) = (q^{−h} G / C) y(k) + (F q^{−d} B / C) u(k). For h = 1 this is
+        ŷ = (1 − A/C) y + (q^{−d} B / C) u.
+        """
+        from scipy.signal import lfilter
+
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+            raise ParameterError(f"horizon={horizon!r} must be an integer >= 1")
+        u = np.asarray(u, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        if u.shape != y.shape or u.ndim != 1:
+            raise DataError(f"u and y must be 1-D of equal length, got {u.shape} and {y.shape}")
+        h = int(horizon)
+        # long division C/A to h terms: F; remainder q^-h G = C − A F
+        m = max(self.na, self.nc) + h
+        cpad = np.zeros(m + 1)
+        cpad[: self.nc + 1] = self.c
+        apad = np.zeros(m + 1)
+        apad[: self.na + 1] = self.a
+        f = np.zeros(h)
+        rem = cpad.copy()
+        for i in range(h):
+            f[i] = rem[i]
+            rem[i:] -= f[i] * apad[: m + 1 - i]
+        gpoly = rem  # = C − A F, zeros in the first h entries
+        ypart = lfilter(gpoly, self.c, y)
+        bd = np.concatenate([np.zeros(self.delay), self.b])
+        upart = lfilter(np.convolve(f, bd), self.c, u)
+        return ypart + upart
+
+    # ------------------------------------------------------------------ conversions
+    def to_control(self) -> Any:
+        """python-control TransferFunction with ``dt``."""
+        import control
+
+        num, den = self.paper_form()
+        return control.tf(num, den, self.dt)
+
+    def to_scipy(self) -> Any:
+        """scipy.signal.dlti (transfer-function form, descending powers of z)."""
+        from scipy import signal
+
+        num, den = self._trimmed()
+        return signal.dlti(num, den, dt=self.dt)
+
+    def to_sos(self) -> np.ndarray:
+        """Second-order sections (scipy.signal.tf2sos of the paper form)."""
+        from scipy import signal
+
+        num, den = self._trimmed()
+        return signal.tf2sos(num, den)
+
+    def _trimmed(self) -> tuple[np.ndarray, np.ndarray]:
+        # scipy warns (BadCoefficients) on exact leading zeros in num (the delay): strip
+        # them; G(z) is unchanged because den keeps its full degree.
+        num, den = self.paper_form()
+        nz = np.flatnonzero(num)
+        num = num[nz[0] :] if nz.size else np.zeros(1)
+        return num, den
+
+    def format_paper(self, precision: int | None = None) -> str:
+        """G(z) as the paper prints it, at full precision (repr) unless ``precision``."""
+
+        def fmt(x: float) -> str:
+            return repr(float(x)) if precision is None else f"{x:.{precision}g}"
+
+        num, den = self.paper_form()
+        n = num.size - 1
+
+        def poly(p: np.ndarray) -> str:
+            terms = []
+            for i, v in enumerate(p):
+                if v == 0:
+                    continue
+                pw = n - i
+                zs = "" if pw == 0 else (" z" if pw == 1 else f" z^{pw}")
+                terms.append(f"{fmt(v)}{zs}")
+            return " + ".join(terms).replace("+ -", "- ") or "0"
+
+        return f"G(z) = ({poly(num)}) / ({poly(den)})"
+
+    def rounding_sensitivity(self, digits: int = 4, *, warn: bool = True) -> RoundingSensitivity:
+        """Pole movement when a and b are rounded to ``digits`` significant digits.
+
+        Warns (EhssWarning) when the relative pole shift exceeds 1 % or stability changes.
+        """
+        from scipy.optimize import linear_sum_assignment
+
+        if isinstance(digits, bool) or not isinstance(digits, (int, np.integer)) or digits < 1:
+            raise ParameterError(f"digits={digits!r} must be an integer >= 1")
+
+        def rnd(v: np.ndarray) -> np.ndarray:
+            return np.array([float(f"{x:.{digits}g}") for x in v])
+
+        rounded = ArmaxModel(
+            a=np.concatenate([[1.0], rnd(self.a[1:])]), b=rnd(self.b), c=self.c,
+            delay=self.delay, dt=self.dt,
+        )
+        p0, p1 = self.poles(), rounded.poles()
+        if p0.size:
+            cost = np.abs(p0[:, None] - p1[None, :])
+            r, c = linear_sum_assignment(cost)
+            shift = cost[r, c]
+            rel = shift / np.maximum(np.abs(p0[r]), 1e-12)
+            max_shift, max_rel = float(shift.max()), float(rel.max())
+        else:
+            max_shift = max_rel = 0.0
+        r0, r1 = self.max_pole_radius(), rounded.max_pole_radius()
+        res = RoundingSensitivity(
+            digits=int(digits), max_pole_shift=max_shift, max_relative_shift=max_rel,
+            max_radius=r0, max_radius_rounded=r1, stability_changed=(r0 < 1.0) != (r1 < 1.0),
+        )
+        if warn and res.material:
+            warnings.warn(
+                f"rounding the model to {digits} significant digits moves its poles by up "
+                f"to {100 * max_rel:.3g} % (max radius {r0:.6g} -> {r1:.6g}); store and "
+                "print it at full precision or as second-order sections",
+                EhssWarning,
+                stacklevel=2,
+            )
+        return res
+
+    # ------------------------------------------------------------------ JSON
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict at full float64 precision (floats round-trip through repr)."""
+        nv = self.noise_variance
+        return {
+            "a": self.a.tolist(),
+            "b": self.b.tolist(),
+            "c": self.c.tolist(),
+            "delay": self.delay,
+            "dt": self.dt,
+            "noise_variance": None if math.isnan(nv) else nv,
+            "covariance": None if self.covariance is None else self.covariance.tolist(),
+            "meta": _jsonable(self.meta),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ArmaxModel:
+        """Inverse of :meth:`to_dict`."""
+        missing = [k for k in ("a", "b", "delay", "dt") if k not in d]
+        if missing:
+            raise DataError(f"model dict lacks {', '.join(missing)}")
+        nv = d.get("noise_variance")
+        return cls(
+            a=d["a"], b=d["b"], c=d.get("c", [1.0]), delay=int(d["delay"]), dt=float(d["dt"]),
+            noise_variance=math.nan if nv is None else float(nv),
+            covariance=d.get("covariance"), meta=dict(d.get("meta") or {}),
+        )
+
+    def save_json(self, path: str | Path) -> None:
+        """Write :meth:`to_dict` as JSON (atomically)."""
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def load_json(cls, path: str | Path) -> ArmaxModel:
+        """Read a model written by :meth:`save_json`."""
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise DataError(f"model file {str(path)!r} does not exist") from None
+        except json.JSONDecodeError as exc:
+            raise DataError(f"model file {str(path)!r} is not valid JSON: {exc}") from None
+        if not isinstance(d, dict):
+            raise DataError(f"model file {str(path)!r} does not hold a JSON object")
+        return cls.from_dict(d)

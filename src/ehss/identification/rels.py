@@ -1,0 +1,490 @@
+"""Recursive extended least squares (RELS) of ARMAX models, paper eqs (19)–(22).
+
+.. math::
+
+    \\hat\\theta(k) &= \\hat\\theta(k-1) + K(k)\\,[y(k) - \\hat\\psi^T(k)\\hat\\theta(k-1)]
+        \\qquad (20)\\\\
+    K(k) &= P(k-1)\\hat\\psi(k) / (\\lambda + \\hat\\psi^T(k) P(k-1) \\hat\\psi(k))
+        \\qquad (21)\\\\
+    P(k) &= [I - K(k)\\hat\\psi^T(k)] P(k-1) / \\lambda \\qquad (22)\\\\
+    \\hat\\xi(k) &= y(k) - \\hat\\psi^T(k)\\hat\\theta(k) \\qquad (19)
+
+with θ = [a1..a_na, b0..b_nb, c1..c_nc] and
+ψ̂(k) = [−y(k−1)..−y(k−na), u(k−d)..u(k−d−nb), ξ̂(k−1)..ξ̂(k−nc)].
+
+Departures from the textbook, all for numerical soundness (PAPER.md §3):
+
+* P is updated in the symmetric rank-1 form (P − g gᵀ/den)/λ with g = Pψ̂ shared,
+  which keeps P bit-exactly symmetric (the textbook form drifts and diverges at λ < 1);
+* tr P is bounded (default tr P(0)) against wind-up under poor excitation;
+* if P loses positive definiteness or anything becomes non-finite, P is reset to P(0)
+  (θ̂ is kept) and the reset is counted;
+* C(q⁻¹) is kept inside ``c_radius`` (roots reflected / shrunk, as MATLAB does),
+  checked every sample by a Rouché bound then an exact O(nc²) Schur–Cohn test;
+* the batch function scales u and y by their RMS so that α = 1e6 means the same thing
+  for any units; the result is de-scaled (b by s_y/s_u, noise variance by s_y²).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ehss.errors import DataError, ParameterError
+from ehss.identification import _kernels as _k
+from ehss.identification.model import ArmaxModel
+
+__all__ = ["rels", "RelsEstimator"]
+
+
+# ---------------------------------------------------------------- validation helpers
+def _order(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ParameterError(f"{name}={value!r} must be an integer >= {minimum}")
+    if value < minimum:
+        raise ParameterError(f"{name}={value!r} must be an integer >= {minimum}")
+    return int(value)
+
+
+def _real(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ParameterError(f"{name}={value!r} must be a real number")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ParameterError(f"{name}={value!r} must be finite")
+    return value
+
+
+def _check_settings(
+    na: Any, nb: Any, nc: Any, delay: Any, forgetting: Any, p0: Any, dt: Any
+) -> tuple[int, int, int, int, float, float, float]:
+    na = _order("na", na, 1)
+    nb = _order("nb", nb, 0)
+    nc = _order("nc", nc, 0)
+    delay = _order("delay", delay, 0)
+    lam = _real("forgetting", forgetting)
+    if not 0.0 < lam <= 1.0:
+        raise ParameterError(f"forgetting={forgetting!r} must be in (0, 1]")
+    alpha = _real("p0", p0)
+    if alpha <= 0:
+        raise ParameterError(f"p0={p0!r} must be > 0")
+    dt = _real("dt", dt)
+    if dt <= 0:
+        raise ParameterError(f"dt={dt!r} must be > 0 (seconds)")
+    return na, nb, nc, delay, lam, alpha, dt
+
+
+def _check_theta0(theta0: Any, n: int) -> np.ndarray:
+    if theta0 is None:
+        return np.zeros(n)
+    t = np.asarray(theta0, dtype=np.float64)
+    if t.shape != (n,):
+        raise ParameterError(f"theta0 has shape {t.shape}, must be ({n},) = na + nb + 1 + nc")
+    if not np.all(np.isfinite(t)):
+        raise ParameterError(f"theta0={theta0!r} must be finite")
+    return t.copy()
+
+
+def check_record(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Validate an input/output record: 1-D, equal length, finite; contiguous float64."""
+    arrs = []
+    for name, v in (("u", u), ("y", y)):
+        try:
+            a = np.ascontiguousarray(v, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{name} must be a 1-D array of numbers: {exc}") from None
+        if a.ndim != 1:
+            raise DataError(f"{name} must be 1-D, got shape {a.shape}")
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            i = int(bad[0])
+            raise DataError(f"{name}[{i}]={float(a[i])!r} is not finite")
+        arrs.append(a)
+    if arrs[0].size != arrs[1].size:
+        raise DataError(f"u and y must have the same length, got {arrs[0].size} and {arrs[1].size}")
+    return arrs[0], arrs[1]
+
+
+def _rms_scale(x: np.ndarray) -> float:
+    s = float(np.sqrt(np.mean(np.square(x)))) if x.size else 0.0
+    return s if (s > 0.0 and math.isfinite(s)) else 1.0
+
+
+def _theta_scale(na: int, nb: int, nc: int, u_scale: float, y_scale: float) -> np.ndarray:
+    """Factor D with θ_physical = D θ_scaled (only the b-part changes: b = b_s s_y/s_u)."""
+    dvec = np.ones(na + nb + 1 + nc)
+    dvec[na : na + nb + 1] = y_scale / u_scale
+    return dvec
+
+
+def _new_state(
+    na: int, nb: int, nc: int, delay: int, lam: float, alpha: float, trace_bound: float,
+    c_radius: float, theta0_scaled: np.ndarray,
+) -> np.ndarray:
+    state = np.zeros(_k.state_size(na, nb, nc, delay))
+    n = na + nb + 1 + nc
+    state[_k.H_NA] = na
+    state[_k.H_NB] = nb
+    state[_k.H_NC] = nc
+    state[_k.H_DELAY] = delay
+    state[_k.H_LAM] = lam
+    state[_k.H_ALPHA] = alpha
+    state[_k.H_TRMAX] = trace_bound
+    state[_k.H_CRADIUS] = c_radius
+    state[_k.H_ENABLED] = 1.0
+    theta, P, *_ = _k.state_views(state)
+    theta[:] = theta0_scaled
+    P[:] = alpha * np.eye(n)
+    return state
+
+
+def _counters(state: np.ndarray) -> dict[str, int]:
+    return {
+        "n_samples": int(state[_k.H_COUNT]),
+        "resets": int(state[_k.H_RESETS]),
+        "c_projections": int(state[_k.H_CPROJ]),
+        "trace_scalings": int(state[_k.H_TRSCALE]),
+        "skipped": int(state[_k.H_SKIPPED]),
+    }
+
+
+def _model_from_state(
+    state: np.ndarray, na: int, nb: int, nc: int, delay: int, dt: float, u_scale: float,
+    y_scale: float, noise_variance_scaled: float, meta: dict,
+) -> ArmaxModel:
+    theta_s, P, *_ = _k.state_views(state)
+    dvec = _theta_scale(na, nb, nc, u_scale, y_scale)
+    theta = theta_s * dvec
+    nv = noise_variance_scaled * y_scale**2
+    # cov(θ̂) ≈ σ² P for λ = 1 (P ≈ (Σψψᵀ)⁻¹); de-scaled with D: D P D σ²
+    cov = noise_variance_scaled * (P * dvec[:, None] * dvec[None, :])
+    if not np.all(np.isfinite(cov)):
+        cov = None
+    return ArmaxModel(
+        a=np.concatenate([[1.0], theta[:na]]),
+        b=theta[na : na + nb + 1],
+        c=np.concatenate([[1.0], theta[na + nb + 1 :]]),
+        delay=delay, dt=dt,
+        noise_variance=nv if math.isfinite(nv) else math.nan,
+        covariance=cov, meta=meta,
+    )
+
+
+# ---------------------------------------------------------------- batch
+def rels(
+    u: Any,
+    y: Any,
+    *,
+    na: int,
+    nb: int,
+    nc: int,
+    delay: int = 1,
+    forgetting: float = 1.0,
+    p0: float = 1e6,
+    theta0: Any = None,
+    dt: float = 1.0,
+    passes: int = 1,
+    trace_bound: float | None = None,
+    c_radius: float = 0.99,
+) -> ArmaxModel:
+    """Identify an ARMAX model from a whole record with RELS, eqs (19)–(22).
+
+    Parameters
+    ----------
+    u, y : array_like, shape (n_samples,)
+        Input and output, finite.
+    na, nb, nc : int
+        Orders of A (≥ 1), B and C (≥ 0); b has nb + 1 coefficients.
+    delay : int
+        Input delay d ≥ 0 (use d ≥ 1 for sampled-data loops, PAPER.md §5).
+    forgetting : float
+        λ in (0, 1].
+    p0 : float
+        α of P(0) = α I, on the internally RMS-normalised data.
+    theta0 : array_like, shape (na+nb+1+nc,), optional
+        Initial θ̂ in physical units (default zeros).
+    dt : float
+        Sample period (s).
+    passes : int
+        Number of passes over the record; each later pass restarts the regressor at
+        zero and P at P(0) but keeps θ̂ (helps the C-part converge on short records).
+    trace_bound : float, optional
+        Upper bound of tr P (default tr P(0) = n α).
+    c_radius : float
+        Roots of C are kept inside this radius.
+
+    Returns
+    -------
+    ArmaxModel
+        ``noise_variance`` is the mean of ξ̂² over the second half of the last pass;
+        ``covariance`` is σ² P (meaningful for λ = 1); ``meta`` holds n_samples,
+        forgetting, p0, passes, resets, c_projections, trace_scalings, u_scale, y_scale.
+
+    Raises
+    ------
+    DataError
+        Non-1-D, unequal-length, non-finite or too short records.
+    ParameterError
+        Impossible orders or settings.
+
+    Warns
+    -----
+    EhssWarning
+        When the identified model is unstable.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.signal import lfilter
+    >>> u = np.random.default_rng(0).standard_normal(2000)
+    >>> y = lfilter([0, 0.5], [1, -0.8], u)
+    >>> m = rels(u, y, na=1, nb=0, nc=0, delay=1)
+    >>> np.round(m.a, 6).tolist(), np.round(m.b, 6).tolist()
+    ([1.0, -0.8], [0.5])
+    """
+    na, nb, nc, delay, lam, alpha, dt = _check_settings(na, nb, nc, delay, forgetting, p0, dt)
+    passes = _order("passes", passes, 1)
+    n = na + nb + 1 + nc
+    tb = n * alpha if trace_bound is None else _real("trace_bound", trace_bound)
+    if tb <= 0:
+        raise ParameterError(f"trace_bound={trace_bound!r} must be > 0")
+    c_radius = _real("c_radius", c_radius)
+    if not 0.0 < c_radius <= 1.0:
+        raise ParameterError(f"c_radius={c_radius!r} must be in (0, 1]")
+    theta0 = _check_theta0(theta0, n)
+    u, y = check_record(u, y)
+    need = max(na, nb + delay, nc) + n + 1
+    if u.size < need:
+        raise DataError(
+            f"{u.size} samples are too few for na={na}, nb={nb}, nc={nc}, delay={delay}: "
+            f"need at least {need}"
+        )
+    su, sy = _rms_scale(u), _rms_scale(y)
+    us, ys = u / su, y / sy
+    theta_s = theta0 / _theta_scale(na, nb, nc, su, sy)
+    err = np.empty(u.size)
+    xi = np.empty(u.size)
+    hist = np.empty((0, n))
+    totals = dict.fromkeys(("resets", "c_projections", "trace_scalings", "skipped"), 0)
+    for _ in range(passes):
+        state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, theta_s)
+        _k.rels_run(state, us, ys, err, xi, hist, 1)
+        for key, v in _counters(state).items():
+            if key in totals:
+                totals[key] += v
+        theta_s = state[_k.HEADER : _k.HEADER + n].copy()
+    nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
+    meta = {
+        "method": "rels",
+        "n_samples": int(u.size),
+        "forgetting": lam,
+        "p0": alpha,
+        "passes": passes,
+        "trace_bound": tb,
+        "c_radius": c_radius,
+        "u_scale": su,
+        "y_scale": sy,
+        **totals,
+    }
+    model = _model_from_state(state, na, nb, nc, delay, dt, su, sy, nv_s, meta)
+    model.check(warn=True)
+    return model
+
+
+# ---------------------------------------------------------------- streaming
+class RelsEstimator:
+    """Streaming RELS: one sample at a time, eqs (19)–(22) with the same safeguards.
+
+    Parameters
+    ----------
+    na, nb, nc, delay, forgetting, p0, theta0, dt
+        As in :func:`rels` (θ0 in physical units).
+    trace_bound : float, optional
+        Upper bound of tr P (default tr P(0) = n α).
+    history_every : int, optional
+        Record θ̂ (physical units) every this many samples in :attr:`history`.
+    u_scale, y_scale : float
+        A stream has no whole record to take an RMS from: give the expected size of u
+        and y (e.g. the command range and the sensor range) so that the estimator
+        works on ``u/u_scale`` and ``y/y_scale``, where α = p0 is meaningful. Default 1
+        (no scaling). The results (:attr:`theta`, :attr:`model`, :meth:`update`'s
+        prediction error) are in physical units.
+    c_radius : float
+        Roots of C are kept inside this radius.
+
+    Notes
+    -----
+    The state is one float64 buffer handled by a small compiled step kernel, so one
+    :meth:`update` costs about one numba dispatch. :attr:`P` is in scaled units.
+
+    Examples
+    --------
+    >>> est = RelsEstimator(na=1, nb=0, nc=0, delay=1)
+    >>> e = est.update(1.0, 0.0)
+    """
+
+    def __init__(
+        self,
+        *,
+        na: int,
+        nb: int,
+        nc: int,
+        delay: int = 1,
+        forgetting: float = 1.0,
+        p0: float = 1e6,
+        theta0: Any = None,
+        trace_bound: float | None = None,
+        history_every: int | None = None,
+        dt: float = 1.0,
+        u_scale: float = 1.0,
+        y_scale: float = 1.0,
+        c_radius: float = 0.99,
+    ) -> None:
+        na, nb, nc, delay, lam, alpha, dt = _check_settings(
+            na, nb, nc, delay, forgetting, p0, dt
+        )
+        n = na + nb + 1 + nc
+        self._orders = (na, nb, nc, delay)
+        self._n = n
+        self._lam, self._alpha, self._dt = lam, alpha, dt
+        tb = n * alpha if trace_bound is None else _real("trace_bound", trace_bound)
+        if tb <= 0:
+            raise ParameterError(f"trace_bound={trace_bound!r} must be > 0")
+        self._trace_bound = tb
+        c_radius = _real("c_radius", c_radius)
+        if not 0.0 < c_radius <= 1.0:
+            raise ParameterError(f"c_radius={c_radius!r} must be in (0, 1]")
+        self._c_radius = c_radius
+        for name, v in (("u_scale", u_scale), ("y_scale", y_scale)):
+            if _real(name, v) <= 0:
+                raise ParameterError(f"{name}={v!r} must be > 0")
+        self._us, self._ys = float(u_scale), float(y_scale)
+        self._inv_us, self._inv_ys = 1.0 / self._us, 1.0 / self._ys
+        self._dvec = _theta_scale(na, nb, nc, self._us, self._ys)
+        self._theta0 = _check_theta0(theta0, n)
+        if history_every is not None:
+            history_every = _order("history_every", history_every, 1)
+        self._every = history_every
+        self._step = _k.rels_step
+        self.reset()
+
+    # ---------------------------------------------------------------- state
+    def reset(self) -> None:
+        """Back to θ̂(0), P(0), empty regressor, counters and history cleared."""
+        na, nb, nc, delay = self._orders
+        self._state = _new_state(
+            na, nb, nc, delay, self._lam, self._alpha, self._trace_bound, self._c_radius,
+            self._theta0 / self._dvec,
+        )
+        self._hist: list[np.ndarray] = []
+        self._since = 0
+        if self._every is not None:
+            self.update = self._update_with_history  # type: ignore[method-assign]
+
+    def freeze(self) -> None:
+        """Stop adapting: θ̂ and P are held, regressors and residuals still run."""
+        self._state[_k.H_ENABLED] = 0.0
+
+    def unfreeze(self) -> None:
+        """Resume adapting."""
+        self._state[_k.H_ENABLED] = 1.0
+
+    @property
+    def enabled(self) -> bool:
+        """True while the estimator adapts (see :meth:`freeze`)."""
+        return bool(self._state[_k.H_ENABLED])
+
+    @enabled.setter
+    def enabled(self, value: bool) -> None:
+        self._state[_k.H_ENABLED] = 1.0 if value else 0.0
+
+    # ---------------------------------------------------------------- updates
+    def update(self, u_k: float, y_k: float) -> float:
+        """Process one sample; return the a-priori prediction error y(k) − ψ̂ᵀθ̂(k−1).
+
+        Raises
+        ------
+        DataError
+            If ``u_k`` or ``y_k`` is not finite (the state is then left unchanged).
+        """
+        e = self._step(self._state, u_k * self._inv_us, y_k * self._inv_ys)
+        if e != e:
+            raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
+        return e * self._ys
+
+    def _update_with_history(self, u_k: float, y_k: float) -> float:
+        e = self._step(self._state, u_k * self._inv_us, y_k * self._inv_ys)
+        if e != e:
+            raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
+        self._since += 1
+        if self._since == self._every:
+            self._since = 0
+            self._hist.append(self.theta)
+        return e * self._ys
+
+    def update_many(self, u: Any, y: Any) -> np.ndarray:
+        """Process a block of samples; return their a-priori prediction errors."""
+        u, y = check_record(u, y)
+        err = np.empty(u.size)
+        xi = np.empty(u.size)
+        if self._every is None:
+            _k.rels_run(self._state, u * self._inv_us, y * self._inv_ys, err, xi,
+                        np.empty((0, self._n)), 1)
+        else:
+            # the kernel records every `every` samples from its own start: run the
+            # first (every − since) samples separately to keep the phase
+            first = min(u.size, self._every - self._since)
+            for k in range(first):
+                err[k] = self.update(u[k], y[k]) / self._ys
+            rest = u.size - first
+            hist = np.empty((rest // self._every, self._n))
+            if rest:
+                _k.rels_run(self._state, u[first:] * self._inv_us, y[first:] * self._inv_ys,
+                            err[first:], xi[first:], hist, self._every)
+            self._hist.extend(list(hist * self._dvec))
+            self._since = rest % self._every
+        return err * self._ys
+
+    # ---------------------------------------------------------------- results
+    @property
+    def theta(self) -> np.ndarray:
+        """Current θ̂ = [a1..a_na, b0..b_nb, c1..c_nc] in physical units (a copy)."""
+        return self._state[_k.HEADER : _k.HEADER + self._n] * self._dvec
+
+    @property
+    def P(self) -> np.ndarray:  # noqa: N802 - the paper's symbol
+        """Current P(k) (a copy, in the scaled units the estimator works in)."""
+        return _k.state_views(self._state)[1].copy()
+
+    @property
+    def history(self) -> np.ndarray:
+        """θ̂ every ``history_every`` samples, shape (n_records, n_params)."""
+        if not self._hist:
+            return np.empty((0, self._n))
+        return np.array(self._hist)
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """n_samples, resets, c_projections, trace_scalings, skipped."""
+        return _counters(self._state)
+
+    @property
+    def model(self) -> ArmaxModel:
+        """The current estimate as an :class:`ArmaxModel` (no stability warning)."""
+        na, nb, nc, delay = self._orders
+        meta = {
+            "method": "rels-streaming",
+            "forgetting": self._lam,
+            "p0": self._alpha,
+            "trace_bound": self._trace_bound,
+            "c_radius": self._c_radius,
+            "u_scale": self._us,
+            "y_scale": self._ys,
+            **_counters(self._state),
+        }
+        return _model_from_state(
+            self._state, na, nb, nc, delay, self._dt, self._us, self._ys,
+            float(self._state[_k.H_NV]), meta,
+        )

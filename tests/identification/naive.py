@@ -1,0 +1,67 @@
+"""Slow, obvious numpy reference of RELS (eqs 19–22) with the same safeguards.
+
+One numpy expression per equation, no state buffer, no vectorisation tricks: the
+compiled kernel in ``ehss.identification._kernels`` must agree with this to 1e-12.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["naive_rels"]
+
+
+def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
+               trace_bound=None, c_radius=0.99):
+    """Return (theta, P, err, xi, counters) after running over u, y (already scaled)."""
+    n = na + nb + 1 + nc
+    theta = np.zeros(n) if theta0 is None else np.array(theta0, dtype=float)
+    P = alpha * np.eye(n)
+    tr_max = n * alpha if trace_bound is None else trace_bound
+    N = len(u)
+    err = np.zeros(N)
+    xi = np.zeros(N)
+    resets = cproj = trscale = 0
+
+    def past(x, k):
+        return x[k] if k >= 0 else 0.0
+
+    for k in range(N):
+        psi = np.array(
+            [-past(y, k - i) for i in range(1, na + 1)]
+            + [past(u, k - delay - i) for i in range(nb + 1)]
+            + [past(xi, k - i) for i in range(1, nc + 1)]
+        )
+        e = y[k] - psi @ theta
+        g = P @ psi
+        den = lam + psi @ g
+        if not (den > 0 and np.isfinite(den)):
+            P = alpha * np.eye(n)
+            resets += 1
+            g = P @ psi
+            den = lam + psi @ g
+        # (21) K = P psi / den; (20) theta += K e
+        theta = theta + (g / den) * e
+        # (22) in symmetric form
+        P = (P - np.outer(g, g) / den) / lam
+        d = np.diag(P)
+        if not (d.min() > 0 and np.isfinite(d.sum())):
+            P = alpha * np.eye(n)
+            resets += 1
+        elif d.sum() > tr_max:
+            P = P * (tr_max / d.sum())
+            trscale += 1
+        if nc > 0:
+            c = theta[na + nb + 1:]
+            roots = np.roots(np.concatenate([[1.0], c]))
+            if np.max(np.abs(roots)) >= c_radius:
+                out = np.abs(roots) > 1
+                roots[out] = 1 / np.conj(roots[out])
+                big = np.abs(roots) > c_radius
+                roots[big] = roots[big] * c_radius / np.abs(roots[big])
+                theta[na + nb + 1:] = np.real(np.poly(roots))[1:]
+                cproj += 1
+        xi[k] = y[k] - psi @ theta
+        err[k] = e
+    return theta, P, err, xi, {"resets": resets, "c_projections": cproj,
+                               "trace_scalings": trscale}
