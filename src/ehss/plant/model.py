@@ -196,7 +196,8 @@ def static_force_state(
     u_guess = params.kce_m3_s_pa * pl / params.flow_gain_m3_s
     sol = scipy.optimize.root(residual, np.array([u_guess, 0.0]), method="hybr", tol=1e-14)
     u0, dpc = float(sol.x[0]), float(sol.x[1])
-    if not sol.success or abs(u0) >= 1.0:  # pragma: no cover - far outside the envelope
+    # judged by the residual (|Ṗ| below ~1 kPa/s), not by the solver's progress flag
+    if not np.max(np.abs(sol.fun)) < 1e-12 or abs(u0) >= 1.0:  # pragma: no cover
         raise ParameterError(f"no steady state holds a static force of {force_n:.6g} N")
     x[K.X_SPOOL] = u0
     x[K.X_P1] = pc0 + dpc * scale + 0.5 * pl
