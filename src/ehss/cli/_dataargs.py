@@ -1,0 +1,140 @@
+"""Pieces shared by the subcommands that read an input/output record from a file."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import sys
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ehss.errors import ParameterError
+
+__all__ = [
+    "add_record_arguments",
+    "Record",
+    "load_record",
+    "int_list",
+    "check_outputs",
+    "write_outputs",
+    "report_warnings",
+    "holdout_fraction",
+]
+
+
+def add_record_arguments(p: argparse.ArgumentParser) -> None:
+    """DATA, --input, --output, --fs, --time-column."""
+    p.add_argument("data", metavar="DATA",
+                   help="record file: .csv, .mat (v5 or v7.3), .h5/.hdf5 or .npz")
+    p.add_argument("--input", required=True, metavar="COL",
+                   help="input column (e.g. the loop's reference)")
+    p.add_argument("--output", required=True, metavar="COL",
+                   help="output column (the measured controlled variable)")
+    p.add_argument("--fs", type=float, metavar="HZ",
+                   help="sample rate in Hz (needed when the file has no time column)")
+    p.add_argument("--time-column", default="t", metavar="COL",
+                   help="time column in seconds, used for the sample rate if present "
+                   "(default: %(default)s)")
+
+
+@dataclass(frozen=True)
+class Record:
+    """An input/output record read from a file."""
+
+    path: Path
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    fs: float
+
+
+def load_record(args: argparse.Namespace) -> Record:
+    """Read ``--input``/``--output`` from DATA and find the sample rate."""
+    from ehss.io import read_columns, sample_rate
+
+    if args.input == args.output:
+        raise ParameterError(f"--input and --output are the same column {args.input!r}")
+    table = read_columns(args.data, [args.input, args.output], time_column=args.time_column)
+    fs = sample_rate(table, args.fs)
+    u, y = table[args.input], table[args.output]
+    t = table.time if table.time is not None else np.arange(u.size) / fs
+    return Record(path=Path(args.data), t=t, u=u, y=y, fs=fs)
+
+
+def int_list(text: str) -> list[int]:
+    """Parse ``"2,3,4"``, ``"2-6"`` or ``"2:6"`` (inclusive ranges) into integers."""
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        sep = "-" if "-" in part[1:] else (":" if ":" in part else None)
+        try:
+            if sep is None:
+                out.append(int(part))
+            else:
+                i = part.index(sep, 1) if sep == "-" else part.index(sep)
+                lo, hi = int(part[:i]), int(part[i + 1 :])
+                if hi < lo:
+                    raise ValueError
+                out.extend(range(lo, hi + 1))
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not a list of integers such as 2,3,4 or 2-6"
+            ) from None
+    if not out:
+        raise argparse.ArgumentTypeError(f"{text!r} holds no integers")
+    return list(dict.fromkeys(out))
+
+
+def holdout_fraction(value: float | None) -> float:
+    """Check ``--holdout`` (0 allowed: no held-out part)."""
+    if value is None:
+        return 0.0
+    if not (math.isfinite(value) and 0.0 <= value < 1.0):
+        raise ParameterError(f"--holdout {value} must be in [0, 1)")
+    return float(value)
+
+
+def check_outputs(*paths: str | Path | None) -> list[Path]:
+    """Check before any work that every output can be written, and that none repeats."""
+    from ehss._files import check_writable
+
+    out = [check_writable(p) for p in paths if p is not None]
+    resolved = [p.resolve() for p in out]
+    if len(set(resolved)) != len(resolved):
+        raise ParameterError("two outputs would be written to the same file")
+    return out
+
+
+def write_outputs(writers: dict[Path, Callable[[Path], None]]) -> None:
+    """Write every output to a temporary file first; rename them only when all succeeded.
+
+    ``writers`` maps each final path to a function writing the content to a given path.
+    """
+    from ehss._files import atomic_path
+
+    with contextlib.ExitStack() as stack:
+        for final, write in writers.items():
+            tmp = stack.enter_context(atomic_path(final))
+            write(tmp)
+
+
+@contextlib.contextmanager
+def report_warnings(command: str) -> Iterator[None]:
+    """Show EhssWarnings raised inside as one ``warning:`` line each on stderr."""
+    from ehss.errors import EhssWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", EhssWarning)
+        yield
+    for w in caught:
+        if issubclass(w.category, EhssWarning):
+            print(f"ehss {command}: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
