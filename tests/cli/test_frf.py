@@ -1,0 +1,103 @@
+"""``ehss frf``: CSV columns, every file format, plot, and exit 2 on bad input."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+import scipy.io
+import scipy.signal
+
+from ehss.cli import main
+from ehss.io import read_columns, write_csv
+
+FS = 1000.0
+
+
+@pytest.fixture
+def record(rng):
+    n = 8192
+    u = rng.standard_normal(n)
+    b, a = scipy.signal.butter(2, 100.0, fs=FS)
+    return {"t": np.arange(n) / FS, "u": u, "y": scipy.signal.lfilter(b, a, u)}
+
+
+def _write(path, record):
+    suffix = path.suffix
+    if suffix == ".csv":
+        write_csv(path, record)
+    elif suffix == ".npz":
+        np.savez(path, **record)
+    elif suffix == ".mat":
+        scipy.io.savemat(path, {k: v[:, None] for k, v in record.items()})
+    else:
+        with h5py.File(path, "w") as fh:
+            for k, v in record.items():
+                fh[f"run1/{k}"] = v
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz", ".mat", ".h5"])
+def test_frf_writes_columns(tmp_path, record, capsys, suffix):
+    data = tmp_path / f"run{suffix}"
+    _write(data, record)
+    cols = ["u", "y"] if suffix != ".h5" else ["run1/u", "run1/y"]
+    extra = [] if suffix != ".h5" else ["--time-column", "run1/t"]
+    out = tmp_path / "frf.csv"
+    code = main(["frf", str(data), "--input", cols[0], "--output", cols[1], *extra,
+                 "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    assert "averages" in capsys.readouterr().out
+    table = read_columns(out)
+    assert list(table) == ["freq_hz", "magnitude_db", "phase_deg", "coherence"]
+    f = table["freq_hz"]
+    assert f[0] == pytest.approx(FS / 1024)  # default nperseg 1024 at 1 kHz
+    h = scipy.signal.freqz(*scipy.signal.butter(2, 100.0, fs=FS), worN=f, fs=FS)[1]
+    band = f < 100
+    # noise-free: leakage-limited (see tests/test_frequency.py), 0.2 dB in the passband
+    np.testing.assert_allclose(table["magnitude_db"][band], 20 * np.log10(np.abs(h[band])),
+                               atol=0.2)
+
+
+def test_frf_nperseg_and_plot(tmp_path, record, capsys):
+    data = tmp_path / "run.csv"
+    _write(data, record)
+    out, plot = tmp_path / "frf.csv", tmp_path / "frf.png"
+    assert main(["frf", str(data), "--input", "u", "--output", "y", "--nperseg", "256",
+                 "--out", str(out), "--plot", str(plot)]) == 0
+    assert read_columns(out)["freq_hz"].size == 128  # 1..128 bins of a 256-point segment
+    assert plot.read_bytes()[:4] == b"\x89PNG" and plot.stat().st_size > 20_000
+
+
+@pytest.mark.parametrize(
+    "args,match",
+    [
+        (["--input", "u", "--output", "y", "--nperseg", "100000"], "longer than the record"),
+        (["--input", "u", "--output", "y", "--nperseg", "2"], "--nperseg 2 must be >= 4"),
+        (["--input", "nope", "--output", "y"], "no column 'nope'"),
+        (["--input", "u", "--output", "y", "--fs", "10"], "--fs is 10 Hz"),
+        (["--input", "u", "--output", "u"], "same column"),
+    ],
+)
+def test_frf_bad_input(tmp_path, record, capsys, args, match):
+    data = tmp_path / "run.csv"
+    _write(data, record)
+    out = tmp_path / "frf.csv"
+    code = main(["frf", str(data), *args, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and match in err, err
+    assert not out.exists()
+
+
+def test_frf_non_finite_and_short(tmp_path, capsys):
+    data = tmp_path / "run.csv"
+    data.write_text("t,u,y\n" + "".join(f"{k / 1000},{k % 3},{k % 5}\n" for k in range(10)))
+    code = main(["frf", str(data), "--input", "u", "--output", "y", "--out",
+                 str(tmp_path / "f.csv")])
+    err = capsys.readouterr().err
+    assert code == 2 and "too few samples" in err
+    data.write_text("t,u,y\n0,1,2\n0.001,inf,2\n")
+    code = main(["frf", str(data), "--input", "u", "--output", "y", "--out",
+                 str(tmp_path / "f.csv")])
+    err = capsys.readouterr().err
+    assert code == 2 and "non-finite value (inf) at data row 2" in err
+    assert not (tmp_path / "f.csv").exists()
