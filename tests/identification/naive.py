@@ -26,30 +26,39 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
     def past(x, k):
         return x[k] if k >= 0 else 0.0
 
+    def dot(p, q):
+        # left-to-right summation, the order the kernel uses (np.dot/BLAS reorders)
+        return np.cumsum(p * q)[-1]
+
+    def matvec(M, v):
+        return np.cumsum(M * v[None, :], axis=1)[:, -1]
+
     for k in range(N):
         psi = np.array(
             [-past(y, k - i) for i in range(1, na + 1)]
             + [past(u, k - delay - i) for i in range(nb + 1)]
             + [past(xi, k - i) for i in range(1, nc + 1)]
         )
-        e = y[k] - psi @ theta
-        g = P @ psi
-        den = lam + psi @ g
+        e = y[k] - dot(psi, theta)
+        g = matvec(P, psi)
+        den = lam + dot(psi, g)
         if not (den > 0 and np.isfinite(den)):
             P = alpha * np.eye(n)
             resets += 1
-            g = P @ psi
-            den = lam + psi @ g
+            g = matvec(P, psi)
+            den = lam + dot(psi, g)
+        inv_den = 1.0 / den
         # (21) K = P psi / den; (20) theta += K e
-        theta = theta + (g / den) * e
-        # (22) in symmetric form
-        P = (P - np.outer(g, g) / den) / lam
+        theta = theta + (g * inv_den) * e
+        # (22) in symmetric form (P − g gᵀ/den)/λ
+        P = (P - np.outer(g, g) * inv_den) * (1.0 / lam)
         d = np.diag(P)
-        if not (d.min() > 0 and np.isfinite(d.sum())):
+        tr = np.cumsum(d)[-1]
+        if not (d.min() > 0 and np.isfinite(tr)):
             P = alpha * np.eye(n)
             resets += 1
-        elif d.sum() > tr_max:
-            P = P * (tr_max / d.sum())
+        elif tr > tr_max:
+            P = P * (tr_max / tr)
             trscale += 1
         if nc > 0:
             c = theta[na + nb + 1:]
@@ -61,7 +70,7 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
                 roots[big] = roots[big] * c_radius / np.abs(roots[big])
                 theta[na + nb + 1:] = np.real(np.poly(roots))[1:]
                 cproj += 1
-        xi[k] = y[k] - psi @ theta
+        xi[k] = y[k] - dot(psi, theta)
         err[k] = e
     return theta, P, err, xi, {"resets": resets, "c_projections": cproj,
                                "trace_scalings": trscale}

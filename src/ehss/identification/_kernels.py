@@ -295,9 +295,10 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
         state[H_SKIPPED] += 1.0
 
     # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k)   (a-posteriori residual)
-    xi = y
+    acc = 0.0
     for i in range(n):
-        xi -= psi[i] * theta[i]
+        acc += psi[i] * theta[i]
+    xi = y - acc
     if not np.isfinite(xi):
         xi = 0.0
     state[H_XI] = xi

@@ -319,11 +319,24 @@ class ArmaxModel:
         return signal.dlti(num, den, dt=self.dt)
 
     def to_sos(self) -> np.ndarray:
-        """Second-order sections (scipy.signal.tf2sos of the paper form)."""
+        """Second-order sections (scipy.signal.tf2sos), shape (n_sections, 6).
+
+        B/A goes through ``tf2sos``; the delay z^{−d} is appended as pure-delay sections
+        ([0, 0, 1, 1, 0, 0] = z^{−2}, [0, 1, 0, 1, 0, 0] = z^{−1}), because leading zeros
+        in the numerator make scipy warn and drop the delay.
+        """
         from scipy import signal
 
-        num, den = self._trimmed()
-        return signal.tf2sos(num, den)
+        n = max(self.na, self.nb)
+        bb = np.zeros(n + 1)
+        bb[: self.nb + 1] = self.b
+        aa = np.zeros(n + 1)
+        aa[: self.na + 1] = self.a
+        sos = signal.tf2sos(bb, aa)
+        extra = [[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]] * (self.delay // 2)
+        if self.delay % 2:
+            extra.append([0.0, 1.0, 0.0, 1.0, 0.0, 0.0])
+        return np.vstack([sos, *extra]) if extra else sos
 
     def _trimmed(self) -> tuple[np.ndarray, np.ndarray]:
         # scipy warns (BadCoefficients) on exact leading zeros in num (the delay): strip

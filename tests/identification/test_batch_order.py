@@ -1,0 +1,60 @@
+"""Batch references (ARX LS, ARMAX ELS/PEM) and order selection."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from ehss.errors import DataError, ParameterError
+from ehss.identification.batch import armax_els, arx_ls
+from ehss.identification.order import select_order
+
+from .systems import DT_S, armax_data, system
+
+
+def test_arx_ls_exact_on_noise_free_data(rng):
+    a, b, _ = system(4)
+    u, y, _ = armax_data(rng, a, b, None, 5000)
+    m = arx_ls(u, y, na=4, nb=b.size - 1, delay=1, dt=DT_S)
+    # exact regression, lstsq in float64 with condition ~1e4: 1e-9
+    assert_allclose(m.a, a, atol=1e-9)
+    assert_allclose(m.b, b, atol=1e-9)
+    assert m.meta["method"] == "arx_ls"
+
+
+def test_armax_els_recovers_c_and_noise_variance(rng):
+    a, b, c = system(2)
+    u, y, nv = armax_data(rng, a, b, c, 20_000, snr_db=20.0)
+    m = armax_els(u, y, na=2, nb=b.size - 1, nc=1, delay=1, dt=DT_S)
+    # N = 2e4: standard errors of c1 ~ 1/sqrt(N) ≈ 7e-3; 3σ ≈ 2e-2
+    assert_allclose(m.c, c, atol=2e-2)
+    assert_allclose(m.noise_variance, nv, rtol=3e-2)  # 3σ of a variance estimate, N=2e4
+    assert_allclose(m.a, a, atol=2e-3)
+    assert m.covariance.shape == (5, 5)
+
+
+def test_select_order_prefers_true_order(rng):
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 6000, snr_db=30.0)
+    uv, yv, _ = armax_data(rng, a, b, c, 3000, snr_db=30.0)
+    sel = select_order(u, y, na=[1, 2, 3], nb=[0, 1], nc=[1], delay=1, dt=DT_S,
+                       criterion="mdl", validation=(uv, yv))
+    assert len(sel.table) == 6
+    assert (sel.best.na, sel.best.nb) in {(2, 1), (2, 0)}
+    assert sel.best.fit > 90.0
+    row = sel.table[0]
+    assert row.n_params == row.na + row.nb + 1 + row.nc
+    assert sel.model.na == sel.best.na
+
+
+def test_select_order_errors(rng):
+    u = rng.standard_normal(300)
+    with pytest.raises(ParameterError, match="criterion='bic' must be one of"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], criterion="bic")
+    with pytest.raises(ParameterError, match="criterion='fit' needs validation"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], criterion="fit")
+    with pytest.raises(ParameterError, match=r"na=\[0\] must hold integers >= 1"):
+        select_order(u, u, na=[0], nb=[0], nc=[0])
+    with pytest.raises(DataError, match=r"y\[3\]=nan is not finite"):
+        arx_ls(u, np.r_[u[:3], np.nan, u[4:]], na=1, nb=0)

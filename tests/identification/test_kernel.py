@@ -1,0 +1,76 @@
+"""The compiled RELS kernel against the slow numpy reference (tests/identification/naive.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from ehss.identification import _kernels as K
+from ehss.identification.rels import _new_state
+
+from .naive import naive_rels
+from .systems import armax_data, system
+
+
+def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=0.99):
+    n = na + nb + 1 + nc
+    tb = n * alpha if trace_bound is None else trace_bound
+    state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, np.zeros(n))
+    err, xi = np.empty(u.size), np.empty(u.size)
+    K.rels_run(state, u, y, err, xi, np.empty((0, n)), 1)
+    theta, P, *_ = K.state_views(state)
+    return theta.copy(), P.copy(), err, xi, state
+
+
+@pytest.mark.parametrize(
+    ("orders", "lam", "alpha", "trace_bound"),
+    [
+        ((2, 1, 1, 1), 1.0, 1e6, None),
+        ((4, 2, 2, 1), 0.995, 1e3, None),
+        ((3, 2, 0, 0), 0.98, 1e2, 50.0),  # trace bound active
+        ((2, 0, 2, 2), 1.0, 1e4, None),
+    ],
+)
+def test_kernel_equals_naive(rng, orders, lam, alpha, trace_bound):
+    na, nb, nc, d = orders
+    a, b, c = system(4)
+    u, y, _ = armax_data(rng, a, b, c, 1500, snr_db=20.0)
+    u, y = u / np.std(u), y / np.std(y)
+    ref = naive_rels(u, y, na=na, nb=nb, nc=nc, delay=d, lam=lam, alpha=alpha,
+                     trace_bound=trace_bound)
+    theta, P, err, xi, state = _run_kernel(u, y, na, nb, nc, d, lam, alpha, trace_bound)
+    # same algorithm, different summation order only (BLAS vs loops): 1e-12
+    assert_allclose(theta, ref[0], rtol=1e-12, atol=1e-12)
+    assert_allclose(err, ref[2], rtol=1e-12, atol=1e-12)
+    assert_allclose(xi, ref[3], rtol=1e-12, atol=1e-12)
+    scale = np.max(np.abs(ref[1]))
+    assert_allclose(P, ref[1], rtol=1e-12, atol=1e-12 * scale)
+    assert state[K.H_RESETS] == ref[4]["resets"]
+    assert state[K.H_CPROJ] == ref[4]["c_projections"]
+    assert state[K.H_TRSCALE] == ref[4]["trace_scalings"]
+    if trace_bound is not None:
+        assert ref[4]["trace_scalings"] > 0
+    assert np.array_equal(P, P.T)  # exactly symmetric by construction
+
+
+def test_c_projection_matches_naive(rng):
+    # C driven out of the unit disc: a deliberately wrong C with a tight radius
+    u = rng.standard_normal(800)
+    y = np.cumsum(rng.standard_normal(800)) * 0.1
+    ref = naive_rels(u, y, na=1, nb=0, nc=2, delay=1, lam=0.99, alpha=1e3, c_radius=0.5)
+    theta, P, err, xi, state = _run_kernel(u, y, 1, 0, 2, 1, 0.99, 1e3, c_radius=0.5)
+    assert ref[4]["c_projections"] > 0
+    assert state[K.H_CPROJ] == ref[4]["c_projections"]
+    # root reflection via eigvals (kernel) vs np.roots (reference): 1e-12
+    assert_allclose(theta, ref[0], rtol=1e-12, atol=1e-12)
+    assert np.max(np.abs(np.roots(np.r_[1.0, theta[2:]]))) <= 0.5 + 1e-12
+
+
+@pytest.mark.parametrize("c", [[0.5], [-1.2], [0.3, 0.2], [1.5, 0.9], [-1.8, 0.81],
+                               [0.1, -0.2, 0.3, 0.96], [2.0, 1.5, 0.5]])
+def test_schur_cohn_matches_roots(c):
+    c = np.array(c)
+    for radius in (0.99, 0.9, 0.5):
+        expect = np.max(np.abs(np.roots(np.r_[1.0, c]))) < radius
+        assert K._c_within(c, c.size, radius, np.zeros(c.size + 1)) == expect
