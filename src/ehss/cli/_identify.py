@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
                  f"({model.na},{model.nb},{model.nc}) d={model.delay}")
         bode = bode_compare(report.frf, {"identified model": model}, band_hz=band_hz,
                             min_coherence=args.min_coherence, title=title)
-        window = min(2.0, report.n_validation / fs)
+        window = min(1.0, report.n_validation / fs)
         tfig = time_compare(rec.t, rec.y, {"model (simulated)": report.simulated + y_mean},
                             window_s=window, ylabel=args.output,
                             title=f"held-out data, simulation fit "
