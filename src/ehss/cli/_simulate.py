@@ -1,0 +1,208 @@
+"""``ehss simulate``: run one closed-loop test on the simulated rig and save the record.
+
+Outputs: a plain CSV (one header row; columns t, reference, output, then the internal
+signals), a JSON sidecar next to it (units of every column, the full parameter set, loop,
+signal kind and settings, seed, fs, versions) and optionally a PNG plot. All outputs are
+written atomically and their folders are checked before the simulation starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ehss.errors import ParameterError
+from ehss.params import GRAVITY_M_S2, PRESETS, RigParams, load_params, params_to_dict, preset
+
+__all__ = ["register", "run", "SIGNALS", "DEFAULT_AMPLITUDE", "DEFAULT_BAND_HZ"]
+
+SIGNALS = ("step", "sine", "random", "sweep", "multisine")
+#: Default size of a test per loop (SI units: m, m/s², N).
+DEFAULT_AMPLITUDE = {"position": 1.0e-3, "acceleration": 0.05 * GRAVITY_M_S2, "force": 1000.0}
+#: Default frequency band per loop: Table 2's working bands, from 1 Hz.
+DEFAULT_BAND_HZ = {"position": (1.0, 20.0), "acceleration": (1.0, 50.0), "force": (1.0, 20.0)}
+_LONG_RUN_S = 2.0  # show a progress indicator when the run should take longer than this
+_EXPECTED_REAL_TIME_FACTOR = 400.0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a closed-loop test (position, acceleration or force loop)",
+        description="Simulate one closed-loop test of the rig: the nonlinear actuator "
+        "channel with its digital controller, driven by a generated test signal or by a "
+        "reference column read from a file. Writes CSV + JSON (units, parameters, seed) "
+        "and optionally a plot.",
+    )
+    p.add_argument("--loop", required=True, choices=("position", "acceleration", "force"))
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--signal", choices=SIGNALS, help="generated reference signal")
+    src.add_argument("--reference", metavar="FILE", help="read the reference from a file")
+    p.add_argument("--column", default="reference",
+                   help="reference column in --reference FILE (default: %(default)s)")
+    p.add_argument("--amplitude", type=float,
+                   help="size in SI units of the loop (m, m/s², N); default per loop: "
+                   + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_AMPLITUDE.items()))
+    p.add_argument("--freq", type=float, default=5.0, metavar="HZ",
+                   help="sine frequency (default: %(default)s Hz)")
+    p.add_argument("--band", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="band of random/sweep/multisine signals, Hz (default: the loop's "
+                   "working band of Table 2)")
+    p.add_argument("--offset", type=float, default=0.0,
+                   help="constant added to the signal (e.g. a static force), SI units")
+    p.add_argument("--duration", type=float, default=5.0, metavar="S",
+                   help="length of a generated signal (default: %(default)s s)")
+    p.add_argument("--fs", type=float, metavar="HZ",
+                   help="control rate (default: the parameter set's, or the file's t column)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the signal and the sensor noise (default: %(default)s)")
+    par = p.add_mutually_exclusive_group()
+    par.add_argument("--params", metavar="FILE.toml", help="(partial) TOML parameter file")
+    par.add_argument("--preset", choices=sorted(PRESETS), default="default",
+                     help="named parameter set (default: %(default)s)")
+    p.add_argument("--out", required=True, metavar="run.csv", help="output CSV")
+    p.add_argument("--plot", metavar="run.png", help="also draw the record")
+    p.set_defaults(func=run)
+
+
+def _generate(args: argparse.Namespace, fs: float):
+    """The generated reference as an ``ehss.signals.Signal``."""
+    from ehss import signals
+
+    loop = args.loop
+    amp = DEFAULT_AMPLITUDE[loop] if args.amplitude is None else args.amplitude
+    lo, hi = DEFAULT_BAND_HZ[loop] if args.band is None else args.band
+    common = {"duration_s": args.duration, "fs": fs}
+    if args.signal == "step":
+        return signals.step(amp, start_s=min(0.1, 0.1 * args.duration), offset=args.offset,
+                            **common)
+    if args.signal == "sine":
+        return signals.sine(amp, args.freq, offset=args.offset, **common)
+    if args.signal == "random":
+        return signals.band_limited_random(band_hz=(lo, hi), peak=amp, seed=args.seed,
+                                           offset=args.offset, **common)
+    if args.signal == "sweep":
+        return signals.swept_sine(amp, f0_hz=lo, f1_hz=hi, offset=args.offset, **common)
+    return signals.multisine(band_hz=(lo, hi), peak=amp, seed=args.seed, offset=args.offset,
+                             **common)
+
+
+def _load_params(args: argparse.Namespace) -> RigParams:
+    return load_params(args.params) if args.params else preset(args.preset)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ehss._files import atomic_path, check_writable
+    from ehss.io import read_columns, sample_rate, write_csv, write_json
+
+    out = Path(args.out)
+    sidecar = out.with_suffix(".json")
+    if sidecar == out:
+        raise ParameterError(f"--out {str(out)!r} must not end in .json (that is the sidecar)")
+    check_writable(out)
+    check_writable(sidecar)
+    if args.plot:
+        check_writable(args.plot)
+    if args.duration is not None and not args.duration > 0:
+        raise ParameterError(f"--duration {args.duration!r} must be > 0")
+
+    params = _load_params(args)
+    if args.reference:
+        table = read_columns(args.reference, [args.column])
+        fs = sample_rate(table, args.fs)
+        values = np.asarray(table[args.column], dtype=np.float64)
+        kind = "file"
+        settings: dict[str, Any] = {"path": str(args.reference), "column": args.column}
+    else:
+        fs = params.timing.control_rate_hz if args.fs is None else args.fs
+        sig = _generate(args, fs)
+        values = np.asarray(sig.values, dtype=np.float64)
+        kind = getattr(sig, "kind", args.signal)
+        settings = dict(getattr(sig, "settings", {}) or {})
+
+    from ehss.simulation import simulate
+    from ehss.simulation.core import _with_rate
+
+    checked = _with_rate(params, fs)  # fs must divide the internal rate: fail before work
+    _check_feasible(values, args.loop, checked, fs, step=kind == "step")
+
+    expected_s = values.size / fs / _EXPECTED_REAL_TIME_FACTOR
+    with _progress(expected_s, f"simulating {values.size / fs:.4g} s of the {args.loop} loop"):
+        result = simulate(args.loop, values, params=params, fs=fs, seed=args.seed)
+
+    meta = _metadata(result, kind, settings)
+    with contextlib.ExitStack() as stack:
+        tmp_csv = stack.enter_context(atomic_path(out))
+        tmp_json = stack.enter_context(atomic_path(sidecar))
+        write_csv(tmp_csv, result.to_columns())
+        write_json(tmp_json, meta)
+        if args.plot:
+            from ehss.simulation.plot import plot_simulation
+
+            # the temporary file keeps the plot's suffix, which picks the format
+            plot_simulation(result, stack.enter_context(atomic_path(args.plot)))
+    hits = result.limits_hit
+    if hits:
+        import sys
+
+        note = ", ".join(f"{k} {v:.1%}" for k, v in hits.items())
+        print(f"ehss simulate: warning: the test hit a limit ({note})", file=sys.stderr)
+    return 0
+
+
+def _check_feasible(values, loop: str, params: RigParams, fs: float, *, step: bool) -> None:
+    """Refuse a test that would leave the stroke, velocity or valve limits.
+
+    A position *step* asks for an infinite reference velocity by design (the loop and the
+    valve limit the actual one), so for it only the stroke is checked.
+    """
+    from ehss.signals import STROKE_MARGIN, check_feasible
+
+    if step and loop == "position":
+        stroke = STROKE_MARGIN * params.actuator.stroke_m
+        peak = float(np.max(np.abs(values)))
+        if peak > stroke:
+            raise ParameterError(
+                f"position step to {peak:.4g} m exceeds {STROKE_MARGIN:.0%} of the stroke "
+                f"({stroke:.4g} m of actuator.stroke_m={params.actuator.stroke_m!r})"
+            )
+        return
+    check_feasible(values, loop, params, fs)
+
+
+def _metadata(result, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
+    import numba
+
+    import ehss
+
+    return {
+        "loop": result.loop,
+        "fs_hz": result.fs,
+        "seed": result.seed,
+        "n_samples": int(result.t.size),
+        "signal": {"kind": kind, "settings": settings},
+        "columns": list(result.to_columns()),
+        "units": result.units,
+        "limits_hit": result.limits_hit,
+        "params": params_to_dict(result.params),
+        "versions": {"ehss": ehss.__version__, "numpy": np.__version__,
+                     "numba": numba.__version__},
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+@contextlib.contextmanager
+def _progress(expected_s: float, text: str):
+    """A rich status line on stderr for runs expected to take longer than ~2 s."""
+    if expected_s < _LONG_RUN_S:
+        yield
+        return
+    from rich.console import Console
+
+    with Console(stderr=True).status(text):
+        yield
