@@ -31,7 +31,7 @@ __all__ = ["FrequencyResponse", "h1_estimate", "default_nperseg", "n_segments"]
 MIN_SAMPLES = 16
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class FrequencyResponse:
     """A frequency response estimated from data.
 

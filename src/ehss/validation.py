@@ -231,7 +231,7 @@ def prediction_fit(model: _Model, u, y, horizon: int = 1, *, start: int = 0) -> 
 # --------------------------------------------------------------------------- residual tests
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class ResidualTests:
     """Whiteness and input-independence tests of one-step prediction residuals.
 
@@ -420,7 +420,7 @@ def residual_tests(
 # ------------------------------------------------------------------------------- validate
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class ValidationReport:
     """Everything :func:`validate` measured about one model on one record.
 
