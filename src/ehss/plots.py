@@ -129,11 +129,14 @@ def bode_compare(
         g_ph += 360.0 * np.round((phase[ref_idx] - g_ph[ref_idx]) / 360.0)
         ax_m.semilogx(f, g_db, color=colour, lw=1.2, ls="--", label=name)
         ax_p.semilogx(f, g_ph, color=colour, lw=1.2, ls="--")
-    # Magnitude limits from the estimate, so a model zero on the unit circle (-inf dB) or
-    # an empty Nyquist bin does not squash the plot.
-    finite = mag[np.isfinite(mag)]
+    # Axis limits from the reliable part of the estimate, so that noise where nothing was
+    # excited, a model zero on the unit circle (-inf dB) or an empty Nyquist bin does not
+    # squash the plot.
+    ref_mag, ref_ph = (mag[good], phase[good]) if good.any() else (mag, phase)
+    finite = ref_mag[np.isfinite(ref_mag)]
     lo_db, hi_db = np.percentile(finite, [1.0, 100.0]) if finite.size else (-60.0, 20.0)
-    ax_m.set_ylim(lo_db - 10.0, hi_db + 10.0)
+    ax_m.set_ylim(lo_db - 15.0, hi_db + 10.0)
+    ax_p.set_ylim(float(np.min(ref_ph)) - 90.0, float(np.max(ref_ph)) + 90.0)
     ax_c.semilogx(f, coh, color="tab:blue", lw=1.0)
     ax_c.axhline(min_coherence, color="tab:blue", ls=":", lw=0.8)
     ax_c.set_ylim(0.0, 1.05)
