@@ -17,14 +17,13 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
 from ehss import signals
 from ehss.errors import ParameterError
 from ehss.frequency import FrequencyResponse, h1_estimate
-from ehss.identification import ArmaxModel, rels, select_order
+from ehss.identification import ArmaxModel, OrderSelection, rels, select_order
 from ehss.params import GRAVITY_M_S2, RigParams, preset
 from ehss.report.steps import StepMetrics, step_metrics
 from ehss.simulation import SimulationResult, simulate
@@ -138,7 +137,7 @@ class LoopResult:
     error: FrfError
     fit_pct: float
     simulated: np.ndarray
-    selection: Any
+    selection: OrderSelection
     recommended: ArmaxModel
     recommended_error: FrfError
     recommended_fit_pct: float
@@ -299,14 +298,15 @@ def _run_loop(
         u[:n_ident],
         y[:n_ident],
         na=settings.order_grid,
-        nb=[n - 1 for n in settings.order_grid],
+        nb=sorted({n - 1 for n in settings.order_grid}),
         nc=settings.noise_orders,
         delay=d0,
         dt=dt,
         criterion="aic",
+        method="rels",
     )
     best = selection.best
-    rec_orders = (int(best["na"]), int(best["nb"]), int(best["nc"]), int(best.get("delay", d0)))
+    rec_orders = (best.na, best.nb, best.nc, best.delay)
     rec = _identify(u, y, n_ident, rec_orders, settings, dt)
     rec_err = frf_error(rec, frf, band_hz=band, min_coherence=MIN_COHERENCE)
     rec_fit, _ = _fit_on_holdout(rec, u, y, n_ident)

@@ -56,17 +56,6 @@ def versions() -> dict[str, str]:
     }
 
 
-def _err_dict(err) -> dict[str, float]:
-    return {
-        "band_hz": [float(err.band_hz[0]), float(err.band_hz[1])],
-        "n_points": int(err.n_points),
-        "max_magnitude_db": float(err.max_magnitude_db),
-        "max_phase_deg": float(err.max_phase_deg),
-        "rms_magnitude_db": float(err.rms_magnitude_db),
-        "rms_phase_deg": float(err.rms_phase_deg),
-    }
-
-
 def _model_summary(model: ArmaxModel) -> dict[str, Any]:
     poles = model.poles()
     return {
@@ -92,21 +81,21 @@ def summary_dict(result: ProgrammeResult) -> dict[str, Any]:
             "n_samples": int(r.sim.t.size),
             "n_identification": int(r.n_ident),
             "model": _model_summary(r.model),
-            "frf_error": _err_dict(r.error),
+            "frf_error": r.error.summary(),
             "holdout_fit_pct": float(r.fit_pct),
             "passes": bool(r.passes),
             "rels_resets": int(r.model.meta.get("resets", 0)),
             "order_selection": {
                 "criterion": "aic",
                 "recommended": _model_summary(r.recommended)["orders"],
-                "frf_error": _err_dict(r.recommended_error),
+                "frf_error": r.recommended_error.summary(),
                 "holdout_fit_pct": float(r.recommended_fit_pct),
             },
         }
         if r.passing is not None:
             entry["passing_order"] = {
                 "model": _model_summary(r.passing),
-                "frf_error": _err_dict(r.passing_error),
+                "frf_error": r.passing_error.summary(),
                 "holdout_fit_pct": float(r.passing_fit_pct),
             }
         loops[name] = entry
