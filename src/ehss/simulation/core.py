@@ -395,7 +395,7 @@ def simulate(
     >>> import numpy as np
     >>> from ehss.simulation import simulate
     >>> r = simulate("position", np.full(500, 0.005), seed=1)
-    >>> abs(r.output[-1] - 0.005) < 2e-4
+    >>> bool(abs(r.output[-1] - 0.005) < 2e-4)
     True
     """
     if loop not in LOOPS:
