@@ -26,10 +26,10 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import control as ct
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-import control as ct
 from ehss.errors import ParameterError
 from ehss.params import RigParams
 

@@ -28,8 +28,8 @@ def test_second_order_overshoot():
     y = 1 - np.exp(-zeta * wn * t) * np.sin(wd * t + phi) / math.sqrt(1 - zeta**2)
     m = step_metrics(t, y, step_time_s=0.0, amplitude=1.0, drive=np.full(t.size, 10.0))
     # Peak overshoot exp(-πζ/√(1-ζ²)) = 16.3 %.
-    assert m.overshoot_pct == pytest.approx(100 * math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)),
-                                            abs=0.01)
+    expected = 100 * math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2))
+    assert m.overshoot_pct == pytest.approx(expected, abs=0.01)
     assert m.drive_saturated_pct == 100.0
 
 

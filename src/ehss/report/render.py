@@ -38,11 +38,11 @@ FIGURE_TITLES = {
 
 
 def versions() -> dict[str, str]:
+    import control
     import matplotlib
     import numba
     import scipy
 
-    import control
     from ehss import __version__
 
     return {
