@@ -69,7 +69,7 @@ def test_quoted_errors_follow_from_the_written_files(report_dir):
         u = cols["reference"] - np.mean(cols["reference"])
         y = cols["output"] - np.mean(cols["output"])
         model = ArmaxModel.from_dict(models[loop])
-        frf = h1_estimate(u, y, 1.0 / model.dt)
+        frf = h1_estimate(u, y, 1.0 / model.dt, nperseg=summary["loops"][loop]["h1_nperseg"])
         quoted = summary["loops"][loop]["frf_error"]
         err = frf_error(model, frf, band_hz=tuple(quoted["band_hz"]), min_coherence=0.9)
         # Same data, same estimator: the numbers must agree to rounding of the CSV text.

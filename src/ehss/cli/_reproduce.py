@@ -55,14 +55,22 @@ def run(args: argparse.Namespace) -> int:
         status.update("writing the report")
         html_path = write_report(result, out)
     console.log(f"done in {time.perf_counter() - t0:.1f} s")
-    summary = []
+    lines = []
     for name, r in result.loops.items():
-        verdict = "pass" if r.passes else "FAIL"
-        summary.append(
-            f"{name:>12}: {verdict}  max |dG| {r.error.max_magnitude_db:.2f} dB, "
-            f"max dphi {r.error.max_phase_deg:.2f} deg, held-out fit {r.fit_pct:.1f} %"
+        chk = r.paper
+        verdict = "meets acceptance" if chk.passes else "does not meet acceptance"
+        lines.append(
+            f"{name:>12}: {chk.label}: max |dG| {chk.error.max_magnitude_db:.2f} dB, "
+            f"max dphi {chk.error.max_phase_deg:.2f} deg, held-out fit {chk.fit_pct:.1f} % "
+            f"-> {verdict}"
         )
-    print("\n".join(summary))
+        if r.passing is not None:
+            p = r.passing
+            lines.append(
+                f"{'':>12}  {p.label}: {p.error.max_magnitude_db:.2f} dB, "
+                f"{p.error.max_phase_deg:.2f} deg, fit {p.fit_pct:.1f} % -> meets acceptance"
+            )
+    print("\n".join(lines))
     print(f"report: {html_path}")
     sys.stdout.flush()
     return 0
