@@ -13,9 +13,13 @@ def test_first_order_step_has_analytic_figures():
     t = np.arange(0.0, 1.0, 1.0 / fs)
     y = np.where(t >= t0, 1.0 - np.exp(-(t - t0) / tau), 0.0) * 3.0
     m = step_metrics(t, y, step_time_s=t0, amplitude=3.0)
-    # 10-90 % rise of a first-order lag is τ ln 9; 5 % settling is τ ln 20 (to 1/fs).
+    # 10-90 % rise of a first-order lag is τ ln 9 (to 1/fs). Settling is read on a 5 ms
+    # centred moving average of the error e^{-t/τ}, which is e^{-t/τ} sinh(x)/x with
+    # x = 2.5 ms/τ: 5 % is reached at τ ln(20 sinh(x)/x).
     assert m.rise_time_s == pytest.approx(tau * math.log(9.0), abs=2.0 / fs)
-    assert m.settling_time_s == pytest.approx(tau * math.log(20.0), abs=2.0 / fs)
+    x = 0.0025 / tau
+    expected = tau * math.log(20.0 * math.sinh(x) / x)
+    assert m.settling_time_s == pytest.approx(expected, abs=2.0 / fs)
     assert m.overshoot_pct == 0.0
     assert abs(m.steady_state_error_pct) < 1e-9
 

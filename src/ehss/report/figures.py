@@ -70,7 +70,7 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
 
     frf = res.frf
     lo, hi = res.paper.error.band_hz
-    keep = (frf.freq_hz > 0) & (frf.freq_hz <= min(1.5 * hi, 0.5 * fs))
+    keep = (frf.freq_hz > 0) & (frf.freq_hz <= hi)
     f = frf.freq_hz[keep]
     good = frf.coherence[keep] >= 0.9
     mag_h1 = frf.magnitude_db[keep]

@@ -74,24 +74,29 @@ def step_metrics(
     t = np.asarray(t, dtype=float)
     y = (np.asarray(output, dtype=float) - baseline) / amplitude
     after = t >= step_time_s
-    ideal = np.where(after, 1.0, 0.0)
-    ref = ideal if target is None else (np.asarray(target, dtype=float) - baseline) / amplitude
-    ta, ya = t[after], y[after]
-    i10 = np.flatnonzero(ya >= 0.1)
-    i90 = np.flatnonzero(ya >= 0.9)
+    if target is None:
+        ref = np.where(after, 1.0, 0.0)
+    else:
+        ref = (np.asarray(target, dtype=float) - baseline) / amplitude
+    ta, ya, ra = t[after], y[after], ref[after]
+    # Rise: from 10 % to 90 % of the way to the target (the target may move, as the
+    # acceleration loop's high-passed step does, eq (13)).
+    i10 = np.flatnonzero(ya >= 0.1 * ra)
+    i90 = np.flatnonzero(ya >= 0.9 * ra)
     rise = float(ta[i90[0]] - ta[i10[0]]) if i10.size and i90.size else float("nan")
-    final = float(np.mean(ref[after][-max(1, ya.size // 10):]))
-    overshoot = max(0.0, float(np.max(ya) - max(final, 1.0 if target is None else final)))
-    err = np.abs(y - ref)
-    outside = np.flatnonzero(after & (err > tolerance))
+    overshoot = max(0.0, float(np.max(ya - ra)))
+    # Settling on a 5 ms moving average, so that sensor noise alone does not count.
+    width = max(1, int(round(0.005 / np.median(np.diff(t))))) if t.size > 1 else 1
+    smooth = np.convolve(y - ref, np.ones(width) / width, mode="same")
+    outside = np.flatnonzero(after & (np.abs(smooth) > tolerance))
+    n_tail = max(1, ya.size // 10)
     if outside.size == 0:
         settling = 0.0
-    elif outside[-1] >= t.size - max(1, ya.size // 20):
+    elif outside[-1] >= t.size - max(1, ya.size // 20) - width:
         settling = float("nan")
     else:
         settling = float(t[outside[-1] + 1] - step_time_s)
-    tail = slice(t.size - max(1, ya.size // 10), None)
-    sse = float(np.mean(y[tail] - ref[tail]))
+    sse = float(np.mean(y[-n_tail:] - ref[-n_tail:]))
     sat = 0.0
     if drive is not None:
         sat = float(np.mean(np.abs(np.asarray(drive)) >= 0.999 * drive_limit)) * 100.0
