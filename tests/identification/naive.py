@@ -41,8 +41,9 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
         )
         e = y[k] - dot(psi, theta)
         g = matvec(P, psi)
-        den = lam + dot(psi, g)
-        if not (den > 0 and np.isfinite(den)):
+        s = dot(psi, g)
+        den = lam + s
+        if not (s >= 0 and np.isfinite(den)):  # ψᵀPψ < 0: P is not definite
             P = alpha * np.eye(n)
             resets += 1
             g = matvec(P, psi)
@@ -52,14 +53,20 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
         theta = theta + (g * inv_den) * e
         # (22) in symmetric form (P − g gᵀ/den)/λ
         P = (P - np.outer(g, g) * inv_den) * (1.0 / lam)
-        d = np.diag(P)
+        d = np.diag(P).copy()
         tr = np.cumsum(d)[-1]
+        if lam < 1.0:
+            # diagonal floor δ = 8 n eps tr P (keeps P definite against downdate rounding)
+            delta = 8.0 * np.finfo(float).eps * n * tr
+            P = P + delta * np.eye(n)
+            tr = tr + n * delta
         if not (d.min() > 0 and np.isfinite(tr)):
             P = alpha * np.eye(n)
             resets += 1
         elif tr > tr_max:
             P = P * (tr_max / tr)
             trscale += 1
+        projected = False
         if nc > 0:
             c = theta[na + nb + 1:]
             roots = np.roots(np.concatenate([[1.0], c]))
@@ -70,7 +77,10 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
                 roots[big] = roots[big] * c_radius / np.abs(roots[big])
                 theta[na + nb + 1:] = np.real(np.poly(roots))[1:]
                 cproj += 1
-        xi[k] = y[k] - dot(psi, theta)
+                projected = True
+        # (19) ξ̂ = y − ψᵀθ(k); without projection this is algebraically e λ/den, the
+        # form the kernel uses (bit-for-bit agreement needs the same rounding)
+        xi[k] = y[k] - dot(psi, theta) if projected else e * (lam * inv_den)
         err[k] = e
     return theta, P, err, xi, {"resets": resets, "c_projections": cproj,
                                "trace_scalings": trscale}

@@ -23,14 +23,17 @@ P(k−1)ψ̂(k)         g           shared by eqs (21) and (22)
 State buffer layout (``state``, float64)::
 
     [0:HEADER]            header (orders, settings, counters; see the H_* indices)
-    theta                 n
-    P                     n*n (row major)
-    psi                   n   (regressor of the *next* sample, u-part filled on entry)
-    g                     n   (work: P psi)
+    theta                 m
+    P                     m*m (row major)
+    psi                   m   (regressor of the *next* sample, u-part filled on entry)
+    g                     m   (work: P psi)
     ul                    d+nb+1 (u delay line, ul[j] = u(k−j))
     cw                    nc+1 (work: Schur–Cohn test of C)
 
-with n = na + nb + 1 + nc.
+with n = na + nb + 1 + nc and m = n rounded up to a multiple of 4. The padding rows,
+columns and entries are zero and stay zero (every update multiplies them by a zero
+of ψ̂ or g), so they change no result — adding 0.0 is exact — but every row is a whole
+number of 4-wide SIMD vectors and the row loops need no scalar remainder.
 """
 
 from __future__ import annotations
@@ -59,26 +62,35 @@ H_XI = 14
 H_NV = 15
 HEADER = 16
 
+#: δ = EPS_FLOOR · n · tr P is added to P's diagonal after each update (8 · eps)
+EPS_FLOOR = 8.0 * 2.220446049250313e-16
+
+
+def padded(n: int) -> int:
+    """n rounded up to a multiple of 4 (storage size of θ, ψ, g and P's rows)."""
+    return (n + 3) // 4 * 4
+
 
 def state_size(na: int, nb: int, nc: int, delay: int) -> int:
     """Length of the float64 state buffer for the given orders."""
-    n = na + nb + 1 + nc
-    return HEADER + n + n * n + n + n + (delay + nb + 1) + (nc + 1)
+    m = padded(na + nb + 1 + nc)
+    return HEADER + m + m * m + m + m + (delay + nb + 1) + (nc + 1)
 
 
 def state_views(state: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(theta, P, psi, g, ul, cw) views into ``state`` (Python side helper)."""
+    """(theta, P, psi, g, ul, cw) views into ``state``, padding hidden (Python side)."""
     na, nb, nc, d = (int(state[i]) for i in (H_NA, H_NB, H_NC, H_DELAY))
     n = na + nb + 1 + nc
+    m = padded(n)
     o = HEADER
     theta = state[o : o + n]
-    o += n
-    P = state[o : o + n * n].reshape(n, n)
-    o += n * n
+    o += m
+    P = state[o : o + m * m].reshape(m, m)[:n, :n]
+    o += m * m
     psi = state[o : o + n]
-    o += n
+    o += m
     g = state[o : o + n]
-    o += n
+    o += m
     ul = state[o : o + d + nb + 1]
     o += d + nb + 1
     cw = state[o : o + nc + 1]
@@ -95,8 +107,9 @@ def _c_within(c, nc, radius, cw):
     """
     s = 0.0
     rp = 1.0
+    inv_r = 1.0 / radius
     for i in range(nc):
-        rp /= radius
+        rp *= inv_r
         cw[i + 1] = c[i] * rp
         s += abs(cw[i + 1])
     if s < 1.0:
@@ -134,6 +147,12 @@ def _project_c(c, nc, radius):
     Uses a complex companion matrix (numba's eigvals does not change domain), so it
     allocates; it only runs when :func:`_c_within` failed.
     """
+    for j in range(nc):
+        if not np.isfinite(c[j]):
+            # cannot happen through _step (it never makes θ̂ non-finite); be safe
+            for i in range(nc):
+                c[i] = 0.0
+            return
     comp = np.zeros((nc, nc), dtype=np.complex128)
     for j in range(nc):
         comp[0, j] = -c[j]
@@ -159,31 +178,33 @@ def _project_c(c, nc, radius):
 
 @njit(cache=True)
 def _reset_P(P, n, alpha):
-    """P = α I (eq 22's initial condition)."""
-    for i in range(n):
-        for j in range(n):
+    """P = α I (eq 22's initial condition); the padding stays zero."""
+    m = P.shape[0]
+    for i in range(m):
+        for j in range(m):
             P[i, j] = 0.0
+    for i in range(n):
         P[i, i] = alpha
 
 
 @njit(cache=True, inline="always")
 def _views(state):
-    """(theta, P, psi, g, ul, cw) views of the state buffer (no copy)."""
+    """(theta, P, psi, g, ul, cw) padded views of the state buffer (no copy)."""
     na = int(state[H_NA])
     nb = int(state[H_NB])
     nc = int(state[H_NC])
     d = int(state[H_DELAY])
-    n = na + nb + 1 + nc
+    m = (na + nb + 1 + nc + 3) // 4 * 4
     nu = d + nb + 1
     o = HEADER
-    theta = state[o : o + n]
-    o += n
-    P = state[o : o + n * n].reshape((n, n))
-    o += n * n
-    psi = state[o : o + n]
-    o += n
-    g = state[o : o + n]
-    o += n
+    theta = state[o : o + m]
+    o += m
+    P = state[o : o + m * m].reshape((m, m))
+    o += m * m
+    psi = state[o : o + m]
+    o += m
+    g = state[o : o + m]
+    o += m
     ul = state[o : o + nu]
     o += nu
     cw = state[o : o + nc + 1]
@@ -202,6 +223,7 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
     nc = int(state[H_NC])
     d = int(state[H_DELAY])
     n = na + nb + 1 + nc
+    m = P.shape[0]  # padded size, multiple of 4
     nu = d + nb + 1
 
     # u delay line: ul[j] = u(k−j); ψ's u-part is u(k−d)..u(k−d−nb)
@@ -217,28 +239,33 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
         yhat += psi[i] * theta[i]
     e = y - yhat
     state[H_COUNT] += 1.0
+    # ξ̂(k) of eq (19); equals e(k) whenever θ̂ is not updated (frozen or skipped)
+    xi = e
+    xi_direct = False
 
     if state[H_ENABLED] != 0.0 and np.isfinite(e):
         lam = state[H_LAM]
         alpha = state[H_ALPHA]
         # g = P(k−1) ψ̂(k), shared by (21) and (22);  s = ψ̂ᵀ P ψ̂
-        # Written as g += P[j, :] ψ_j (rows of the symmetric P as columns): each g_i
-        # still sums j = 0..n−1 in order, as the plain dot product would, but the
-        # inner loop is element-wise and vectorises; a dot-product inner loop is a
-        # serial reduction that (without fastmath) cannot.
-        for i in range(n):
+        # Readable form: g_i = Σ_j P_ij ψ_j. Written as g += P[j, :] ψ_j (rows of the
+        # symmetric P read as columns), so each g_i still sums j = 0..m−1 in order —
+        # the rounding of the plain dot product — while the inner loop is element-wise
+        # over whole 4-wide vectors (m is a multiple of 4) and vectorises. A dot-product
+        # inner loop is one serial add chain that, without fastmath, cannot.
+        for i in range(m):
             g[i] = 0.0
-        for j in range(n):
+        for j in range(m):
             pj = psi[j]
-            for i in range(n):
+            for i in range(m):
                 g[i] += P[j, i] * pj
         s = 0.0
         for i in range(n):
             s += psi[i] * g[i]
-        # denominator of (21): λ + ψ̂ᵀ P ψ̂ > 0 whenever P is positive definite.
-        # If it is not (P lost definiteness through rounding) or not finite: reset P.
+        # denominator of (21): λ + ψ̂ᵀ P ψ̂ ≥ λ whenever P is positive semi-definite.
+        # ψ̂ᵀ P ψ̂ < 0 proves that P lost definiteness through rounding (a tiny positive
+        # den would then give a huge gain); that, or overflow, resets P = P(0).
         den = lam + s
-        if not (den > 0.0 and np.isfinite(den)):
+        if not (s >= 0.0 and np.isfinite(den)):
             _reset_P(P, n, alpha)
             state[H_RESETS] += 1.0
             s = 0.0
@@ -246,11 +273,19 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
                 g[i] = alpha * psi[i]
                 s += psi[i] * g[i]
             den = lam + s
-        if den > 0.0 and np.isfinite(den):
+        # the step K e must be finite (a huge e with a small den could overflow θ̂)
+        gmax = 0.0
+        for i in range(n):
+            if abs(g[i]) > gmax:
+                gmax = abs(g[i])
+        if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
             inv_den = 1.0 / den
             # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
             for i in range(n):
                 theta[i] += (g[i] * inv_den) * e
+            # (19) without a second dot product: ψ̂ᵀθ̂(k) = ψ̂ᵀθ̂(k−1) + (s/den) e, so
+            # ξ̂(k) = e − (s/den) e = e λ/den (exact algebra; used unless C is projected)
+            xi = e * (lam * inv_den)
             # (22) P(k) = [I − K ψ̂ᵀ] P(k−1) / λ  — textbook form, NOT used: rounding makes
             # it drift from symmetry and, with λ < 1, diverge. Since K ψ̂ᵀ P = g gᵀ / den
             # for symmetric P, we use the symmetric rank-1 form
@@ -260,16 +295,30 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
             # symmetric by construction (no separate symmetrisation pass needed), and the
             # full-row loop vectorises, which is faster than a triangle + mirror.
             inv_lam = 1.0 / lam
+            for i in range(m):
+                gi = g[i]
+                for j in range(m):
+                    P[i, j] = (P[i, j] - (gi * g[j]) * inv_den) * inv_lam
             tr = 0.0
             dmin = np.inf
             for i in range(n):
-                gi = g[i]
-                for j in range(n):
-                    P[i, j] = (P[i, j] - (gi * g[j]) * inv_den) * inv_lam
                 pii = P[i, i]
                 tr += pii
                 if pii < dmin:
                     dmin = pii
+            # floor (λ < 1 only): the rank-1 downdate cancels; its rounding error is
+            # about n·eps·‖P‖. With forgetting and poor excitation (long constant
+            # stretches) the unexcited directions of P grow to the trace bound while
+            # the excited one shrinks to ~(1−λ)/|ψ̂|², and that error makes the small
+            # eigenvalue slightly negative. δ = 8·n·eps·tr P on the diagonal keeps P
+            # positive definite; next to the forgetting it is negligible. At λ = 1, P
+            # only shrinks, rounding stays benign, and a floor proportional to the large
+            # early tr P would act like process noise and bias the LS limit, so none.
+            if lam < 1.0:
+                delta = EPS_FLOOR * n * tr
+                for i in range(n):
+                    P[i, i] += delta
+                tr += n * delta
             # guard: a non-positive diagonal means P is no longer positive definite;
             # a non-finite trace means overflow. Reset P = P(0) and keep θ̂.
             if not (dmin > 0.0 and np.isfinite(tr)):
@@ -279,26 +328,29 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
                 # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the
                 # unexcited directions ("wind-up"); scaling keeps tr P ≤ tr_max.
                 f = state[H_TRMAX] / tr
-                for i in range(n):
-                    for j in range(n):
+                for i in range(m):
+                    for j in range(m):
                         P[i, j] *= f
                 state[H_TRSCALE] += 1.0
             # keep C(q⁻¹) stable (inside c_radius), else ξ̂ feedback can blow up
             if nc > 0:
-                c = theta[na + nb + 1 :]
+                c = theta[na + nb + 1 : n]
                 if not _c_within(c, nc, state[H_CRADIUS], cw):
                     _project_c(c, nc, state[H_CRADIUS])
                     state[H_CPROJ] += 1.0
+                    xi_direct = True
         else:
             state[H_SKIPPED] += 1.0
     elif state[H_ENABLED] != 0.0:
         state[H_SKIPPED] += 1.0
 
-    # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k)   (a-posteriori residual)
-    acc = 0.0
-    for i in range(n):
-        acc += psi[i] * theta[i]
-    xi = y - acc
+    # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k)   (a-posteriori residual), directly when the
+    # projection of C changed θ̂ after the update
+    if xi_direct:
+        acc = 0.0
+        for i in range(n):
+            acc += psi[i] * theta[i]
+        xi = y - acc
     if not np.isfinite(xi):
         xi = 0.0
     state[H_XI] = xi
@@ -340,7 +392,7 @@ def rels_run(state, u, y, err, xi_out, hist, hist_every):
     hist_every : int ≥ 1
     """
     theta, P, psi, g, ul, cw = _views(state)
-    n = theta.shape[0]
+    n = hist.shape[1]
     nh = hist.shape[0]
     r = 0
     c = 0

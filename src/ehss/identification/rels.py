@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ehss.errors import DataError, ParameterError
+from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification import _kernels as _k
 from ehss.identification.model import ArmaxModel
 
@@ -156,12 +156,18 @@ def _model_from_state(
 ) -> ArmaxModel:
     theta_s, P, *_ = _k.state_views(state)
     dvec = _theta_scale(na, nb, nc, u_scale, y_scale)
-    theta = theta_s * dvec
-    nv = noise_variance_scaled * y_scale**2
-    # cov(θ̂) ≈ σ² P for λ = 1 (P ≈ (Σψψᵀ)⁻¹); de-scaled with D: D P D σ²
-    cov = noise_variance_scaled * (P * dvec[:, None] * dvec[None, :])
+    with np.errstate(over="ignore", invalid="ignore"):  # adversarial data: checked below
+        theta = theta_s * dvec
+        nv = noise_variance_scaled * y_scale**2
+        # cov(θ̂) ≈ σ² P for λ = 1 (P ≈ (Σψψᵀ)⁻¹); de-scaled with D: D P D σ²
+        cov = noise_variance_scaled * (P * dvec[:, None] * dvec[None, :])
     if not np.all(np.isfinite(cov)):
         cov = None
+    if not np.all(np.isfinite(theta)):
+        raise IdentificationError(
+            "the estimate does not fit float64 in physical units (u_scale/y_scale too "
+            "far apart); choose scales closer to the data"
+        )
     return ArmaxModel(
         a=np.concatenate([[1.0], theta[:na]]),
         b=theta[na : na + nb + 1],
@@ -445,7 +451,8 @@ class RelsEstimator:
                             err[first:], xi[first:], hist, self._every)
             self._hist.extend(list(hist * self._dvec))
             self._since = rest % self._every
-        return err * self._ys
+        with np.errstate(over="ignore"):  # |e| near float max times y_scale > 1
+            return err * self._ys
 
     # ---------------------------------------------------------------- results
     @property
