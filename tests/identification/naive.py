@@ -12,12 +12,14 @@ __all__ = ["naive_rels"]
 
 
 def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
-               trace_bound=None, c_radius=0.99):
+               trace_bound=None, c_radius=0.99, alpha_c=None):
     """Return (theta, P, err, xi, counters) after running over u, y (already scaled)."""
     n = na + nb + 1 + nc
     theta = np.zeros(n) if theta0 is None else np.array(theta0, dtype=float)
-    P = alpha * np.eye(n)
-    tr_max = n * alpha if trace_bound is None else trace_bound
+    alpha_c = alpha if alpha_c is None else alpha_c
+    P0 = np.diag(np.r_[np.full(na + nb + 1, alpha), np.full(nc, alpha_c)])
+    P = P0.copy()
+    tr_max = np.trace(P0) if trace_bound is None else trace_bound
     N = len(u)
     err = np.zeros(N)
     xi = np.zeros(N)
@@ -44,7 +46,7 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
         s = dot(psi, g)
         den = lam + s
         if not (s >= 0 and np.isfinite(den)):  # ψᵀPψ < 0: P is not definite
-            P = alpha * np.eye(n)
+            P = P0.copy()
             resets += 1
             g = matvec(P, psi)
             den = lam + dot(psi, g)
@@ -61,7 +63,7 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
             P = P + delta * np.eye(n)
             tr = tr + n * delta
         if not (d.min() > 0 and np.isfinite(tr)):
-            P = alpha * np.eye(n)
+            P = P0.copy()
             resets += 1
         elif tr > tr_max:
             P = P * (tr_max / tr)

@@ -13,10 +13,12 @@ from .naive import naive_rels
 from .systems import armax_data, system
 
 
-def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=0.99):
+def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=0.99,
+                alpha_c=None):
     n = na + nb + 1 + nc
-    tb = n * alpha if trace_bound is None else trace_bound
-    state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, np.zeros(n))
+    ac = alpha if alpha_c is None else alpha_c
+    tb = (na + nb + 1) * alpha + nc * ac if trace_bound is None else trace_bound
+    state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, np.zeros(n), alpha_c)
     err, xi = np.empty(u.size), np.empty(u.size)
     K.rels_run(state, u, y, err, xi, np.empty((0, n)), 1)
     theta, P, *_ = K.state_views(state)
@@ -24,22 +26,24 @@ def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=
 
 
 @pytest.mark.parametrize(
-    ("orders", "lam", "alpha", "trace_bound"),
+    ("orders", "lam", "alpha", "trace_bound", "alpha_c"),
     [
-        ((2, 1, 1, 1), 1.0, 1e6, None),
-        ((4, 2, 2, 1), 0.995, 1e3, None),
-        ((3, 2, 0, 0), 0.98, 1e2, 50.0),  # trace bound active
-        ((2, 0, 2, 2), 1.0, 1e4, None),
+        ((2, 1, 1, 1), 1.0, 1e6, None, None),
+        ((4, 2, 2, 1), 0.995, 1e3, None, None),
+        ((3, 2, 0, 0), 0.98, 1e2, 50.0, None),  # trace bound active
+        ((2, 0, 2, 2), 1.0, 1e4, None, None),
+        ((4, 2, 2, 1), 1.0, 1e10, None, 1e2),  # separate P(0) of the c-part
     ],
 )
-def test_kernel_equals_naive(rng, orders, lam, alpha, trace_bound):
+def test_kernel_equals_naive(rng, orders, lam, alpha, trace_bound, alpha_c):
     na, nb, nc, d = orders
     a, b, c = system(4)
     u, y, _ = armax_data(rng, a, b, c, 1500, snr_db=20.0)
     u, y = u / np.std(u), y / np.std(y)
     ref = naive_rels(u, y, na=na, nb=nb, nc=nc, delay=d, lam=lam, alpha=alpha,
-                     trace_bound=trace_bound)
-    theta, P, err, xi, state = _run_kernel(u, y, na, nb, nc, d, lam, alpha, trace_bound)
+                     trace_bound=trace_bound, alpha_c=alpha_c)
+    theta, P, err, xi, state = _run_kernel(u, y, na, nb, nc, d, lam, alpha, trace_bound,
+                                           alpha_c=alpha_c)
     # same algorithm, different summation order only (BLAS vs loops): 1e-12
     assert_allclose(theta, ref[0], rtol=1e-12, atol=1e-12)
     assert_allclose(err, ref[2], rtol=1e-12, atol=1e-12)

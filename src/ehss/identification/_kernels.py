@@ -16,7 +16,8 @@ paper              code        meaning
 P(k)               P           covariance-like gain matrix, shape (n, n)
 P(k−1)ψ̂(k)         g           shared by eqs (21) and (22)
 λ (printed "r")    lam         forgetting factor
-α                  alpha       P(0) = α I
+α                  alpha       P(0) = diag(α … α, α_c … α_c): α for the a- and
+                   alpha_c     b-parts, α_c for the c-part (α_c = α is the paper's αI)
 ξ̂(k)               xi          a-posteriori residual, eq (19)
 =================  ==========  ==============================================
 
@@ -60,7 +61,8 @@ H_TRSCALE = 12
 H_SKIPPED = 13
 H_XI = 14
 H_NV = 15
-HEADER = 16
+H_ALPHA_C = 16
+HEADER = 20
 
 #: δ = EPS_FLOOR · n · tr P is added to P's diagonal after each update (8 · eps)
 EPS_FLOOR = 8.0 * 2.220446049250313e-16
@@ -177,14 +179,14 @@ def _project_c(c, nc, radius):
 
 
 @njit(cache=True)
-def _reset_P(P, n, alpha):
-    """P = α I (eq 22's initial condition); the padding stays zero."""
+def _reset_P(P, n, nab, alpha, alpha_c):
+    """P = P(0) = diag(α (first nab), α_c (rest)) (eq 22); the padding stays zero."""
     m = P.shape[0]
     for i in range(m):
         for j in range(m):
             P[i, j] = 0.0
     for i in range(n):
-        P[i, i] = alpha
+        P[i, i] = alpha if i < nab else alpha_c
 
 
 @njit(cache=True, inline="always")
@@ -246,6 +248,8 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
     if state[H_ENABLED] != 0.0 and np.isfinite(e):
         lam = state[H_LAM]
         alpha = state[H_ALPHA]
+        alpha_c = state[H_ALPHA_C]
+        nab = na + nb + 1
         # g = P(k−1) ψ̂(k), shared by (21) and (22);  s = ψ̂ᵀ P ψ̂
         # Readable form: g_i = Σ_j P_ij ψ_j. Written as g += P[j, :] ψ_j (rows of the
         # symmetric P read as columns), so each g_i still sums j = 0..m−1 in order —
@@ -266,11 +270,11 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
         # den would then give a huge gain); that, or overflow, resets P = P(0).
         den = lam + s
         if not (s >= 0.0 and np.isfinite(den)):
-            _reset_P(P, n, alpha)
+            _reset_P(P, n, nab, alpha, alpha_c)
             state[H_RESETS] += 1.0
             s = 0.0
             for i in range(n):
-                g[i] = alpha * psi[i]
+                g[i] = P[i, i] * psi[i]
                 s += psi[i] * g[i]
             den = lam + s
         # the step K e must be finite (a huge e with a small den could overflow θ̂)
@@ -322,7 +326,7 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
             # guard: a non-positive diagonal means P is no longer positive definite;
             # a non-finite trace means overflow. Reset P = P(0) and keep θ̂.
             if not (dmin > 0.0 and np.isfinite(tr)):
-                _reset_P(P, n, alpha)
+                _reset_P(P, n, nab, alpha, alpha_c)
                 state[H_RESETS] += 1.0
             elif tr > state[H_TRMAX]:
                 # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the

@@ -76,6 +76,15 @@ def _check_settings(
     return na, nb, nc, delay, lam, alpha, dt
 
 
+def _check_p0_c(p0_c: Any, alpha: float) -> float:
+    if p0_c is None:
+        return alpha
+    value = _real("p0_c", p0_c)
+    if value <= 0:
+        raise ParameterError(f"p0_c={p0_c!r} must be > 0")
+    return value
+
+
 def _check_theta0(theta0: Any, n: int) -> np.ndarray:
     if theta0 is None:
         return np.zeros(n)
@@ -121,22 +130,23 @@ def _theta_scale(na: int, nb: int, nc: int, u_scale: float, y_scale: float) -> n
 
 def _new_state(
     na: int, nb: int, nc: int, delay: int, lam: float, alpha: float, trace_bound: float,
-    c_radius: float, theta0_scaled: np.ndarray,
+    c_radius: float, theta0_scaled: np.ndarray, alpha_c: float | None = None,
 ) -> np.ndarray:
     state = np.zeros(_k.state_size(na, nb, nc, delay))
-    n = na + nb + 1 + nc
     state[_k.H_NA] = na
     state[_k.H_NB] = nb
     state[_k.H_NC] = nc
     state[_k.H_DELAY] = delay
     state[_k.H_LAM] = lam
+    alpha_c = alpha if alpha_c is None else alpha_c
     state[_k.H_ALPHA] = alpha
+    state[_k.H_ALPHA_C] = alpha_c
     state[_k.H_TRMAX] = trace_bound
     state[_k.H_CRADIUS] = c_radius
     state[_k.H_ENABLED] = 1.0
     theta, P, *_ = _k.state_views(state)
     theta[:] = theta0_scaled
-    P[:] = alpha * np.eye(n)
+    P[:] = np.diag(np.r_[np.full(na + nb + 1, alpha), np.full(nc, alpha_c)])
     return state
 
 
@@ -192,6 +202,7 @@ def rels(
     theta0: Any = None,
     dt: float = 1.0,
     passes: int = 1,
+    p0_c: float | None = None,
     trace_bound: float | None = None,
     c_radius: float = 0.99,
 ) -> ArmaxModel:
@@ -209,6 +220,12 @@ def rels(
         λ in (0, 1].
     p0 : float
         α of P(0) = α I, on the internally RMS-normalised data.
+    p0_c : float, optional
+        Initial P of the c-part (P(0) = diag(α…, α_c…)); default α, the paper's αI.
+        On oversampled band-limited data use a large α (1e10: P(0) acts as a ridge
+        1/α that biases high orders) with a moderate α_c (1e2): a huge α_c lets the
+        near-zero early a-posteriori residuals drive C to its bound (RELS start-up
+        divergence). See the test-suite's 2nd–6th-order cases.
     theta0 : array_like, shape (na+nb+1+nc,), optional
         Initial θ̂ in physical units (default zeros).
     dt : float
@@ -217,7 +234,7 @@ def rels(
         Number of passes over the record; each later pass restarts the regressor at
         zero and P at P(0) but keeps θ̂ (helps the C-part converge on short records).
     trace_bound : float, optional
-        Upper bound of tr P (default tr P(0) = n α).
+        Upper bound of tr P (default tr P(0)).
     c_radius : float
         Roots of C are kept inside this radius.
 
@@ -251,9 +268,11 @@ def rels(
     ([1.0, -0.8], [0.5])
     """
     na, nb, nc, delay, lam, alpha, dt = _check_settings(na, nb, nc, delay, forgetting, p0, dt)
+    alpha_c = _check_p0_c(p0_c, alpha)
     passes = _order("passes", passes, 1)
     n = na + nb + 1 + nc
-    tb = n * alpha if trace_bound is None else _real("trace_bound", trace_bound)
+    tr0 = (na + nb + 1) * alpha + nc * alpha_c
+    tb = tr0 if trace_bound is None else _real("trace_bound", trace_bound)
     if tb <= 0:
         raise ParameterError(f"trace_bound={trace_bound!r} must be > 0")
     c_radius = _real("c_radius", c_radius)
@@ -275,7 +294,7 @@ def rels(
     hist = np.empty((0, n))
     totals = dict.fromkeys(("resets", "c_projections", "trace_scalings", "skipped"), 0)
     for _ in range(passes):
-        state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, theta_s)
+        state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, theta_s, alpha_c)
         _k.rels_run(state, us, ys, err, xi, hist, 1)
         for key, v in _counters(state).items():
             if key in totals:
@@ -287,6 +306,7 @@ def rels(
         "n_samples": int(u.size),
         "forgetting": lam,
         "p0": alpha,
+        "p0_c": alpha_c,
         "passes": passes,
         "trace_bound": tb,
         "c_radius": c_radius,
@@ -308,7 +328,9 @@ class RelsEstimator:
     na, nb, nc, delay, forgetting, p0, theta0, dt
         As in :func:`rels` (θ0 in physical units).
     trace_bound : float, optional
-        Upper bound of tr P (default tr P(0) = n α).
+        Upper bound of tr P (default tr P(0)).
+    p0_c : float, optional
+        Initial P of the c-part (default ``p0``); see :func:`rels`.
     history_every : int, optional
         Record θ̂ (physical units) every this many samples in :attr:`history`.
     u_scale, y_scale : float
@@ -347,6 +369,7 @@ class RelsEstimator:
         u_scale: float = 1.0,
         y_scale: float = 1.0,
         c_radius: float = 0.99,
+        p0_c: float | None = None,
     ) -> None:
         na, nb, nc, delay, lam, alpha, dt = _check_settings(
             na, nb, nc, delay, forgetting, p0, dt
@@ -355,7 +378,9 @@ class RelsEstimator:
         self._orders = (na, nb, nc, delay)
         self._n = n
         self._lam, self._alpha, self._dt = lam, alpha, dt
-        tb = n * alpha if trace_bound is None else _real("trace_bound", trace_bound)
+        self._alpha_c = _check_p0_c(p0_c, alpha)
+        tr0 = (na + nb + 1) * alpha + nc * self._alpha_c
+        tb = tr0 if trace_bound is None else _real("trace_bound", trace_bound)
         if tb <= 0:
             raise ParameterError(f"trace_bound={trace_bound!r} must be > 0")
         self._trace_bound = tb
@@ -382,7 +407,7 @@ class RelsEstimator:
         na, nb, nc, delay = self._orders
         self._state = _new_state(
             na, nb, nc, delay, self._lam, self._alpha, self._trace_bound, self._c_radius,
-            self._theta0 / self._dvec,
+            self._theta0 / self._dvec, self._alpha_c,
         )
         self._hist: list[np.ndarray] = []
         self._since = 0
@@ -485,6 +510,7 @@ class RelsEstimator:
             "method": "rels-streaming",
             "forgetting": self._lam,
             "p0": self._alpha,
+            "p0_c": self._alpha_c,
             "trace_bound": self._trace_bound,
             "c_radius": self._c_radius,
             "u_scale": self._us,
