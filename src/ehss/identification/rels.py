@@ -435,6 +435,9 @@ class RelsEstimator:
     def update(self, u_k: float, y_k: float) -> float:
         """Process one sample; return the a-priori prediction error y(k) − ψ̂ᵀθ̂(k−1).
 
+        An error that overflows float64 (adversarial magnitudes) is returned as 0.0,
+        the sample does not update θ̂ and it is counted in ``counters["skipped"]``.
+
         Raises
         ------
         DataError
