@@ -61,6 +61,27 @@ def kernel_rate(u, y, na, nb, nc, repeats=3) -> tuple[float, float]:
     return u.size / best, compile_s
 
 
+def cold_compile_s() -> float:
+    """Compile time of the batch kernel with an empty numba cache (fresh process)."""
+    import subprocess
+    import tempfile
+
+    code = (
+        "import time, numpy as np\n"
+        "from ehss.identification import _kernels as K\n"
+        "from ehss.identification.rels import _new_state\n"
+        "st = _new_state(6, 6, 4, 1, 1.0, 1e6, 17e6, 0.99, np.zeros(17))\n"
+        "e = np.empty(4); x = np.empty(4); u = np.zeros(4)\n"
+        "t = time.perf_counter(); K.rels_run(st, u, u, e, x, np.empty((0, 17)), 1)\n"
+        "print(time.perf_counter() - t)\n"
+    )
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                             text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
 def timed(fn, n_samples: int) -> float:
     t0 = time.perf_counter()
     fn()
@@ -139,7 +160,9 @@ def main() -> None:
     print(f"machine: nproc={os.cpu_count()}, CPU {cpu_model()}, Python "
           f"{platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}")
     print()
-    print("| orders (na,nb,nc) | ehss kernel | compile | numpy loop | padasip RLS | "
+    print(f"cold compile of the batch kernel (empty cache): {cold_compile_s():.2f} s")
+    print()
+    print("| orders (na,nb,nc) | ehss kernel | cache load | numpy loop | padasip RLS | "
           "SIPPY RLLS | × numpy | × SIPPY | streaming update median |")
     print("|---|---|---|---|---|---|---|---|---|")
     for na, nb, nc in ((4, 4, 2), (6, 6, 4)):
