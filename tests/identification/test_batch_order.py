@@ -48,6 +48,15 @@ def test_select_order_prefers_true_order(rng):
     assert sel.model.na == sel.best.na
 
 
+def test_select_order_with_rels(rng):
+    a, b, c = system(4)
+    u, y, _ = armax_data(rng, a, b, c, 8000, snr_db=30.0)
+    sel = select_order(u, y, na=[2, 4], nb=[1, 2], nc=[2], delay=1, dt=DT_S,
+                       criterion="aic", method="rels", p0=1e10, p0_c=1e2)
+    assert (sel.best.na, sel.best.nb) == (4, 2)
+    assert sel.model.meta["p0_c"] == 1e2
+
+
 def test_select_order_errors(rng):
     u = rng.standard_normal(300)
     with pytest.raises(ParameterError, match="criterion='bic' must be one of"):

@@ -102,6 +102,8 @@ def select_order(
     criterion: str = "aic",
     validation: tuple[Any, Any] | None = None,
     method: str = "els",
+    p0: float = 1e6,
+    p0_c: float | None = None,
 ) -> OrderSelection:
     """Fit every (na, nb, nc, delay) of the grid and pick the best by ``criterion``.
 
@@ -119,6 +121,8 @@ def select_order(
         Held-out data for the simulation fit %.
     method : {"els", "rels"}
         Estimator: :func:`armax_els` (with PEM refinement) or :func:`rels`.
+    p0, p0_c : float
+        Initial P of :func:`rels` (a, b part and c part) when ``method="rels"``.
     """
     if criterion not in _CRITERIA:
         raise ParameterError(f"criterion={criterion!r} must be one of {_CRITERIA}")
@@ -142,7 +146,7 @@ def select_order(
             if method == "els":
                 m = armax_els(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt)
             else:
-                m = rels(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt)
+                m = rels(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt, p0=p0, p0_c=p0_c)
         k0 = max(a_, b_ + d_, c_)
         eps = (y - m.predict(u, y))[k0:]
         N = eps.size
