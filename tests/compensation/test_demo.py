@@ -26,17 +26,24 @@ def test_position_loop_within_1db_5deg_and_10x(position_demo):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "the 6th-order RELS model identified at 1 kHz on the 2-100 Hz random test does not "
-    "capture the 0.5 Hz acceleration-generator high-pass (the loop leads by 54 deg at 1 Hz, "
-    "the model by -2 deg); the inverse and its learning iterations leave about "
-    "±3.5 dB / ±13 deg at 1-2 Hz and a 7.8x RMS improvement"))
 def test_acceleration_loop_within_1db_5deg_and_10x():
+    # Identified behind the known generator (eq 10) and accelerometer coupling on the
+    # paper's 2-100 Hz random test; compensated as rest⁻¹ ∘ known⁻¹ (band 1-50 Hz).
     d = demonstrate("acceleration", seed=0, duration_s=16.0, iterations=2)
     assert d.judge_hz == (1.0, 50.0)
     assert d.max_abs_db_with <= 1.0
     assert d.max_abs_deg_with <= 5.0
     assert d.improvement["random"] >= 10.0
+    assert d.max_abs_deg_without > 5.0
+    # The model alone does it: the one-shot inverse already reduces the random error
+    # ≥ 10× (measured 11.6-13.8× over seeds 0-4), and the drive-file iteration only
+    # lowers it further, run after run.
+    assert d.rms_error_without["random"] / d.one_shot_rms_error["random"] >= 10.0
+    for history in d.refine_rms_error.values():
+        assert np.all(np.diff(history) < 0)
+    # The complete model carries its known factors, so its JSON is self-contained.
+    assert "known_factors" in d.model.meta
+    assert d.inverse.has_known
 
 
 def test_plot_and_figures(position_demo, tmp_path):

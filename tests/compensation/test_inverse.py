@@ -207,3 +207,75 @@ def test_reduced_preview_lags():
     assert_allclose(y[2:], r[:-2], atol=1e-12)  # lags by 3 - 1 samples
     with pytest.raises(ParameterError, match="preview"):
         compensate(m, r, preview=-1)
+
+
+# --------------------------------------------------------------------------- known factors
+def _acceleration_known():
+    from ehss.identification.known import known_factors
+    from ehss.params import preset
+
+    return known_factors("acceleration", preset("default"))
+
+
+def test_known_factor_inverse_response_is_exact(min_phase):
+    # Loop = G·F with F the acceleration loop's generator (eq 10) and accelerometer
+    # coupling. The inverse times the loop is the band limit itself (G's zeros are all
+    # cancelled): exact up to rounding of polynomials evaluated near their roots at
+    # z ≈ 0.997 (relative 1e-7, as for compose).
+    num, den = _acceleration_known()
+    inv = design_inverse(min_phase, band_hz=(1.0, 50.0), known=(num, den))
+    f = np.linspace(0.0, 499.0, 2000)
+    _, hf = scipy.signal.freqz(num, den, worN=f, fs=1 / DT)
+    overall = inv.frequency_response(f) * _response(min_phase, f) * hf
+    assert_allclose(overall, inv.band_response(f), rtol=0, atol=1e-7)
+    assert np.all(inv.frequency_response(f[f <= 0.5]) == 0.0)  # no 1/F growth below lo/2
+
+
+def test_known_factor_drive_tracks_in_time(min_phase):
+    # A reference at rest and in band (tones under a Gaussian envelope): the loop G·F
+    # driven by the inverse follows it. The FFT inverse of F acts on the padded record;
+    # what remains is rounding, amplified by F's poles and zeros at z ≈ 0.997 (measured
+    # 1.4e-10 of the peak; 1e-8 leaves room for other FFT and BLAS builds).
+    num, den = _acceleration_known()
+    t = np.arange(8000) * DT
+    r = (np.sin(2 * np.pi * 3.0 * t) + 0.5 * np.sin(2 * np.pi * 17.0 * t + 1.0)) * np.exp(
+        -(((t - 4.0) / 0.7) ** 2))
+    drive = compensate(min_phase, r, band_hz=(1.0, 50.0), known=(num, den))
+    y = scipy.signal.lfilter(num, den, _simulate(min_phase, drive))
+    assert_allclose(y, r, rtol=0, atol=1e-8 * np.max(np.abs(r)))
+
+
+def test_band_limited_drive_starts_without_a_jump(min_phase):
+    # A reference that does not start at rest: the inverse filter runs over the band
+    # limit's lead-in, so the drive does not jump at t = 0 (without the lead-in its first
+    # sample would be the high-frequency gain of A/B times r_band(0): measured 25 against
+    # a steady peak of 0.4).
+    t = np.arange(2000) * DT
+    r = np.cos(2 * np.pi * 5.0 * t)
+    drive = compensate(min_phase, r, band_hz=(1.0, 50.0))
+    steady = np.max(np.abs(drive[500:1500]))
+    assert np.max(np.abs(drive[:50])) < 1.5 * steady
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"band_hz": None}, "needs band_hz"),
+        ({"band_hz": (0.0, 50.0)}, "vanishes at 0 Hz"),
+        ({"band_hz": (1.0, 50.0), "known": ([1.0], [1.0, -1.01])}, "unstable"),
+        ({"band_hz": (1.0, 50.0), "known": ([0.0], [1.0])}, "non-zero"),
+        ({"band_hz": (1.0, 50.0), "known": "F"}, "pair"),
+    ],
+)
+def test_bad_known_factor(min_phase, kwargs, match):
+    kwargs = {"known": _acceleration_known(), **kwargs}
+    with pytest.raises(ParameterError, match=match):
+        design_inverse(min_phase, **kwargs)
+
+
+def test_composed_model_with_foreign_known_factor(min_phase):
+    num, den = _acceleration_known()
+    m = SimpleNamespace(b=min_phase.b, a=min_phase.a, delay=2, dt=DT,
+                        meta={"known_factors": {"num": num.tolist(), "den": den.tolist()}})
+    with pytest.raises(ParameterError, match="not a multiple"):
+        design_inverse(m, band_hz=(1.0, 50.0))

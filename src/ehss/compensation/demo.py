@@ -52,63 +52,50 @@ LOOP_SETTINGS: dict[str, dict[str, Any]] = {
 
 
 # --------------------------------------------------------------------------- signals
-def _taper(n: int, m: int) -> np.ndarray:
-    w = np.ones(n)
-    m = max(1, min(m, n // 2))
-    ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(m) / m)
-    w[:m] = ramp
-    w[n - m:] = ramp[::-1]
-    return w
-
-
-def _spectral_shape(n: int, fs: float, lo: float, hi: float) -> np.ndarray:
-    f = np.fft.rfftfreq(n, 1.0 / fs)
-    return ((f >= lo) & (f <= hi)).astype(float)
-
-
-def random_reference(n: int, fs: float, band_hz: tuple[float, float], rms_value: float,
-                     rng: np.random.Generator, *, rest_s: float = 0.2) -> np.ndarray:
-    """Band-limited random (flat spectrum in ``band_hz``), at rest at both ends."""
-    lo, hi = band_hz
-    spec = np.fft.rfft(rng.standard_normal(n)) * _spectral_shape(n, fs, lo, hi)
-    x = np.fft.irfft(spec, n)
-    x *= _taper(n, int(rest_s * fs))
-    x[: int(0.05 * fs)] = 0.0
-    return x * (rms_value / rms(x))
-
-
-def earthquake_reference(n: int, fs: float, *, kind: str, peak: float,
-                         rng: np.random.Generator, band_hz: tuple[float, float]) -> np.ndarray:
-    """Kanai–Tajimi earthquake-like history (acceleration, or its displacement).
-
-    White noise shaped by the Kanai–Tajimi filter
-    ``H(s) = (2ζg ωg s + ωg²) / (s² + 2ζg ωg s + ωg²)`` (ωg = 2π·2.5 Hz, ζg = 0.6) and a
-    build-up/decay envelope; for ``kind="displacement"`` it is integrated twice in the
-    frequency domain with a high-pass at ``max(band lo, 0.3 Hz)``, so it stays bounded.
-    The history is band-limited to ``band_hz`` and scaled to ``peak``.
-    """
-    wg, zg = 2 * np.pi * 2.5, 0.6
-    num = [2 * zg * wg, wg * wg]
-    den = [1.0, 2 * zg * wg, wg * wg]
-    bz, az = scipy.signal.bilinear(num, den, fs)
-    acc = scipy.signal.lfilter(bz, az, rng.standard_normal(n))
-    t = np.arange(n) / fs
-    dur = n / fs
-    env = (t / (0.2 * dur)) ** 2 * np.exp(2.0 * (1 - t / (0.2 * dur)))
-    acc *= env
-    f = np.fft.rfftfreq(n, 1.0 / fs)
-    spec = np.fft.rfft(acc * _taper(n, int(0.2 * fs)))
-    lo = band_hz[0]
-    if kind == "displacement":
-        f_hp = max(lo, 0.3)
-        w = 2 * np.pi * np.where(f > 0, f, 1.0)
-        hp = (f / f_hp) ** 4 / (1 + (f / f_hp) ** 4)
-        spec = -spec / (w * w) * hp
+def _band_project(x: np.ndarray, fs: float, band_hz: tuple[float, float]) -> np.ndarray:
+    """Keep only the FFT bins inside ``band_hz`` (DC removed when ``lo > 0``)."""
+    spec = np.fft.rfft(x)
+    f = np.fft.rfftfreq(x.size, 1.0 / fs)
+    spec[(f < band_hz[0]) | (f > band_hz[1])] = 0.0
+    if band_hz[0] > 0.0:
         spec[0] = 0.0
-    spec *= _spectral_shape(n, fs, 0.0 if kind == "displacement" else lo, band_hz[1])
-    x = np.fft.irfft(spec, n) * _taper(n, int(0.5 * fs))
-    x[: int(0.05 * fs)] = 0.0
+    return np.fft.irfft(spec, x.size)
+
+
+def earthquake_reference(duration_s: float, fs: float, *, kind: str, peak: float, seed: int,
+                         band_hz: tuple[float, float]) -> np.ndarray:
+    """Earthquake-like reference in a loop's working band (acceleration or displacement).
+
+    The ground acceleration is :func:`ehss.signals.earthquake` (Kanai–Tajimi filtered
+    noise, ωg = 2π·2.5 Hz, ζg = 0.6, build-up/strong/decay envelope, baseline-correcting
+    high-pass at ``max(band lo, 0.3 Hz)``). For ``kind="displacement"`` it is integrated
+    twice in the frequency domain (exact inverse of the generator's FFT second
+    derivative; the constant is fixed by the record starting at rest). The history is
+    then projected on ``band_hz`` (the rig is asked only for what it is meant to follow),
+    faded in and out over 0.2 s and scaled to ``peak``.
+    """
+    from ehss.signals import earthquake, with_fade
+
+    x = np.array(earthquake(duration_s=duration_s, fs=fs, seed=seed, peak_m_s2=1.0,
+                            highpass_hz=max(band_hz[0], 0.3)).values)
+    if kind == "displacement":
+        f = np.fft.rfftfreq(x.size, 1.0 / fs)
+        spec = np.fft.rfft(x)
+        spec[0] = 0.0
+        spec[1:] /= (2j * np.pi * f[1:]) ** 2
+        x = np.fft.irfft(spec, x.size)
+        x -= x[0]
+    x = with_fade(_band_project(x, fs, band_hz), fs=fs, fade_in_s=0.2, fade_out_s=0.2)
     return x * (peak / np.max(np.abs(x)))
+
+
+def random_reference(duration_s: float, fs: float, band_hz: tuple[float, float],
+                     rms_value: float, seed: int) -> np.ndarray:
+    """Band-limited random reference (:func:`ehss.signals.band_limited_random`)."""
+    from ehss.signals import band_limited_random
+
+    return np.array(band_limited_random(band_hz=band_hz, duration_s=duration_s, fs=fs,
+                                        seed=seed, rms=rms_value).values)
 
 
 # --------------------------------------------------------------------------- result
@@ -122,8 +109,10 @@ class CompensationDemo:
     band_hz, judge_hz : (float, float)
         Band limit of the inverse and band in which amplitude ratio and phase are judged.
     model : ArmaxModel
-        Closed loop identified on the random test.
+        Closed loop identified on the random test (complete: for the acceleration loop
+        the identified rest composed with the known factors, ``meta["known_factors"]``).
     inverse : InverseModel
+        Its inverse (rest⁻¹ ∘ known⁻¹).
     fs : float
     references, outputs_without, outputs_with, drives : dict of str to ndarray
         Per test (``"random"``, ``"earthquake"``).
@@ -249,6 +238,7 @@ def demonstrate(
     -------
     CompensationDemo
     """
+    from ehss.identification.known import compose, known_factors
     from ehss.identification.rels import rels
     from ehss.params import preset
     from ehss.simulation import simulate
@@ -262,44 +252,47 @@ def demonstrate(
     fs = float(params.timing.control_rate_hz)
     band = tuple(band_hz) if band_hz is not None else cfg["band_hz"]
     judge = (max(cfg["judge_hz"][0], band[0]), min(cfg["judge_hz"][1], band[1]))
-    rng = np.random.default_rng(seed)
-    n = int(round(duration_s * fs))
-    n_id = int(round((identification_s or duration_s) * fs))
+    id_s = identification_s or duration_s
 
-    # 1. Identification on a band-limited random test (the paper's 2-100 Hz random).
-    u_id = random_reference(n_id, fs, cfg["ident_hz"], cfg["ident_rms"], rng)
+    # 1. Identification on a band-limited random test (the paper's 2-100 Hz random),
+    #    behind the loop's known factors (the acceleration loop's generator, eq (10), and
+    #    accelerometer coupling; none for the position loop): RELS sees F·u → y.
+    u_id = random_reference(id_s, fs, cfg["ident_hz"], cfg["ident_rms"], seed)
     y_id = simulate(loop, u_id, params=params, seed=seed + 100).output
+    num, den = known_factors(loop, params)
+    known = None if num.size == 1 and den.size == 1 else (num, den)
+    u_f = u_id if known is None else scipy.signal.lfilter(num, den, u_id)
     o = cfg["orders"]
-    model = rels(u_id, y_id, na=o["na"], nb=o["nb"], nc=o["nc"], delay=o["delay"], dt=1.0 / fs)
+    rest = rels(u_f, y_id, na=o["na"], nb=o["nb"], nc=o["nc"], delay=o["delay"], dt=1.0 / fs)
 
-    # 2. Inverse (checked here: a bad model fails before the tests run), references.
-    design_inverse(model, method=method, band_hz=band)
-    ref_band = (band[0], band[1])
+    # 2. Inverse rest⁻¹ ∘ F⁻¹ (checked here: a bad model fails before the tests run).
+    design_inverse(rest, method=method, band_hz=band, known=known)
     references = {
-        "random": random_reference(n, fs, ref_band, cfg["test_rms"], rng),
+        "random": random_reference(duration_s, fs, band, cfg["test_rms"], seed + 1),
         "earthquake": earthquake_reference(
-            n, fs, kind="displacement" if loop == "position" else "acceleration",
-            peak=cfg["quake_peak"], rng=rng, band_hz=band),
+            duration_s, fs, kind="displacement" if loop == "position" else "acceleration",
+            peak=cfg["quake_peak"], seed=seed + 2, band_hz=band),
     }
     outputs_without, outputs_with, drives, one_shot, history = {}, {}, {}, {}, {}
-    final_model = model
+    final_rest = rest
     for i, (name, r) in enumerate(references.items()):
         outputs_without[name] = simulate(loop, r, params=params, seed=seed + 300 + i).output
         # Drive-file iteration, as a shaking-table controller does for a known history.
-        ref = refine(loop, r, params=params, model=model, iterations=iterations,
-                     method=method, band_hz=band, seed=seed + 200 + 10 * i)
+        ref = refine(loop, r, params=params, model=rest, iterations=iterations,
+                     method=method, band_hz=band, seed=seed + 200 + 10 * i, known=known)
         best = int(np.argmin(ref.rms_error))
         drives[name] = ref.drive
         outputs_with[name] = ref.outputs[best]
         one_shot[name] = float(ref.rms_error[0])
         history[name] = ref.rms_error
         if name == "random":
-            final_model = ref.models[min(best, len(ref.models) - 1)]
-    final_inverse = design_inverse(final_model, method=method, band_hz=band)
+            final_rest = ref.models[min(best, len(ref.models) - 1)]
+    final_inverse = design_inverse(final_rest, method=method, band_hz=band, known=known)
+    final_model = final_rest if known is None else compose(final_rest, num, den)
     err0 = {k: rms(outputs_without[k] - references[k]) for k in references}
     err1 = {k: rms(outputs_with[k] - references[k]) for k in references}
     nperseg = int(2 ** round(math.log2(fs / 0.5)))  # ~0.5 Hz resolution
-    nperseg = min(nperseg, n // 4)
+    nperseg = min(nperseg, references["random"].size // 4)
     freq, h0 = _h1(references["random"], outputs_without["random"], fs, nperseg)
     _, h1 = _h1(references["random"], outputs_with["random"], fs, nperseg)
     db0, deg0 = _worst(freq, h0, judge)

@@ -33,6 +33,21 @@ Leading exact zeros of ``b`` are extra delay and are added to the preview. The b
 is a zero-phase raised-cosine taper applied by FFT to the reference before the inversion:
 unity inside ``[lo, hi]``, smoothly to zero at ``lo/2`` and at ``cutoff_hz``, exactly zero
 beyond, so the inverse cannot amplify noise above the identified band.
+
+**Known factors.** Part of a closed loop may be known exactly and need not be identified:
+the acceleration loop's reference first passes the controller's acceleration generator,
+eq (10), GAR·s² = Kg s²/(s² + ωg s + δg) (discretised with a zero-order hold as the
+controller runs it), and the output is measured through the accelerometer's AC coupling
+s/(s + ωa) (:mod:`ehss.identification.known`). Both are slow high-passes near 0.5 Hz that
+a 2–100 Hz identification test hardly excites, yet they give the loop tens of degrees of
+phase lead at 1–2 Hz. The loop is then modelled as ``G = G_rest · F`` with
+``F = N(q^-1)/D(q^-1)`` known and ``G_rest`` identified from ``F a_r`` to the output, and
+the compensator is ``G_rest^{-1} ∘ F^{-1}``. ``F`` has zeros at or next to ``z = 1``, so
+its inverse grows without bound towards DC and is never run as a recursive filter: it is
+applied in the frequency domain together with the band limit,
+``R_band(f) = R(f) · W(f) / F(e^{j2πf dt})``, and the band limit's zero below ``lo/2``
+removes the content where ``1/F`` grows (the design checks that ``|F|`` does not vanish
+where ``W > 0``). ``G_rest^{-1}`` (ZPETC or ZMETC) then acts on ``R_band`` as before.
 """
 
 from __future__ import annotations
@@ -152,6 +167,10 @@ class InverseModel:
         Zeros cancelled exactly, zeros handled by the ZPETC/ZMETC factor, model poles.
     model_delay : int
         Total model delay (``delay`` plus leading zero b's).
+    known_num, known_den : ndarray
+        Known factor ``F = N/D`` in series with the inverted model (ascending powers of
+        q^-1; ``[1.]`` and ``[1.]`` for none). Its inverse is applied in the frequency
+        domain with the band limit (see the module notes).
     """
 
     method: str
@@ -167,6 +186,19 @@ class InverseModel:
     uncancelled_zeros: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
     poles: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
     model_delay: int = 0
+    known_num: np.ndarray = field(default_factory=lambda: np.ones(1))
+    known_den: np.ndarray = field(default_factory=lambda: np.ones(1))
+
+    @property
+    def has_known(self) -> bool:
+        """Whether a known factor ``F`` other than 1 is inverted too."""
+        return not (self.known_num.size == 1 and self.known_den.size == 1
+                    and self.known_num[0] == self.known_den[0])
+
+    def known_response(self, freq_hz: np.ndarray) -> np.ndarray:
+        """Complex response of the known factor ``F = N/D`` at ``freq_hz``."""
+        x = np.exp(-2j * np.pi * np.asarray(freq_hz, dtype=float) * self.dt)
+        return _eval_ascending(self.known_num, x) / _eval_ascending(self.known_den, x)
 
     @property
     def fs(self) -> float:
@@ -193,12 +225,19 @@ class InverseModel:
         x = np.exp(-1j * w)
         h = _eval_ascending(self.num, x) / _eval_ascending(self.den, x)
         h = h * np.exp(1j * w * self.preview)
+        if self.has_known:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                h = h / self.known_response(f)
         if band:
             h = h * self.band_response(f)
+            if self.has_known:
+                h = np.where(self.band_response(f) > 0.0, h, 0.0)
         return h
 
     def design_response(self, freq_hz: np.ndarray) -> np.ndarray:
         """Analytic overall response ``G·F`` the design aims at (no band limit).
+
+        A known factor is cancelled exactly and does not appear here.
 
         ZPETC: ``|B_u|^2 / B_u(1)^2`` (real, non-negative); ZMETC: ``e^{jφ}`` with φ from
         :func:`zmetc_phase`.
@@ -243,7 +282,22 @@ class InverseModel:
                 raise ParameterError(f"preview={preview!r} must be a non-negative integer")
             advance = min(int(preview), self.preview)
         if self.band_hz is not None:
-            r = _fft_band_limit(r, self.dt, self.band_hz, self.cutoff_hz)
+            shape = None
+            if self.has_known:
+                def shape(f: np.ndarray) -> np.ndarray:
+                    w = band_taper(f, self.band_hz, self.cutoff_hz)
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        return np.where(w > 0.0, w / self.known_response(f), 0.0)
+            padded, npad = _fft_band_limit(r, self.dt, self.band_hz, self.cutoff_hz, shape,
+                                           padded=True)
+            # The band limit is non-causal: the limited reference rings a little before
+            # the record starts and after it ends. The inverse filter runs over that
+            # lead-in (starting at rest far before t = 0) and its preview reads the
+            # limited continuation, so the drive starts without the jump a recursive
+            # inverse would give to a reference that does not start exactly at rest.
+            r_ext = padded[: npad + r.size + advance]
+            v = scipy.signal.lfilter(self.num, self.den, r_ext)
+            return np.ascontiguousarray(v[npad + advance: npad + advance + r.size])
         # r(k) held at its last value after the end: the preview needs r(N..N+p-1).
         r_ext = np.concatenate([r, np.full(advance, r[-1])])
         v = scipy.signal.lfilter(self.num, self.den, r_ext)
@@ -273,8 +327,15 @@ def _as_reference(reference: Any) -> np.ndarray:
 
 
 def _fft_band_limit(r: np.ndarray, dt: float, band_hz: tuple[float, float],
-                    cutoff_hz: float | None) -> np.ndarray:
-    """Zero-phase band limit by FFT with constant-extended padding (no wrap-around)."""
+                    cutoff_hz: float | None, shape: Any = None, *, padded: bool = False
+                    ) -> Any:
+    """Zero-phase band limit by FFT with constant-extended padding (no wrap-around).
+
+    ``shape(freq_hz) -> complex`` replaces the band taper when given (band limit times
+    the inverse of a known factor); it must vanish wherever the taper does. With
+    ``padded=True`` returns ``(y, npad)``: the limited signal with ``npad`` samples of
+    lead-in before the record and at least ``npad`` after it.
+    """
     lo, hi = band_hz
     widths = [w for w in ((cutoff_hz - hi) if cutoff_hz else 0.0, 0.5 * lo) if w > 0]
     width = min(widths) if widths else 1.0 / (r.size * dt)
@@ -287,8 +348,11 @@ def _fft_band_limit(r: np.ndarray, dt: float, band_hz: tuple[float, float],
     ramp = r[-1] + (r[0] - r[-1]) * 0.5 * (1.0 - np.cos(np.pi * np.arange(gap) / max(gap, 1)))
     x = np.concatenate([x, ramp])
     spec = scipy.fft.rfft(x)
-    spec *= band_taper(scipy.fft.rfftfreq(n, dt), band_hz, cutoff_hz)
+    freq = scipy.fft.rfftfreq(n, dt)
+    spec *= band_taper(freq, band_hz, cutoff_hz) if shape is None else shape(freq)
     y = scipy.fft.irfft(spec, n)
+    if padded:
+        return y, npad
     return np.ascontiguousarray(y[npad:npad + r.size])
 
 
@@ -327,6 +391,7 @@ def design_inverse_tf(
     max_zero_radius: float = 0.999,
     min_zero_damping: float = 0.1,
     fast_zero_radius: float = 0.5,
+    known: tuple[Any, Any] | None = None,
 ) -> InverseModel:
     """Design the inverse of ``G = q^-delay B(q^-1)/A(q^-1)`` (ZPETC or ZMETC).
 
@@ -354,6 +419,12 @@ def design_inverse_tf(
     fast_zero_radius : float
         ... unless ``|z| <= fast_zero_radius`` (their mode dies out within a few samples).
         ZMETC cancels every zero inside the unit circle and mirrors only the unstable ones.
+    known : (num, den), optional
+        Known factor ``F = num/den`` (ascending powers of q^-1) in series with the model:
+        the loop is ``G·F`` and the inverse ``G^-1 F^-1``, with ``F^-1`` applied in the
+        frequency domain inside the band limit (see the module notes). Needs ``band_hz``;
+        ``|F|`` must not vanish where the band limit is non-zero (e.g. the acceleration
+        loop's high-passes need ``lo > 0``).
 
     Returns
     -------
@@ -450,6 +521,7 @@ def design_inverse_tf(
         extra = _allpass_advance(b_u, dt, band)
     den0 = den[0]
     num, den = num / den0, den / den0
+    known_num, known_den = _check_known(known, band, cutoff, dt)
     return InverseModel(
         method=method,
         num=np.ascontiguousarray(num, dtype=float),
@@ -464,7 +536,44 @@ def design_inverse_tf(
         uncancelled_zeros=z_u,
         poles=poles,
         model_delay=int(delay) + lead,
+        known_num=known_num,
+        known_den=known_den,
     )
+
+
+def _check_known(known: Any, band: tuple[float, float] | None, cutoff: float | None,
+                 dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a known factor ``(num, den)``; normalised so that ``den[0] == 1``."""
+    if known is None:
+        return np.ones(1), np.ones(1)
+    try:
+        num, den = (np.atleast_1d(np.asarray(c, dtype=float)).ravel() for c in known)
+    except (TypeError, ValueError):
+        raise ParameterError(
+            f"known={known!r} must be a pair (num, den) of coefficient arrays") from None
+    if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))) or den[0] == 0.0 \
+            or not np.any(num):
+        raise ParameterError("known factor must have finite coefficients, den[0] != 0 and a "
+                             "non-zero numerator")
+    num, den = num / den[0], den / den[0]
+    if den.size > 1 and np.max(np.abs(np.roots(den))) >= 1.0:
+        raise ParameterError("known factor has an unstable pole (|z| >= 1)")
+    if band is None:
+        raise ParameterError("a known factor needs band_hz: its inverse is applied inside "
+                             "the band limit")
+    # |F| on the support of the band limit (lo/2 .. cutoff): its inverse must stay bounded.
+    lo, _ = band
+    f = np.linspace(0.5 * lo, cutoff, 2001)[1:] if lo > 0 else np.linspace(0.0, cutoff, 2001)
+    x = np.exp(-2j * np.pi * f * dt)
+    mag = np.abs(_eval_ascending(num, x) / _eval_ascending(den, x))
+    if not np.min(mag) > 1e-3 * np.max(mag):
+        i = int(np.argmin(mag))
+        raise ParameterError(
+            f"known factor nearly vanishes at {f[i]:.4g} Hz inside the band limit "
+            f"(|F| = {mag[i]:.3g}); raise the band's low edge so that its inverse stays "
+            "bounded"
+        )
+    return np.ascontiguousarray(num), np.ascontiguousarray(den)
 
 
 def _allpass_advance(b_u: np.ndarray, dt: float, band: tuple[float, float] | None) -> int:
@@ -491,6 +600,12 @@ def design_inverse(model: Any, *, method: str = "zpetc",
     Only the deterministic part ``q^-delay B/A`` is used; ``model`` needs the attributes
     ``b``, ``a``, ``delay`` and ``dt``. Options are those of :func:`design_inverse_tf`.
 
+    A model built by :func:`ehss.identification.known.compose` (identified behind known
+    factors, ``meta["known_factors"]`` set) is split back into the identified rest and
+    the known factor unless ``known`` is given: ``b`` and ``a`` are divided exactly by
+    the factor's numerator and denominator, and the inverse is ``rest^-1 ∘ F^-1`` (the
+    factor's zeros at ``z ≈ 1`` could be neither cancelled nor mirrored).
+
     Examples
     --------
     >>> from types import SimpleNamespace
@@ -502,5 +617,23 @@ def design_inverse(model: Any, *, method: str = "zpetc",
     for name in ("b", "a", "delay", "dt"):
         if not hasattr(model, name):
             raise TypeError(f"model must have attributes b, a, delay, dt (missing {name!r})")
-    return design_inverse_tf(model.b, model.a, delay=model.delay, dt=model.dt, method=method,
+    b, a = model.b, model.a
+    stored = (getattr(model, "meta", None) or {}).get("known_factors")
+    if options.get("known") is None and stored is not None:
+        known = (np.asarray(stored["num"], dtype=float), np.asarray(stored["den"], dtype=float))
+        b = _divide_exactly(np.asarray(b, dtype=float), known[0], "b", "numerator")
+        a = _divide_exactly(np.asarray(a, dtype=float), known[1], "a", "denominator")
+        options["known"] = known
+    return design_inverse_tf(b, a, delay=model.delay, dt=model.dt, method=method,
                              band_hz=band_hz, cutoff_hz=cutoff_hz, **options)
+
+
+def _divide_exactly(p: np.ndarray, d: np.ndarray, name: str, what: str) -> np.ndarray:
+    """Quotient of ``p`` by ``d`` (coefficient sequences), checking the remainder."""
+    if d.size > p.size or d[0] == 0.0:
+        raise ParameterError(f"model {name} is not a multiple of the known factor's {what}")
+    q, rem = scipy.signal.deconvolve(p, d)
+    if np.max(np.abs(rem)) > 1e-8 * max(np.max(np.abs(p)), 1e-300):
+        raise ParameterError(f"model {name} is not a multiple of the known factor's {what} "
+                             "(meta['known_factors'] does not belong to this model)")
+    return q

@@ -10,14 +10,24 @@ with ``F_k`` the band-limited inverse of the model identified on iteration ``k``
 ``L`` the learning gain. With ``G F_k ≈ 1`` in the band the error contracts by
 ``|1 - L G F_k|`` per iteration, so model errors of the one-shot inverse ``u_0 = F_0 r``
 are corrected by measurement instead of being left in the tracking error.
+
+If the model was identified behind known factors ``F`` (e.g. the acceleration loop's
+generator and accelerometer coupling, :mod:`ehss.identification.known`), each
+re-identification is done behind them too (from ``F u_k`` to ``y_k``) and every inverse is
+``G_rest^{-1} ∘ F^{-1}`` (:mod:`ehss.compensation.inverse`).
+
+The loop is the simulated rig by default; any callable ``drive -> output`` can stand in
+for it (a real rig's run, or a test plant).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import scipy.signal
 
 from ehss.compensation.inverse import InverseModel, _as_reference, design_inverse
 from ehss.errors import ParameterError
@@ -44,7 +54,8 @@ class RefineResult:
     rms_error : ndarray
         RMS of ``output - reference`` per run (SI units of the loop).
     models : list
-        The model used for the inverse of each run (the first is the one given).
+        The model used for the inverse of each run (the first is the one given; with
+        known factors, the identified rest behind them).
     inverses : list of InverseModel
     """
 
@@ -57,7 +68,7 @@ class RefineResult:
 
 
 def refine(
-    loop: str,
+    loop: str | Callable[[np.ndarray], np.ndarray],
     reference: Any,
     *,
     params: Any = None,
@@ -69,12 +80,15 @@ def refine(
     reidentify: bool = True,
     seed: int | None = 0,
     nc: int | None = None,
+    known: tuple[Any, Any] | None = None,
 ) -> RefineResult:
     """Refine a compensated drive by simulation, re-identification and learning updates.
 
     Parameters
     ----------
-    loop : {"position", "acceleration", "force"}
+    loop : {"position", "acceleration", "force"} or callable
+        Loop of the simulated rig, or a function ``drive -> measured output`` (same
+        length) that runs the loop.
     reference : array_like, shape (n_samples,)
         Desired output (SI), at the control rate of ``params``.
     params : RigParams, optional
@@ -93,6 +107,10 @@ def refine(
         Sensor-noise seed of the first run (``seed + k`` for run ``k``).
     nc : int, optional
         Noise order for re-identification (default: the model's).
+    known : (num, den), optional
+        Known factor in series with ``model`` (see
+        :func:`~ehss.compensation.inverse.design_inverse_tf`); a model from
+        :func:`ehss.identification.known.compose` carries its own.
 
     Returns
     -------
@@ -107,13 +125,29 @@ def refine(
     if not 0.0 < learning_gain < 2.0:
         raise ParameterError(f"learning_gain={learning_gain!r} must be in (0, 2)")
     r = _as_reference(reference)
-    inverse: InverseModel = design_inverse(model, method=method, band_hz=band_hz)
+    inverse: InverseModel = design_inverse(model, method=method, band_hz=band_hz, known=known)
+    na, nb = model.na, model.nb
+    if inverse.has_known:
+        known = (inverse.known_num, inverse.known_den)
+        if _composed(model, known):
+            # Re-identification is behind the known factor: the rest's orders.
+            na, nb = na - (known[1].size - 1), nb - (known[0].size - 1)
+
+    def run(drive: np.ndarray, k: int) -> np.ndarray:
+        if callable(loop):
+            y = np.asarray(loop(drive), dtype=float)
+            if y.shape != drive.shape:
+                raise ParameterError(
+                    f"loop returned shape {y.shape} for a drive of shape {drive.shape}")
+            return y
+        run_seed = None if seed is None else seed + k
+        return simulate(loop, drive, params=params, seed=run_seed).output
+
     # u_0 = F_0 r: the one-shot compensation.
     drive = inverse.apply(r)
     drives, outputs, errors, models, inverses = [], [], [], [model], [inverse]
     for k in range(iterations + 1):
-        run_seed = None if seed is None else seed + k
-        y = simulate(loop, drive, params=params, seed=run_seed).output
+        y = run(drive, k)
         drives.append(drive)
         outputs.append(y)
         errors.append(rms(y - r))
@@ -121,11 +155,12 @@ def refine(
             break
         if reidentify:
             current = models[-1]
+            u_id = drive if known is None else scipy.signal.lfilter(known[0], known[1], drive)
             try:
-                new = rels(drive, y, na=current.na, nb=current.nb,
+                new = rels(u_id, y, na=na, nb=nb,
                            nc=current.nc if nc is None else nc, delay=current.delay,
                            dt=current.dt)
-                inverse = design_inverse(new, method=method, band_hz=band_hz)
+                inverse = design_inverse(new, method=method, band_hz=band_hz, known=known)
                 models.append(new)
                 inverses.append(inverse)
             except ParameterError:
@@ -137,3 +172,10 @@ def refine(
     best = int(np.argmin(errors))
     return RefineResult(drive=drives[best], drives=drives, outputs=outputs,
                         rms_error=np.asarray(errors), models=models, inverses=inverses)
+
+
+def _composed(model: Any, known: tuple[np.ndarray, np.ndarray]) -> bool:
+    """Whether ``model`` is a complete model carrying ``known`` (from ``compose``)."""
+    stored = (getattr(model, "meta", None) or {}).get("known_factors")
+    return stored is not None and len(stored["num"]) == known[0].size \
+        and len(stored["den"]) == known[1].size
