@@ -97,3 +97,29 @@ def test_missing_model_file(tmp_path, reference, capsys):
     assert main(["compensate", str(tmp_path / "none.json"), str(ref), "--out", str(out)]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_model_with_known_factors_needs_band_and_inverts_them(tmp_path, capsys):
+    # A model identified behind the acceleration loop's known factors (compose): the
+    # factors travel in its JSON, and the drive inverts rest and factors.
+    from ehss.identification.known import compose, known_factors
+    from ehss.identification.model import ArmaxModel
+    from ehss.params import preset
+
+    num, den = known_factors("acceleration", preset("default"))
+    rest = ArmaxModel(a=[1.0, -1.5, 0.7], b=[0.1, 0.05], c=[1.0], delay=2, dt=DT)
+    path = tmp_path / "m.json"
+    compose(rest, num, den).save_json(path)
+    t = np.arange(8000) * DT
+    r = np.sin(2 * np.pi * 4.0 * t) * np.exp(-(((t - 4.0) / 0.7) ** 2))  # at rest, in band
+    ref = _write_reference(tmp_path / "r.csv", r)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(path), str(ref), "--out", str(out)]) == 2
+    assert "band" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["compensate", str(path), str(ref), "--out", str(out), "--band", "1",
+                 "50"]) == 0
+    drive = read_columns(out, ["drive"])["drive"]
+    y = scipy.signal.lfilter(num, den, rest.simulate(drive))
+    # Exact in band up to rounding near F's roots at z ≈ 0.997 (see test_inverse).
+    assert_allclose(y, r, rtol=0, atol=1e-8)
