@@ -101,3 +101,19 @@ def test_frf_non_finite_and_short(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "non-finite value (inf) at data row 2" in err
     assert not (tmp_path / "f.csv").exists()
+
+
+def test_outputs_are_plain_csv_with_a_json_sidecar(tmp_path, record):
+    """One header row, no comment lines: pandas, MATLAB and spreadsheets open it as is."""
+    import json
+
+    data = tmp_path / "rec.csv"
+    _write(data, record)
+    out = tmp_path / "frf.csv"
+    assert main(["frf", str(data), "--input", "u", "--output", "y", "--out", str(out)]) == 0
+    first = out.read_text().splitlines()[0]
+    assert first == "freq_hz,magnitude_db,phase_deg,coherence"
+    table = np.genfromtxt(out, delimiter=",", names=True)
+    assert table.dtype.names == ("freq_hz", "magnitude_db", "phase_deg", "coherence")
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["nperseg"] > 0 and "numba" in side["versions"]

@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", default="zpetc", choices=("zpetc", "zmetc"),
                    help="inverse design (default: %(default)s)")
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="zero-phase band limit of the drive in Hz (default: none)")
+                   help="zero-phase band limit of the drive in Hz (default: none; required "
+                   "for models identified behind known factors, e.g. the acceleration loop)")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate if the file has no time column t")
     p.set_defaults(func=run)
@@ -52,9 +53,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ehss._files import check_writable
+    from ehss._provenance import versions
+    from ehss.cli._dataargs import write_outputs
     from ehss.compensation import compensate
     from ehss.identification.model import ArmaxModel
-    from ehss.io import read_columns, sample_rate, write_csv
+    from ehss.io import read_columns, sample_rate, write_csv, write_json
 
     check_writable(args.out)
     model = ArmaxModel.load_json(args.model)
@@ -66,8 +69,19 @@ def run(args: argparse.Namespace) -> int:
     t = table.time if table.time is not None else np.arange(r.size) / fs
     if not np.all(np.isfinite(drive)):
         raise DataError("the compensated drive is not finite (badly conditioned model?)")
-    write_csv(args.out, {"t": t, "reference": r, "drive": drive},
-              header_comment=f"ehss compensate: {args.method} inverse of {args.model}")
+    out = Path(args.out)
+    sidecar = {
+        "what": f"{args.method} inverse-model drive",
+        "model": str(args.model),
+        "reference": str(args.reference),
+        "column": args.column,
+        "fs_hz": fs,
+        "band_hz": None if args.band is None else list(args.band),
+        "units": "drive and reference in the units of the model's input",
+        "versions": versions(),
+    }
+    write_outputs({out: lambda tmp: write_csv(tmp, {"t": t, "reference": r, "drive": drive}),
+                   out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})
     return 0
 
 

@@ -31,26 +31,35 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ehss._provenance import versions
     from ehss.frequency import h1_estimate
-    from ehss.io import write_csv
+    from ehss.io import write_csv, write_json
 
     if args.nperseg is not None and args.nperseg < 4:
         raise ParameterError(f"--nperseg {args.nperseg} must be >= 4")
     check_outputs(args.out, args.plot)
     rec = load_record(args)
     frf = h1_estimate(rec.u, rec.y, rec.fs, nperseg=args.nperseg, noverlap=args.noverlap)
-    comment = (
-        f"ehss frf: H1 estimate {args.input} -> {args.output} from {rec.path.name}\n"
-        f"fs = {rec.fs!r} Hz, Hann window, nperseg = {frf.nperseg}, "
-        f"averages = {frf.n_averages}, resolution = {frf.resolution_hz!r} Hz"
-    )
+    sidecar = {
+        "what": f"H1 estimate {args.input} -> {args.output}",
+        "data": str(rec.path),
+        "fs_hz": rec.fs,
+        "window": "hann",
+        "nperseg": frf.nperseg,
+        "n_averages": frf.n_averages,
+        "resolution_hz": frf.resolution_hz,
+        "units": {"freq_hz": "Hz", "magnitude_db": "dB", "phase_deg": "deg", "coherence": "-"},
+        "versions": versions(),
+    }
     good = frf.coherence >= 0.9
     print(f"H1 estimate {args.input} -> {args.output}: {frf.freq_hz.size} frequencies "
           f"{frf.freq_hz[0]:.4g}..{frf.freq_hz[-1]:.4g} Hz, resolution "
           f"{frf.resolution_hz:.4g} Hz, {frf.n_averages} averages of {frf.nperseg} samples; "
           f"coherence >= 0.9 at {int(good.sum())} of them")
+    out = Path(args.out)
     writers = {
-        Path(args.out): lambda tmp: write_csv(tmp, frf.to_columns(), header_comment=comment)
+        out: lambda tmp: write_csv(tmp, frf.to_columns()),
+        out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar),
     }
     if args.plot is not None:
         from ehss.plots import DPI, bode_compare

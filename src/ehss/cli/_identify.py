@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import platform
 from pathlib import Path
 from typing import Any
 
@@ -148,10 +147,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _provenance(rec, args, holdout: float, n_est: int) -> dict[str, Any]:
-    import numba
-    import scipy
-
-    from ehss import __version__
+    from ehss._provenance import versions
 
     return {
         "command": "ehss identify",
@@ -167,10 +163,7 @@ def _provenance(rec, args, holdout: float, n_est: int) -> dict[str, Any]:
             "band_hz": None if args.band is None else list(args.band),
             "min_coherence": args.min_coherence,
         },
-        "versions": {
-            "ehss": __version__, "numpy": np.__version__, "scipy": scipy.__version__,
-            "numba": numba.__version__, "python": platform.python_version(),
-        },
+        "versions": versions(),
     }
 
 

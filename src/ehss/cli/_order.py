@@ -84,12 +84,22 @@ def run(args: argparse.Namespace) -> int:
 
         cols = {c: np.array([_value(r, c) for r in sel.table], dtype=np.float64)
                 for c in _COLUMNS}
-        comment = (f"ehss order: {args.input} -> {args.output} from {rec.path.name}, "
-                   f"{args.method}, {n_est} estimation samples, best by {args.criterion}: "
-                   f"na={sel.best.na} nb={sel.best.nb} nc={sel.best.nc} "
-                   f"delay={sel.best.delay}")
-        write_outputs({Path(args.out): lambda tmp: write_csv(tmp, cols,
-                                                             header_comment=comment)})
+        from ehss._provenance import versions
+        from ehss.io import write_json
+
+        sidecar = {
+            "what": f"order selection {args.input} -> {args.output}",
+            "data": str(rec.path),
+            "method": args.method,
+            "criterion": args.criterion,
+            "n_estimation_samples": n_est,
+            "best": {"na": sel.best.na, "nb": sel.best.nb, "nc": sel.best.nc,
+                     "delay": sel.best.delay},
+            "versions": versions(),
+        }
+        out = Path(args.out)
+        write_outputs({out: lambda tmp: write_csv(tmp, cols),
+                       out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})
     return 0
 
 

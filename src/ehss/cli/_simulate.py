@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import time
 from pathlib import Path
 from typing import Any
 
@@ -176,9 +175,7 @@ def _check_feasible(values, loop: str, params: RigParams, fs: float, *, step: bo
 
 
 def _metadata(result, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
-    import numba
-
-    import ehss
+    from ehss._provenance import timestamp, versions
 
     return {
         "loop": result.loop,
@@ -190,9 +187,8 @@ def _metadata(result, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
         "units": result.units,
         "limits_hit": result.limits_hit,
         "params": params_to_dict(result.params),
-        "versions": {"ehss": ehss.__version__, "numpy": np.__version__,
-                     "numba": numba.__version__},
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "versions": versions(),
+        "created": timestamp(),
     }
 
 

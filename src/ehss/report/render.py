@@ -7,7 +7,6 @@ import dataclasses
 import html
 import io
 import json
-import platform
 import shutil
 import tempfile
 from pathlib import Path
@@ -15,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss._provenance import versions
 from ehss.errors import DataError
 from ehss.identification import ArmaxModel
 from ehss.params import params_to_dict
@@ -29,32 +29,13 @@ from ehss.report.programme import (
     ProgrammeResult,
 )
 
-__all__ = ["write_report", "summary_dict", "versions"]
+__all__ = ["write_report", "summary_dict"]
 
 FIGURE_TITLES = {
     "position": ("fig13_position.png", "Position loop, P/PID (cf. Fig. 13, eq 23 form)"),
     "acceleration": ("fig14_acceleration.png", "Acceleration loop, TVC (cf. Fig. 14, eq 24 form)"),
     "force": ("fig15_force.png", "Force loop, PID (cf. Fig. 15, eq 25 form)"),
 }
-
-
-def versions() -> dict[str, str]:
-    import control
-    import matplotlib
-    import numba
-    import scipy
-
-    from ehss import __version__
-
-    return {
-        "ehss": __version__,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "numba": numba.__version__,
-        "control": control.__version__,
-        "matplotlib": matplotlib.__version__,
-    }
 
 
 def _model_summary(model: ArmaxModel) -> dict[str, Any]:
