@@ -28,7 +28,8 @@ def report_dir(tmp_path_factory):
 def test_files_and_json_layout(report_dir):
     for name in ("report.html", "report.md", "models.json", "summary.json",
                  "fig12_steps.png", "fig13_position.png", "fig14_acceleration.png",
-                 "fig15_force.png"):
+                 "fig15_force.png", "fig16_compensation_position.png",
+                 "fig17_compensation_acceleration.png"):
         assert (report_dir / name).is_file(), name
     models = json.loads((report_dir / "models.json").read_text())
     assert sorted(models) == sorted(LOOPS)
@@ -83,7 +84,7 @@ def test_html_is_self_contained_and_shows_every_figure(report_dir):
     html = (report_dir / "report.html").read_text()
     md = (report_dir / "report.md").read_text()
     figures = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", md)
-    assert len(figures) == 4
+    assert len(figures) == 6
     assert html.count("src='data:image/png;base64,") == len(figures)
     assert "<script" not in html and "http" not in html.split("</style>")[0]
     for loop in LOOPS:
@@ -97,3 +98,14 @@ def test_bad_duration_and_unwritable_out(tmp_path, capsys):
     f.write_text("x")
     assert main(["reproduce", "--out", str(f), "--quiet"]) == 2
     assert f.read_text() == "x"
+
+
+@pytest.mark.slow
+def test_compensation_meets_its_targets(report_dir):
+    summary = json.loads((report_dir / "summary.json").read_text())
+    for loop in ("position", "acceleration"):
+        c = summary["compensation"][loop]
+        # Targets of the compensation demonstration: ±1 dB, ±5°, ≥ 10× on random.
+        assert c["max_abs_db_with"] <= 1.0
+        assert c["max_abs_deg_with"] <= 5.0
+        assert c["improvement"]["random"] >= 10.0

@@ -326,9 +326,10 @@ def demonstrate(
 # --------------------------------------------------------------------------- output
 def plot_demo(result: CompensationDemo, path: str | Path | None = None) -> Any:
     """Amplitude ratio and phase (±1 dB / ±5° bands) and time traces; returns the Figure."""
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), constrained_layout=True)
+    fig = Figure(figsize=(11, 7), layout="constrained")
+    axes = fig.subplots(2, 2)
     f = result.freq_hz
     # Above the band the reference has no content and H1 is meaningless: stop there.
     sel = (f > 0) & (f <= result.band_hz[1])
@@ -367,8 +368,6 @@ def plot_demo(result: CompensationDemo, path: str | Path | None = None) -> Any:
 
 def write_demo_report(result: CompensationDemo, folder: str | Path) -> list[Path]:
     """Write ``<loop>_compensation.json``, ``_frf.csv``, ``_traces.csv`` and ``.png``."""
-    import matplotlib.pyplot as plt
-
     from ehss._files import atomic_path
     from ehss.io import write_csv, write_json
 
@@ -394,6 +393,5 @@ def write_demo_report(result: CompensationDemo, folder: str | Path) -> list[Path
     png = folder / f"{stem}.png"
     with atomic_path(png) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
     paths.append(png)
     return [Path(p) for p in paths]

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.signal import butter, lfilter, sosfiltfilt
 
 from ehss import signals
+from ehss.compensation import CompensationDemo, demonstrate
 from ehss.errors import ParameterError
 from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import ArmaxModel, OrderSelection, rels, select_order
@@ -109,6 +110,8 @@ class ProgrammeSettings:
     order_grid: tuple[int, ...] = (2, 3, 4, 5, 6, 7, 8)
     noise_orders: tuple[int, ...] = (0, 2)
     max_search_order: int = 12
+    compensation: bool = True
+    compensation_duration_s: float = 16.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or self.seed < 0:
@@ -187,6 +190,7 @@ class ProgrammeResult:
     settings: ProgrammeSettings
     steps: dict[str, StepTest]
     loops: dict[str, LoopResult]
+    compensation: dict[str, CompensationDemo]
     elapsed_s: float
 
 
@@ -456,10 +460,21 @@ def run_programme(
     for k, (name, setup) in enumerate(settings.setups.items()):
         say(f"{name} loop: simulate, identify, validate")
         loops[name] = _run_loop(setup, params, settings, settings.seed + 1 + k)
+    demos: dict[str, CompensationDemo] = {}
+    if settings.compensation:
+        for k, name in enumerate(("position", "acceleration")):
+            say(f"{name} loop: feed-forward compensation")
+            demos[name] = demonstrate(
+                name,
+                params=params,
+                seed=settings.seed + 10 + k,
+                duration_s=settings.compensation_duration_s,
+            )
     return ProgrammeResult(
         params=params,
         settings=settings,
         steps=steps,
         loops=loops,
+        compensation=demos,
         elapsed_s=time.perf_counter() - t0,
     )

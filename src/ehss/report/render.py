@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ehss._provenance import versions
+from ehss.compensation import plot_demo
 from ehss.errors import DataError
 from ehss.identification import ArmaxModel
 from ehss.params import params_to_dict
@@ -30,6 +31,11 @@ from ehss.report.programme import (
 )
 
 __all__ = ["write_report", "summary_dict"]
+
+COMPENSATION_FIGURES = {
+    "position": "fig16_compensation_position.png",
+    "acceleration": "fig17_compensation_acceleration.png",
+}
 
 FIGURE_TITLES = {
     "position": ("fig13_position.png", "Position loop, P/PID (cf. Fig. 13, eq 23 form)"),
@@ -95,6 +101,7 @@ def summary_dict(result: ProgrammeResult) -> dict[str, Any]:
         },
         "steps": {k: s.metrics.to_dict() for k, s in result.steps.items()},
         "loops": loops,
+        "compensation": {k: d.figures() for k, d in result.compensation.items()},
         "printed_models": printed_model_findings(),
         "settings": {
             "seed": result.settings.seed,
@@ -184,6 +191,48 @@ def _loop_markdown(name: str, r: LoopResult, fig_name: str) -> list[str]:
     return lines
 
 
+def _compensation_markdown(result: ProgrammeResult) -> list[str]:
+    lines = [
+        "## Feed-forward compensation",
+        "",
+        "The identified closed loop is inverted (ZPETC: stable well-damped zeros cancelled, "
+        "the others by their zero-phase factor; the delay by preview over the known drive "
+        "file; a zero-phase band limit), the drive file is refined by re-identification "
+        "between runs, and the rig tracks a band-limited random reference and a "
+        "Kanai–Tajimi earthquake-like history. Targets: within ±1 dB and ±5° of unity over "
+        "the working band (position 0–20 Hz, judged from 1 Hz; acceleration 1–50 Hz) and at "
+        "least 10× lower RMS tracking error on the random reference.",
+        "",
+        "| loop | band judged | without: ±dB / ±° | with: ±dB / ±° | random: RMS error "
+        "without → with | earthquake: RMS error without → with | meets targets |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, d in result.compensation.items():
+        lo, hi = d.judge_hz
+        ok = (d.max_abs_db_with <= 1.0 and d.max_abs_deg_with <= 5.0
+              and d.improvement["random"] >= 10.0)
+        lines.append(
+            f"| {name} | {lo:g}–{hi:g} Hz | {d.max_abs_db_without:.2f} / "
+            f"{d.max_abs_deg_without:.1f} | {d.max_abs_db_with:.2f} / {d.max_abs_deg_with:.1f} | "
+            f"{d.rms_error_without['random']:.3g} → {d.rms_error_with['random']:.3g} {d.unit} "
+            f"({d.improvement['random']:.0f}×) | {d.rms_error_without['earthquake']:.3g} → "
+            f"{d.rms_error_with['earthquake']:.3g} {d.unit} "
+            f"({d.improvement['earthquake']:.0f}×) | {'yes' if ok else 'no'} |"
+        )
+    lines.append("")
+    for name in result.compensation:
+        lines += [f"![{name} compensation]({COMPENSATION_FIGURES[name]})", ""]
+    if "acceleration" in result.compensation:
+        lines += [
+            "The acceleration loop is identified behind its known factors (the generator of "
+            "eq (10) and the accelerometer coupling) and inverted as inverse(rest) ∘ "
+            "inverse(known factors); a model identified straight from the 2–100 Hz test "
+            "misses the 0.5 Hz high-passes and leaves tens of degrees at 1–2 Hz.",
+            "",
+        ]
+    return lines
+
+
 def _cplx(z: complex) -> str:
     if abs(z.imag) < 1e-15:
         return f"{z.real:.6g}"
@@ -249,6 +298,8 @@ def _markdown(result: ProgrammeResult, summary: dict[str, Any]) -> str:
     lines += ["", "## Identified closed loops", ""]
     for name, r in result.loops.items():
         lines += _loop_markdown(name, r, FIGURE_TITLES[name][0])
+    if result.compensation:
+        lines += _compensation_markdown(result)
     lines += [
         "## The paper's printed models",
         "",
@@ -372,6 +423,8 @@ def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
     for name, r in result.loops.items():
         fname, title = FIGURE_TITLES[name]
         figures[fname] = _png(loop_figure(r, title=title))
+    for name, demo in result.compensation.items():
+        figures[COMPENSATION_FIGURES[name]] = _png(plot_demo(demo))
     md = _markdown(result, summary)
 
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
