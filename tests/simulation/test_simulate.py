@@ -242,3 +242,12 @@ def test_one_position_loop_against_slow_reference():
             assert_allclose(r.signals["p1_pa"][k + 1], x[4], rtol=1e-12)
             assert_allclose(r.signals["displacement_m"][k + 1], x[6], rtol=1e-12, atol=1e-18)
     assert_allclose(r.signals["drive_v"], drives, rtol=1e-12, atol=1e-15)
+
+
+def test_force_reference_starting_near_zero_starts_at_rest():
+    # A reference whose first value is rounding noise (a band-limited random signal starts
+    # at ~1e-13 N) must not ask the plant for a steady state it cannot resolve.
+    ref = np.full(200, 2.4e-13)
+    run = simulate("force", ref, seed=1)
+    assert run.signals["spool"][0] == 0.0
+    assert np.all(np.isfinite(run.output))
