@@ -122,7 +122,7 @@ def test_bad_arguments(rng):
     u = rng.standard_normal(100)
     with pytest.raises(DataError, match="same length"):
         h1_estimate(u, u[:-1], FS)
-    with pytest.raises(DataError, match="non-finite value at sample 5"):
+    with pytest.raises(DataError, match=r"u\[4\]=nan is not finite"):
         h1_estimate(np.where(np.arange(100) == 4, np.nan, u), u, FS)
     with pytest.raises(DataError, match="too few samples"):
         h1_estimate(u[:10], u[:10], FS)

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.signal
 
+from ehss._checks import as_record
 from ehss.errors import DataError, ParameterError
 
 __all__ = ["FrequencyResponse", "h1_estimate", "default_nperseg", "n_segments"]
@@ -202,8 +203,7 @@ def h1_estimate(
     >>> frf.nperseg, frf.n_averages
     (1024, 38)
     """
-    u = _as_signal(u, "u")
-    y = _as_signal(y, "y")
+    u, y = as_record(u, y)
     if u.size != y.size:
         raise DataError(f"u and y must have the same length, got {u.size} and {y.size}")
     fs = _check_fs(fs)
@@ -257,20 +257,6 @@ def h1_estimate(
 
 
 # ------------------------------------------------------------------------------- checks
-
-
-def _as_signal(x, name: str) -> np.ndarray:
-    a = np.asarray(x)
-    if a.dtype.kind not in "biuf":
-        raise DataError(f"{name} must be real numbers, got dtype {a.dtype}")
-    a = np.ascontiguousarray(a, dtype=np.float64)
-    if a.ndim != 1:
-        raise DataError(f"{name} must be 1-D, got shape {a.shape}")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise DataError(f"{name} has a non-finite value at sample {k + 1}")
-    return a
 
 
 def _as_int(x, name: str) -> int:

@@ -29,6 +29,7 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
+from ehss._checks import as_record
 from ehss.errors import DataError, ParameterError
 from ehss.frequency import FrequencyResponse, _check_band, h1_estimate
 
@@ -211,7 +212,7 @@ def simulation_fit(model: _Model, u, y, *, start: int = 0) -> float:
     ``start`` on, so a held-out part starts from the state the earlier part left.
     An unstable model's simulation diverges and scores ``-inf``.
     """
-    u, y = _pair(u, y)
+    u, y = as_record(u, y)
     start = _check_start(start, y.size)
     with np.errstate(over="ignore", invalid="ignore"):
         yhat = np.asarray(model.simulate(u), dtype=np.float64)
@@ -220,7 +221,7 @@ def simulation_fit(model: _Model, u, y, *, start: int = 0) -> float:
 
 def prediction_fit(model: _Model, u, y, horizon: int = 1, *, start: int = 0) -> float:
     """Fit (percent) of the ``horizon``-step-ahead ARMAX prediction of ``y``."""
-    u, y = _pair(u, y)
+    u, y = as_record(u, y)
     start = _check_start(start, y.size)
     horizon = _pos_int(horizon, "horizon")
     with np.errstate(over="ignore", invalid="ignore"):
@@ -366,7 +367,7 @@ def residual_tests(
     as MATLAB's ``resid`` does) and a Bonferroni correction over the
     :math:`2\\,\\text{max\\_lag}+1` lags keeps the test at level ``alpha``.
     """
-    u, y = _pair(u, y)
+    u, y = as_record(u, y)
     max_lag = _pos_int(max_lag, "max_lag")
     if not 0.0 < float(alpha) < 1.0:
         raise ParameterError(f"{alpha=} must be in (0, 1)")
@@ -557,7 +558,7 @@ def validate(
     DataError
         If the held-out part is too short to validate.
     """
-    u, y = _pair(u, y)
+    u, y = as_record(u, y)
     if holdout is None or holdout == 0:
         start = 0
     else:
@@ -608,20 +609,6 @@ def _autocorr(x0: np.ndarray, max_lag: int) -> np.ndarray:
     mid = x0.size - 1
     r = full[mid : mid + max_lag + 1]
     return r / r[0]
-
-
-def _pair(u, y) -> tuple[np.ndarray, np.ndarray]:
-    u = np.ascontiguousarray(u, dtype=np.float64)
-    y = np.ascontiguousarray(y, dtype=np.float64)
-    if u.ndim != 1 or y.ndim != 1 or u.size != y.size:
-        raise DataError(f"u and y must be 1-D of the same length, got shapes {u.shape} "
-                        f"and {y.shape}")
-    for name, a in (("u", u), ("y", y)):
-        bad = ~np.isfinite(a)
-        if bad.any():
-            raise DataError(f"{name} has a non-finite value at sample "
-                            f"{int(np.flatnonzero(bad)[0]) + 1}")
-    return u, y
 
 
 def _pos_int(x, name: str) -> int:

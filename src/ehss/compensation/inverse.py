@@ -60,7 +60,8 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from ehss.errors import DataError, ParameterError
+from ehss._checks import as_signal
+from ehss.errors import ParameterError
 
 __all__ = [
     "InverseModel",
@@ -310,20 +311,7 @@ def _as_reference(reference: Any) -> np.ndarray:
     data = getattr(reference, "values", None)
     if data is None:
         data = getattr(reference, "data", reference)
-    try:
-        r = np.asarray(data, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise DataError(f"reference must be a 1-D array of numbers: {exc}") from None
-    if r.ndim != 1:
-        raise DataError(f"reference must be 1-D, got shape {r.shape}")
-    if r.size == 0:
-        raise DataError("reference is empty")
-    bad = np.flatnonzero(~np.isfinite(r))
-    if bad.size:
-        raise DataError(
-            f"reference has {bad.size} non-finite value(s), first at sample {int(bad[0])}"
-        )
-    return np.ascontiguousarray(r)
+    return as_signal(data, "reference")
 
 
 def _fft_band_limit(r: np.ndarray, dt: float, band_hz: tuple[float, float],

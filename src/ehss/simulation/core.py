@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import as_signal
 from ehss.control import _kernels as CK
 from ehss.control.discrete import pid_coefficients, tvc_coefficients
-from ehss.errors import DataError, ParameterError
+from ehss.errors import ParameterError
 from ehss.params import RigParams, preset
 from ehss.plant import _kernels as PK
 from ehss.plant.model import (
@@ -156,20 +157,7 @@ def _reference_values(reference: Any, fs: float | None) -> tuple[np.ndarray, flo
         reference = reference.values
         if fs is not None and not math.isclose(float(fs), ref_fs, rel_tol=1e-12):
             raise ParameterError(f"fs={fs!r} differs from the reference signal's fs={ref_fs!r}")
-    try:
-        arr = np.asarray(reference, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise DataError(f"reference must be an array of numbers: {exc}") from None
-    if arr.ndim != 1:
-        raise DataError(f"reference must be 1-D, got shape {arr.shape}")
-    if arr.size == 0:
-        raise DataError("reference is empty")
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        raise DataError(
-            f"reference[{bad[0]}]={arr[bad[0]]!r} is not finite ({bad.size} bad samples)"
-        )
-    return np.ascontiguousarray(arr), (fs if fs is not None else ref_fs)
+    return as_signal(reference, "reference"), (fs if fs is not None else ref_fs)
 
 
 def _with_rate(params: RigParams, fs: float | None) -> RigParams:
