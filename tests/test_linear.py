@@ -5,11 +5,11 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import control as ct
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-import control as ct
 from ehss import linear as lin
 from ehss.errors import ParameterError
 from ehss.params import preset
