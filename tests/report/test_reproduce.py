@@ -84,7 +84,7 @@ def test_html_is_self_contained_and_shows_every_figure(report_dir):
     html = (report_dir / "report.html").read_text()
     md = (report_dir / "report.md").read_text()
     figures = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", md)
-    assert len(figures) == 6
+    assert len(figures) == 7
     assert html.count("src='data:image/png;base64,") == len(figures)
     assert "<script" not in html and "http" not in html.split("</style>")[0]
     for loop in LOOPS:

@@ -7,7 +7,7 @@ from matplotlib.figure import Figure
 
 from ehss.report.programme import LoopResult, StepTest
 
-__all__ = ["step_figure", "loop_figure", "LOOP_UNITS"]
+__all__ = ["step_figure", "loop_figure", "convergence_figure", "LOOP_UNITS"]
 
 LOOP_UNITS = {
     "position": ("displacement", "mm", 1e3),
@@ -98,4 +98,21 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
     ax_p.set_title("(c) phase", fontsize=10)
     ax_m.legend(fontsize=7, loc="lower left")
     fig.suptitle(title)
+    return fig
+
+
+def convergence_figure(loops: dict[str, LoopResult]) -> Figure:
+    """θ̂(k) of each paper-order model during its estimation record (RELS, eqs 20–22)."""
+    from ehss.plots import theta_convergence
+
+    fig = Figure(figsize=(11, 3.6), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(loops)))
+    for ax, (name, r) in zip(axes, loops.items(), strict=True):
+        m = r.paper.model
+        names = ([f"a{i}" for i in range(1, m.na + 1)] + [f"b{i}" for i in range(m.nb + 1)]
+                 + [f"c{i}" for i in range(1, m.nc + 1)])
+        # b is in physical units (m/m, (m/s²)/(m/s²), N/N); all of θ share one axis.
+        theta_convergence(r.theta_history, names, t=r.theta_t, ax=ax, title=f"{name} loop")
+        ax.get_legend().remove() if ax.get_legend() is not None else None
+    fig.suptitle("Convergence of the RELS estimates θ̂ = [a, b, c] (eqs 20–22)")
     return fig

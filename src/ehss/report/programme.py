@@ -25,7 +25,13 @@ from ehss import signals
 from ehss.compensation import CompensationDemo, demonstrate
 from ehss.errors import ParameterError
 from ehss.frequency import FrequencyResponse, h1_estimate
-from ehss.identification import ArmaxModel, OrderSelection, rels, select_order
+from ehss.identification import (
+    ArmaxModel,
+    OrderSelection,
+    RelsEstimator,
+    rels,
+    select_order,
+)
 from ehss.identification.known import compose, known_factors
 from ehss.params import GRAVITY_M_S2, RigParams, preset
 from ehss.report.steps import StepMetrics, step_metrics
@@ -178,6 +184,8 @@ class LoopResult:
     selection: OrderSelection
     recommended: ModelCheck
     passing: ModelCheck | None
+    theta_t: np.ndarray
+    theta_history: np.ndarray
 
     @property
     def passes(self) -> bool:
@@ -358,6 +366,31 @@ def _search(
     return None
 
 
+def _convergence(
+    rec: _Record, model: ArmaxModel, settings: ProgrammeSettings, every: int = 10
+) -> tuple[np.ndarray, np.ndarray]:
+    """θ̂(k) of the paper-order model as the online estimator sees it (eqs 20–22).
+
+    The streaming :class:`RelsEstimator` with the batch run's scaling replays the
+    estimation part; it runs the same compiled step, so it ends on the batch estimate.
+    """
+    est = RelsEstimator(
+        na=model.na,
+        nb=model.nb,
+        nc=model.nc,
+        delay=model.delay,
+        forgetting=settings.forgetting,
+        p0=settings.p0,
+        dt=model.dt,
+        u_scale=float(model.meta["u_scale"]),
+        y_scale=float(model.meta["y_scale"]),
+        history_every=every,
+    )
+    est.update_many(rec.u[: rec.n_ident], rec.y[: rec.n_ident])
+    history = np.asarray(est.history)
+    return (np.arange(history.shape[0]) + 1) * every / rec.fs, history
+
+
 def _run_loop(
     setup: LoopSetup, params: RigParams, settings: ProgrammeSettings, seed: int
 ) -> LoopResult:
@@ -390,6 +423,7 @@ def _run_loop(
         output_mean=y_mean,
     )
     paper = _check(_label(setup.orders, False), _identify(rec, setup.orders, settings), rec)
+    theta_t, theta_history = _convergence(rec, paper.model, settings)
 
     n = rec.n_ident
     selection = select_order(
@@ -418,6 +452,8 @@ def _run_loop(
         selection=selection,
         recommended=recommended,
         passing=passing,
+        theta_t=theta_t,
+        theta_history=theta_history,
     )
 
 

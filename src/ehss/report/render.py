@@ -19,7 +19,7 @@ from ehss.compensation import plot_demo
 from ehss.errors import DataError
 from ehss.identification import ArmaxModel
 from ehss.params import params_to_dict
-from ehss.report.figures import loop_figure, step_figure
+from ehss.report.figures import convergence_figure, loop_figure, step_figure
 from ehss.report.paper_models import PRINTED_MODELS, printed_model_findings
 from ehss.report.programme import (
     MAX_MAG_ERROR_DB,
@@ -31,6 +31,8 @@ from ehss.report.programme import (
 )
 
 __all__ = ["write_report", "summary_dict"]
+
+CONVERGENCE_FIGURE = "fig18_rels_convergence.png"
 
 COMPENSATION_FIGURES = {
     "position": "fig16_compensation_position.png",
@@ -298,6 +300,13 @@ def _markdown(result: ProgrammeResult, summary: dict[str, Any]) -> str:
     lines += ["", "## Identified closed loops", ""]
     for name, r in result.loops.items():
         lines += _loop_markdown(name, r, FIGURE_TITLES[name][0])
+    lines += [
+        "How the estimates settle during each estimation record (the online estimator "
+        "replaying the record; it ends on the batch estimate):",
+        "",
+        f"![RELS convergence]({CONVERGENCE_FIGURE})",
+        "",
+    ]
     if result.compensation:
         lines += _compensation_markdown(result)
     lines += [
@@ -423,6 +432,7 @@ def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
     for name, r in result.loops.items():
         fname, title = FIGURE_TITLES[name]
         figures[fname] = _png(loop_figure(r, title=title))
+    figures[CONVERGENCE_FIGURE] = _png(convergence_figure(result.loops))
     for name, demo in result.compensation.items():
         figures[COMPENSATION_FIGURES[name]] = _png(plot_demo(demo))
     md = _markdown(result, summary)
