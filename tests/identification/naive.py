@@ -1,7 +1,12 @@
-"""Slow, obvious numpy reference of RELS (eqs 19–22) with the same safeguards.
+"""Slow, obvious numpy reference of RELS (eqs 19–22) and RML with the same safeguards.
 
 One numpy expression per equation, no state buffer, no vectorisation tricks: the
 compiled kernel in ``ehss.identification._kernels`` must agree with this to 1e-12.
+
+RML (recursive maximum likelihood, the recursive prediction-error method for ARMAX,
+Ljung & Söderström 1983): ψ_f(k) = ψ(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc) with
+ĉ = ĉ(k−1), then K = Pψ_f/(λ + ψ_fᵀPψ_f), θ̂ += K e, P = (P − Pψ_f ψ_fᵀP/den)/λ;
+e and ξ̂ use ψ as in RELS. A reset of P also zeroes the ψ_f history.
 """
 
 from __future__ import annotations
@@ -12,8 +17,12 @@ __all__ = ["naive_rels"]
 
 
 def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
-               trace_bound=None, c_radius=0.99, alpha_c=None):
-    """Return (theta, P, err, xi, counters) after running over u, y (already scaled)."""
+               trace_bound=None, c_radius=0.99, alpha_c=None, method="rels"):
+    """Return (theta, P, err, xi, counters) after running over u, y (already scaled).
+
+    ``method`` is "rels" (eqs 19–22) or "rml" (gain and P from ψ filtered by 1/Ĉ).
+    """
+    rml = method == "rml" and nc > 0
     n = na + nb + 1 + nc
     theta = np.zeros(n) if theta0 is None else np.array(theta0, dtype=float)
     alpha_c = alpha if alpha_c is None else alpha_c
@@ -24,6 +33,8 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
     err = np.zeros(N)
     xi = np.zeros(N)
     resets = cproj = trscale = 0
+    # RML: hist[j − 1] = ψ_f(k − j), j = 1..nc (zero before the record)
+    hist = [np.zeros(n) for _ in range(nc)]
 
     def past(x, k):
         return x[k] if k >= 0 else 0.0
@@ -42,16 +53,26 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
             + [past(xi, k - i) for i in range(1, nc + 1)]
         )
         e = y[k] - dot(psi, theta)
-        g = matvec(P, psi)
-        s = dot(psi, g)
+        # regressor of the gain and the P update: ψ (RELS) or ψ_f = ψ/Ĉ(k−1) (RML)
+        r = psi
+        if rml:
+            c_prev = theta[na + nb + 1:]
+            r = psi.copy()
+            for j in range(nc):
+                r = r - c_prev[j] * hist[j]
+        g = matvec(P, r)
+        s = dot(r, g)
         den = lam + s
         if not (s >= 0 and np.isfinite(den)):  # ψᵀPψ < 0: P is not definite
             P = P0.copy()
             resets += 1
-            g = matvec(P, psi)
-            den = lam + dot(psi, g)
+            if rml:  # the filter 1/Ĉ restarts from rest
+                hist = [np.zeros(n) for _ in range(nc)]
+                r = psi.copy()
+            g = matvec(P, r)
+            den = lam + dot(r, g)
         inv_den = 1.0 / den
-        # (21) K = P psi / den; (20) theta += K e
+        # (21) K = P r / den; (20) theta += K e
         theta = theta + (g * inv_den) * e
         # (22) in symmetric form (P − g gᵀ/den)/λ
         P = (P - np.outer(g, g) * inv_den) * (1.0 / lam)
@@ -65,6 +86,9 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
         if not (d.min() > 0 and np.isfinite(tr)):
             P = P0.copy()
             resets += 1
+            if rml:  # the filter 1/Ĉ restarts from rest (ψ_f(k) dropped too)
+                hist = [np.zeros(n) for _ in range(nc)]
+                r = np.zeros(n)
         elif tr > tr_max:
             P = P * (tr_max / tr)
             trscale += 1
@@ -80,9 +104,17 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
                 theta[na + nb + 1:] = np.real(np.poly(roots))[1:]
                 cproj += 1
                 projected = True
-        # (19) ξ̂ = y − ψᵀθ(k); without projection this is algebraically e λ/den, the
-        # form the kernel uses (bit-for-bit agreement needs the same rounding)
-        xi[k] = y[k] - dot(psi, theta) if projected else e * (lam * inv_den)
+        # (19) ξ̂ = y − ψᵀθ(k); without projection this is algebraically e λ/den (RELS)
+        # or e − (ψᵀg/den) e (RML), the forms the kernel uses (bit-for-bit agreement
+        # needs the same rounding)
+        if projected:
+            xi[k] = y[k] - dot(psi, theta)
+        elif rml:
+            xi[k] = e - (dot(psi, g) * inv_den) * e
+        else:
+            xi[k] = e * (lam * inv_den)
         err[k] = e
+        if rml:
+            hist = [r, *hist[:-1]]
     return theta, P, err, xi, {"resets": resets, "c_projections": cproj,
                                "trace_scalings": trscale}

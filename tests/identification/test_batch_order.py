@@ -57,8 +57,22 @@ def test_select_order_with_rels(rng):
     assert sel.model.meta["p0_c"] == 1e2
 
 
+def test_select_order_with_rml(rng):
+    # output-error record (white noise at the output, ARMAX C = A): RML with nc = na
+    a, b, _ = system(2)
+    u, y, _ = armax_data(rng, a, b, None, 8000)
+    y = y + 0.03 * np.std(y) * rng.standard_normal(y.size)
+    sel = select_order(u, y, na=[1, 2], nb=[1], nc=[1, 2], delay=1, dt=DT_S,
+                       criterion="aic", method="rml", p0=1e10, p0_c=1e2, forgetting=0.9995)
+    assert len(sel.table) == 4
+    assert sel.best.na == 2
+    assert sel.model.meta["method"] == "rml" and sel.model.meta["forgetting"] == 0.9995
+
+
 def test_select_order_errors(rng):
     u = rng.standard_normal(300)
+    with pytest.raises(ParameterError, match="method='pem' must be 'els', 'rels' or 'rml'"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], method="pem")
     with pytest.raises(ParameterError, match="criterion='bic' must be one of"):
         select_order(u, u, na=[1], nb=[0], nc=[0], criterion="bic")
     with pytest.raises(ParameterError, match="criterion='fit' needs validation"):

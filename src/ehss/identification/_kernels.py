@@ -1,4 +1,16 @@
-"""Numba kernels of recursive extended least squares (RELS), eqs (19)–(22).
+"""Numba kernels of recursive extended least squares (RELS), eqs (19)–(22), and RML.
+
+Two estimators share one compiled step (:func:`_step`), selected by ``state[H_METHOD]``:
+
+* RELS (method 0, the paper's eqs 19–22): gain and P update driven by ψ̂(k);
+* RML (method 1): recursive maximum likelihood, i.e. the recursive prediction-error
+  method for ARMAX (Ljung & Söderström, *Theory and Practice of Recursive
+  Identification*, MIT Press 1983, RML/RPEM for ARMAX). The prediction error and θ̂
+  use ψ̂(k) as in RELS, but the gain and the P update use the gradient of the
+  prediction error, the regressor filtered through 1/Ĉ(q⁻¹):
+  ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc). RELS converges only where
+  1/C − 1/2 is strictly positive real; RML does not need that condition, which fails
+  for output-error records (C ≈ A with lightly damped roots).
 
 The whole estimator state lives in **one** contiguous float64 buffer so that the
 streaming wrapper pays the Python→numba dispatch cost for a single array per sample,
@@ -19,6 +31,8 @@ P(k−1)ψ̂(k)         g           shared by eqs (21) and (22)
 α                  alpha       P(0) = diag(α … α, α_c … α_c): α for the a- and
                    alpha_c     b-parts, α_c for the c-part (α_c = α is the paper's αI)
 ξ̂(k)               xi          a-posteriori residual, eq (19)
+ψ_f(k)             hf[0]       RML: ψ̂(k) filtered through 1/Ĉ(q⁻¹) (L&S 1983)
+ψ_f(k−j)           hf[j]       RML: its history, j = 1..nc
 =================  ==========  ==============================================
 
 State buffer layout (``state``, float64)::
@@ -30,6 +44,7 @@ State buffer layout (``state``, float64)::
     g                     m   (work: P psi)
     ul                    d+nb+1 (u delay line, ul[j] = u(k−j))
     cw                    nc+1 (work: Schur–Cohn test of C)
+    hf                    (nc+1)*m (RML: rows ψ_f(k), ψ_f(k−1)..ψ_f(k−nc); unused by RELS)
 
 with n = na + nb + 1 + nc and m = n rounded up to a multiple of 4. The padding rows,
 columns and entries are zero and stay zero (every update multiplies them by a zero
@@ -62,7 +77,12 @@ H_SKIPPED = 13
 H_XI = 14
 H_NV = 15
 H_ALPHA_C = 16
+H_METHOD = 17
 HEADER = 20
+
+#: values of ``state[H_METHOD]``
+METHOD_RELS = 0.0
+METHOD_RML = 1.0
 
 #: δ = EPS_FLOOR · n · tr P is added to P's diagonal after each update (8 · eps)
 EPS_FLOOR = 8.0 * 2.220446049250313e-16
@@ -76,11 +96,11 @@ def padded(n: int) -> int:
 def state_size(na: int, nb: int, nc: int, delay: int) -> int:
     """Length of the float64 state buffer for the given orders."""
     m = padded(na + nb + 1 + nc)
-    return HEADER + m + m * m + m + m + (delay + nb + 1) + (nc + 1)
+    return HEADER + m + m * m + m + m + (delay + nb + 1) + (nc + 1) + (nc + 1) * m
 
 
 def state_views(state: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(theta, P, psi, g, ul, cw) views into ``state``, padding hidden (Python side)."""
+    """(theta, P, psi, g, ul, cw, hf) views into ``state``, padding hidden (Python side)."""
     na, nb, nc, d = (int(state[i]) for i in (H_NA, H_NB, H_NC, H_DELAY))
     n = na + nb + 1 + nc
     m = padded(n)
@@ -96,7 +116,9 @@ def state_views(state: np.ndarray) -> tuple[np.ndarray, ...]:
     ul = state[o : o + d + nb + 1]
     o += d + nb + 1
     cw = state[o : o + nc + 1]
-    return theta, P, psi, g, ul, cw
+    o += nc + 1
+    hf = state[o : o + (nc + 1) * m].reshape(nc + 1, m)[:, :n]
+    return theta, P, psi, g, ul, cw, hf
 
 
 @njit(cache=True)
@@ -191,7 +213,7 @@ def _reset_P(P, n, nab, alpha, alpha_c):
 
 @njit(cache=True, inline="always")
 def _views(state):
-    """(theta, P, psi, g, ul, cw) padded views of the state buffer (no copy)."""
+    """(theta, P, psi, g, ul, cw, hf) padded views of the state buffer (no copy)."""
     na = int(state[H_NA])
     nb = int(state[H_NB])
     nc = int(state[H_NC])
@@ -210,15 +232,31 @@ def _views(state):
     ul = state[o : o + nu]
     o += nu
     cw = state[o : o + nc + 1]
-    return theta, P, psi, g, ul, cw
+    o += nc + 1
+    hf = state[o : o + (nc + 1) * m].reshape((nc + 1, m))
+    return theta, P, psi, g, ul, cw, hf
 
 
 @njit(cache=True, inline="always")
-def _step(state, theta, P, psi, g, ul, cw, u, y):
-    """One RELS sample, eqs (19)–(22), with the safeguards. Returns the a-priori error.
+def _clear_rows(hf):
+    """Zero the RML filtered-regressor rows (filter 1/Ĉ restarts from rest)."""
+    for j in range(hf.shape[0]):
+        for i in range(hf.shape[1]):
+            hf[j, i] = 0.0
 
-    ``u``/``y`` are already scaled and finite (checked by the callers). The array
-    arguments are the views returned by :func:`_views` (taken once per batch).
+
+@njit(cache=True, inline="always")
+def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
+    """One RELS or RML sample with the safeguards. Returns the a-priori error.
+
+    RELS: eqs (19)–(22). RML (``rml`` True; the callers pass
+    ``state[H_METHOD] == METHOD_RML and nc > 0``, see :func:`_is_rml`): the same
+    with ψ_f(k) = ψ̂(k)/Ĉ(q⁻¹) in place of ψ̂(k) in the gain (21) and the P update
+    (22) (Ljung & Söderström 1983, RML/RPEM for ARMAX); with nc = 0 the filter is the
+    identity and RML is RELS bit for bit. ``u``/``y`` are already scaled and finite
+    (checked by the callers). The array arguments are the views returned by
+    :func:`_views` (taken once per batch). The batch kernel passes ``rml`` as a
+    constant, so each method compiles to its own loop and RELS keeps its speed.
     """
     na = int(state[H_NA])
     nb = int(state[H_NB])
@@ -241,6 +279,22 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
         yhat += psi[i] * theta[i]
     e = y - yhat
     state[H_COUNT] += 1.0
+    o = na + nb + 1  # start of the c-part of θ̂ and ψ̂
+
+    # r: the regressor of the gain and of the P update — ψ̂(k) for RELS; for RML
+    # (L&S 1983) ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc), with Ĉ = Ĉ(k−1)
+    # kept inside c_radius, so the filter 1/Ĉ is stable. It runs on every sample
+    # (also frozen or skipped ones) so that its history stays that of the data.
+    if rml:
+        r = hf[0]
+        for i in range(m):
+            r[i] = psi[i]
+        for j in range(1, nc + 1):
+            cj = theta[o + j - 1]
+            for i in range(m):
+                r[i] -= cj * hf[j, i]
+    else:
+        r = psi
     # ξ̂(k) of eq (19); equals e(k) whenever θ̂ is not updated (frozen or skipped)
     xi = e
     xi_direct = False
@@ -256,15 +310,16 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
         # the rounding of the plain dot product — while the inner loop is element-wise
         # over whole 4-wide vectors (m is a multiple of 4) and vectorises. A dot-product
         # inner loop is one serial add chain that, without fastmath, cannot.
+        # (RML: g = P(k−1) ψ_f(k), s = ψ_fᵀ P ψ_f; r is ψ_f)
         for i in range(m):
             g[i] = 0.0
         for j in range(m):
-            pj = psi[j]
+            pj = r[j]
             for i in range(m):
                 g[i] += P[j, i] * pj
         s = 0.0
         for i in range(n):
-            s += psi[i] * g[i]
+            s += r[i] * g[i]
         # denominator of (21): λ + ψ̂ᵀ P ψ̂ ≥ λ whenever P is positive semi-definite.
         # ψ̂ᵀ P ψ̂ < 0 proves that P lost definiteness through rounding (a tiny positive
         # den would then give a huge gain); that, or overflow, resets P = P(0).
@@ -272,10 +327,15 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
         if not (s >= 0.0 and np.isfinite(den)):
             _reset_P(P, n, nab, alpha, alpha_c)
             state[H_RESETS] += 1.0
+            if rml:
+                # RML: the filter 1/Ĉ restarts from rest too, so ψ_f(k) = ψ̂(k)
+                _clear_rows(hf)
+                for i in range(m):
+                    r[i] = psi[i]
             s = 0.0
             for i in range(n):
-                g[i] = P[i, i] * psi[i]
-                s += psi[i] * g[i]
+                g[i] = P[i, i] * r[i]
+                s += r[i] * g[i]
             den = lam + s
         # the step K e must be finite (a huge e with a small den could overflow θ̂)
         gmax = 0.0
@@ -285,15 +345,26 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
         if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
             inv_den = 1.0 / den
             # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
+            # (RML: K = P ψ_f / (λ + ψ_fᵀ P ψ_f); θ̂(k) = θ̂(k−1) + K e, e with ψ̂)
             for i in range(n):
                 theta[i] += (g[i] * inv_den) * e
-            # (19) without a second dot product: ψ̂ᵀθ̂(k) = ψ̂ᵀθ̂(k−1) + (s/den) e, so
-            # ξ̂(k) = e − (s/den) e = e λ/den (exact algebra; used unless C is projected)
-            xi = e * (lam * inv_den)
+            if rml:
+                # (19) for RML: ψ̂ᵀθ̂(k) = ψ̂ᵀθ̂(k−1) + (ψ̂ᵀg/den) e, so
+                # ξ̂(k) = e − (ψ̂ᵀg/den) e (ψ̂ᵀg ≠ s since g = P ψ_f; one n-term dot)
+                t = 0.0
+                for i in range(n):
+                    t += psi[i] * g[i]
+                xi = e - (t * inv_den) * e
+            else:
+                # (19) without a second dot product: ψ̂ᵀθ̂(k) = ψ̂ᵀθ̂(k−1) + (s/den) e, so
+                # ξ̂(k) = e − (s/den) e = e λ/den (exact algebra; used unless C is
+                # projected)
+                xi = e * (lam * inv_den)
             # (22) P(k) = [I − K ψ̂ᵀ] P(k−1) / λ  — textbook form, NOT used: rounding makes
             # it drift from symmetry and, with λ < 1, diverge. Since K ψ̂ᵀ P = g gᵀ / den
             # for symmetric P, we use the symmetric rank-1 form
             #     P(k) = (P(k−1) − g gᵀ / den) / λ
+            # (RML: the same with g = P ψ_f, i.e. P(k) = [I − K ψ_fᵀ] P(k−1) / λ)
             # computing each entry as (P_ij − (g_i g_j) · inv_den) · inv_lam. IEEE products
             # commute, so entry (i, j) and (j, i) get bit-identical values: P stays exactly
             # symmetric by construction (no separate symmetrisation pass needed), and the
@@ -324,10 +395,13 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
                     P[i, i] += delta
                 tr += n * delta
             # guard: a non-positive diagonal means P is no longer positive definite;
-            # a non-finite trace means overflow. Reset P = P(0) and keep θ̂.
+            # a non-finite trace means overflow. Reset P = P(0) and keep θ̂
+            # (RML: and restart the filter 1/Ĉ from rest, ψ_f history = 0).
             if not (dmin > 0.0 and np.isfinite(tr)):
                 _reset_P(P, n, nab, alpha, alpha_c)
                 state[H_RESETS] += 1.0
+                if rml:
+                    _clear_rows(hf)
             elif tr > state[H_TRMAX]:
                 # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the
                 # unexcited directions ("wind-up"); scaling keeps tr P ≤ tr_max.
@@ -338,7 +412,7 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
                 state[H_TRSCALE] += 1.0
             # keep C(q⁻¹) stable (inside c_radius), else ξ̂ feedback can blow up
             if nc > 0:
-                c = theta[na + nb + 1 : n]
+                c = theta[o:n]
                 if not _c_within(c, nc, state[H_CRADIUS], cw):
                     _project_c(c, nc, state[H_CRADIUS])
                     state[H_CPROJ] += 1.0
@@ -371,37 +445,35 @@ def _step(state, theta, P, psi, g, ul, cw, u, y):
     for i in range(na - 1, 0, -1):
         psi[i] = psi[i - 1]
     psi[0] = -y
-    o = na + nb + 1
     for i in range(nc - 1, 0, -1):
         psi[o + i] = psi[o + i - 1]
     if nc > 0:
         psi[o] = xi
+    # RML: ψ_f(k) becomes ψ_f((k+1)−1): shift the filtered-regressor history
+    if rml:
+        for j in range(nc, 0, -1):
+            for i in range(m):
+                hf[j, i] = hf[j - 1, i]
     if not np.isfinite(e):
         e = 0.0
     return e
 
 
-@njit(cache=True)
-def rels_run(state, u, y, err, xi_out, hist, hist_every):
-    """Run :func:`_step` over whole records (batch RELS, one compiled loop).
+@njit(cache=True, inline="always")
+def _is_rml(state):
+    """True if the state selects RML and has a C part (else the step is RELS)."""
+    return state[H_METHOD] == METHOD_RML and int(state[H_NC]) > 0
 
-    Parameters
-    ----------
-    state : float64 buffer, updated in place
-    u, y : float64 (N,), scaled, finite
-    err : float64 (N,) out, a-priori prediction errors e(k)
-    xi_out : float64 (N,) out, a-posteriori residuals ξ̂(k) of eq (19)
-    hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
-        (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
-    hist_every : int ≥ 1
-    """
-    theta, P, psi, g, ul, cw = _views(state)
+
+@njit(cache=True, inline="always")
+def _run(state, theta, P, psi, g, ul, cw, hf, u, y, err, xi_out, hist, hist_every, rml):
+    """The batch loop; ``rml`` is a compile-time constant at both call sites."""
     n = hist.shape[1]
     nh = hist.shape[0]
     r = 0
     c = 0
     for k in range(u.shape[0]):
-        err[k] = _step(state, theta, P, psi, g, ul, cw, u[k], y[k])
+        err[k] = _step(state, theta, P, psi, g, ul, cw, hf, u[k], y[k], rml)
         xi_out[k] = state[H_XI]
         c += 1
         if c == hist_every:
@@ -413,6 +485,27 @@ def rels_run(state, u, y, err, xi_out, hist, hist_every):
 
 
 @njit(cache=True)
+def rels_run(state, u, y, err, xi_out, hist, hist_every):
+    """Run :func:`_step` over whole records (batch RELS or RML, one compiled loop).
+
+    Parameters
+    ----------
+    state : float64 buffer, updated in place
+    u, y : float64 (N,), scaled, finite
+    err : float64 (N,) out, a-priori prediction errors e(k)
+    xi_out : float64 (N,) out, a-posteriori residuals ξ̂(k) of eq (19)
+    hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
+        (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
+    hist_every : int ≥ 1
+    """
+    theta, P, psi, g, ul, cw, hf = _views(state)
+    if _is_rml(state):
+        _run(state, theta, P, psi, g, ul, cw, hf, u, y, err, xi_out, hist, hist_every, True)
+    else:
+        _run(state, theta, P, psi, g, ul, cw, hf, u, y, err, xi_out, hist, hist_every, False)
+
+
+@njit(cache=True)
 def rels_step(state, u, y):
     """Streaming entry point: one sample (scaled), returns the a-priori error.
 
@@ -421,5 +514,5 @@ def rels_step(state, u, y):
     """
     if not (np.isfinite(u) and np.isfinite(y)):
         return np.nan
-    theta, P, psi, g, ul, cw = _views(state)
-    return _step(state, theta, P, psi, g, ul, cw, u, y)
+    theta, P, psi, g, ul, cw, hf = _views(state)
+    return _step(state, theta, P, psi, g, ul, cw, hf, u, y, _is_rml(state))

@@ -1,7 +1,7 @@
 """Model order selection over a grid of ARMAX orders with AIC, FPE and MDL.
 
 For each candidate the model is fitted with :func:`~ehss.identification.armax_els`
-(or :func:`~ehss.identification.rels`), its one-step prediction errors ε on the
+(or :func:`~ehss.identification.rels`, RELS or RML), its one-step prediction errors ε on the
 estimation data give the loss V = mean(ε²), and with p parameters and N samples
 
 .. math::
@@ -104,6 +104,7 @@ def select_order(
     method: str = "els",
     p0: float = 1e6,
     p0_c: float | None = None,
+    forgetting: float = 1.0,
 ) -> OrderSelection:
     """Fit every (na, nb, nc, delay) of the grid and pick the best by ``criterion``.
 
@@ -119,15 +120,20 @@ def select_order(
         "fit" needs ``validation``.
     validation : (u_val, y_val), optional
         Held-out data for the simulation fit %.
-    method : {"els", "rels"}
-        Estimator: :func:`armax_els` (with PEM refinement) or :func:`rels`.
+    method : {"els", "rels", "rml"}
+        Estimator: :func:`armax_els` (with PEM refinement), :func:`rels` with
+        ``method="rels"`` (the paper's eqs 19–22) or with ``method="rml"`` (recursive
+        maximum likelihood, for output-error-like disturbances; use nc = na).
     p0, p0_c : float
-        Initial P of :func:`rels` (a, b part and c part) when ``method="rels"``.
+        Initial P of :func:`rels` (a, b part and c part) when ``method`` is "rels"
+        or "rml".
+    forgetting : float
+        λ of :func:`rels` when ``method`` is "rels" or "rml" (default 1).
     """
     if criterion not in _CRITERIA:
         raise ParameterError(f"criterion={criterion!r} must be one of {_CRITERIA}")
-    if method not in ("els", "rels"):
-        raise ParameterError(f"method={method!r} must be 'els' or 'rels'")
+    if method not in ("els", "rels", "rml"):
+        raise ParameterError(f"method={method!r} must be 'els', 'rels' or 'rml'")
     if criterion == "fit" and validation is None:
         raise ParameterError("criterion='fit' needs validation=(u_val, y_val)")
     u, y = check_record(u, y)
@@ -146,7 +152,8 @@ def select_order(
             if method == "els":
                 m = armax_els(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt)
             else:
-                m = rels(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt, p0=p0, p0_c=p0_c)
+                m = rels(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt, p0=p0, p0_c=p0_c,
+                         forgetting=forgetting, method=method)
         k0 = max(a_, b_ + d_, c_)
         eps = (y - m.predict(u, y))[k0:]
         N = eps.size

@@ -1,4 +1,4 @@
-"""Recursive extended least squares (RELS) of ARMAX models, paper eqs (19)–(22).
+"""Recursive ARMAX identification: RELS (paper eqs 19–22) and RML.
 
 .. math::
 
@@ -23,6 +23,23 @@ Departures from the textbook, all for numerical soundness (PAPER.md §3):
   checked every sample by a Rouché bound then an exact O(nc²) Schur–Cohn test;
 * the batch function scales u and y by their RMS so that α = 1e6 means the same thing
   for any units; the result is de-scaled (b by s_y/s_u, noise variance by s_y²).
+
+``method="rml"`` selects recursive maximum likelihood instead, the recursive
+prediction-error method for ARMAX (Ljung & Söderström, *Theory and Practice of
+Recursive Identification*, MIT Press 1983, RML/RPEM for ARMAX): the prediction error,
+θ̂ and ξ̂ are as above, but the gain (21) and the P update (22) use the regressor
+filtered through 1/Ĉ(q⁻¹),
+
+.. math::
+
+    \\psi_f(k) = \\hat\\psi(k) - \\hat c_1 \\psi_f(k-1) - \\dots
+        - \\hat c_{n_c} \\psi_f(k-n_c),
+
+the gradient of the prediction error. RELS converges only where 1/C − 1/2 is strictly
+positive real, which fails when C has roots near the unit circle — e.g. output-error
+records (white sensor noise at the output: the ARMAX noise model needs C ≈ A, lightly
+damped). RML with nc = na does not need that condition. All the safeguards above apply
+to RML as well (a reset of P also restarts the filter 1/Ĉ from rest).
 """
 
 from __future__ import annotations
@@ -32,11 +49,14 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import as_record
 from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification import _kernels as _k
 from ehss.identification.model import ArmaxModel
 
 __all__ = ["rels", "RelsEstimator"]
+
+_METHODS = {"rels": _k.METHOD_RELS, "rml": _k.METHOD_RML}
 
 
 # ---------------------------------------------------------------- validation helpers
@@ -76,6 +96,12 @@ def _check_settings(
     return na, nb, nc, delay, lam, alpha, dt
 
 
+def _check_method(method: Any) -> str:
+    if not isinstance(method, str) or method not in _METHODS:
+        raise ParameterError(f"method={method!r} must be 'rels' or 'rml'")
+    return method
+
+
 def _check_p0_c(p0_c: Any, alpha: float) -> float:
     if p0_c is None:
         return alpha
@@ -98,22 +124,7 @@ def _check_theta0(theta0: Any, n: int) -> np.ndarray:
 
 def check_record(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
     """Validate an input/output record: 1-D, equal length, finite; contiguous float64."""
-    arrs = []
-    for name, v in (("u", u), ("y", y)):
-        try:
-            a = np.ascontiguousarray(v, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise DataError(f"{name} must be a 1-D array of numbers: {exc}") from None
-        if a.ndim != 1:
-            raise DataError(f"{name} must be 1-D, got shape {a.shape}")
-        bad = np.flatnonzero(~np.isfinite(a))
-        if bad.size:
-            i = int(bad[0])
-            raise DataError(f"{name}[{i}]={float(a[i])!r} is not finite")
-        arrs.append(a)
-    if arrs[0].size != arrs[1].size:
-        raise DataError(f"u and y must have the same length, got {arrs[0].size} and {arrs[1].size}")
-    return arrs[0], arrs[1]
+    return as_record(u, y)
 
 
 def _rms_scale(x: np.ndarray) -> float:
@@ -131,6 +142,7 @@ def _theta_scale(na: int, nb: int, nc: int, u_scale: float, y_scale: float) -> n
 def _new_state(
     na: int, nb: int, nc: int, delay: int, lam: float, alpha: float, trace_bound: float,
     c_radius: float, theta0_scaled: np.ndarray, alpha_c: float | None = None,
+    method: str = "rels",
 ) -> np.ndarray:
     state = np.zeros(_k.state_size(na, nb, nc, delay))
     state[_k.H_NA] = na
@@ -144,6 +156,7 @@ def _new_state(
     state[_k.H_TRMAX] = trace_bound
     state[_k.H_CRADIUS] = c_radius
     state[_k.H_ENABLED] = 1.0
+    state[_k.H_METHOD] = _METHODS[method]
     theta, P, *_ = _k.state_views(state)
     theta[:] = theta0_scaled
     P[:] = np.diag(np.r_[np.full(na + nb + 1, alpha), np.full(nc, alpha_c)])
@@ -205,8 +218,9 @@ def rels(
     p0_c: float | None = None,
     trace_bound: float | None = None,
     c_radius: float = 0.99,
+    method: str = "rels",
 ) -> ArmaxModel:
-    """Identify an ARMAX model from a whole record with RELS, eqs (19)–(22).
+    """Identify an ARMAX model from a whole record with RELS, eqs (19)–(22), or RML.
 
     Parameters
     ----------
@@ -237,13 +251,21 @@ def rels(
         Upper bound of tr P (default tr P(0)).
     c_radius : float
         Roots of C are kept inside this radius.
+    method : {"rels", "rml"}
+        "rels": the paper's eqs (19)–(22). "rml": recursive maximum likelihood (the
+        recursive prediction-error method for ARMAX, Ljung & Söderström 1983): gain
+        and P update from the regressor filtered through 1/Ĉ (see the module notes).
+        Use "rml" with nc = na when the disturbance is mostly white noise at the
+        output (output-error records), where RELS is biased. With nc = 0 both are RLS.
 
     Returns
     -------
     ArmaxModel
         ``noise_variance`` is the mean of ξ̂² over the second half of the last pass;
-        ``covariance`` is σ² P (meaningful for λ = 1); ``meta`` holds n_samples,
-        forgetting, p0, passes, resets, c_projections, trace_scalings, u_scale, y_scale.
+        ``covariance`` is σ² P (meaningful for λ = 1; for RML P approximates the
+        inverse Hessian of the prediction-error loss, the usual PEM covariance);
+        ``meta`` holds method, n_samples, forgetting, p0, passes, resets,
+        c_projections, trace_scalings, u_scale, y_scale.
 
     Raises
     ------
@@ -269,6 +291,7 @@ def rels(
     """
     na, nb, nc, delay, lam, alpha, dt = _check_settings(na, nb, nc, delay, forgetting, p0, dt)
     alpha_c = _check_p0_c(p0_c, alpha)
+    method = _check_method(method)
     passes = _order("passes", passes, 1)
     n = na + nb + 1 + nc
     tr0 = (na + nb + 1) * alpha + nc * alpha_c
@@ -294,7 +317,8 @@ def rels(
     hist = np.empty((0, n))
     totals = dict.fromkeys(("resets", "c_projections", "trace_scalings", "skipped"), 0)
     for _ in range(passes):
-        state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, theta_s, alpha_c)
+        state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, theta_s, alpha_c,
+                           method)
         _k.rels_run(state, us, ys, err, xi, hist, 1)
         for key, v in _counters(state).items():
             if key in totals:
@@ -302,7 +326,7 @@ def rels(
         theta_s = state[_k.HEADER : _k.HEADER + n].copy()
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
     meta = {
-        "method": "rels",
+        "method": method,
         "n_samples": int(u.size),
         "forgetting": lam,
         "p0": alpha,
@@ -321,7 +345,7 @@ def rels(
 
 # ---------------------------------------------------------------- streaming
 class RelsEstimator:
-    """Streaming RELS: one sample at a time, eqs (19)–(22) with the same safeguards.
+    """Streaming RELS (eqs 19–22) or RML: one sample at a time, the same safeguards.
 
     Parameters
     ----------
@@ -341,6 +365,9 @@ class RelsEstimator:
         prediction error) are in physical units.
     c_radius : float
         Roots of C are kept inside this radius.
+    method : {"rels", "rml"}
+        As in :func:`rels`: the paper's RELS, or recursive maximum likelihood (RPEM
+        for ARMAX, Ljung & Söderström 1983) for output-error-like disturbances.
 
     Notes
     -----
@@ -370,6 +397,7 @@ class RelsEstimator:
         y_scale: float = 1.0,
         c_radius: float = 0.99,
         p0_c: float | None = None,
+        method: str = "rels",
     ) -> None:
         na, nb, nc, delay, lam, alpha, dt = _check_settings(
             na, nb, nc, delay, forgetting, p0, dt
@@ -379,6 +407,7 @@ class RelsEstimator:
         self._n = n
         self._lam, self._alpha, self._dt = lam, alpha, dt
         self._alpha_c = _check_p0_c(p0_c, alpha)
+        self._method = _check_method(method)
         tr0 = (na + nb + 1) * alpha + nc * self._alpha_c
         tb = tr0 if trace_bound is None else _real("trace_bound", trace_bound)
         if tb <= 0:
@@ -407,7 +436,7 @@ class RelsEstimator:
         na, nb, nc, delay = self._orders
         self._state = _new_state(
             na, nb, nc, delay, self._lam, self._alpha, self._trace_bound, self._c_radius,
-            self._theta0 / self._dvec, self._alpha_c,
+            self._theta0 / self._dvec, self._alpha_c, self._method,
         )
         self._hist: list[np.ndarray] = []
         self._since = 0
@@ -510,7 +539,7 @@ class RelsEstimator:
         """The current estimate as an :class:`ArmaxModel` (no stability warning)."""
         na, nb, nc, delay = self._orders
         meta = {
-            "method": "rels-streaming",
+            "method": f"{self._method}-streaming",
             "forgetting": self._lam,
             "p0": self._alpha,
             "p0_c": self._alpha_c,
