@@ -1,4 +1,4 @@
-"""RELS throughput: compiled kernel vs per-sample numpy, padasip RLS and SIPPY RLLS ARMAX.
+"""RELS/RML throughput: compiled kernel vs per-sample numpy, padasip RLS and SIPPY RLLS ARMAX.
 
 Run from the project root:  .venv/bin/python benchmarks/bench_rels.py [--quick]
 
@@ -44,17 +44,17 @@ def data(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return u / np.std(u), y / np.std(y)
 
 
-def kernel_rate(u, y, na, nb, nc, repeats=3) -> tuple[float, float]:
+def kernel_rate(u, y, na, nb, nc, repeats=3, method="rels") -> tuple[float, float]:
     n = na + nb + 1 + nc
     err, xi = np.empty(u.size), np.empty(u.size)
     hist = np.empty((0, n))
     t0 = time.perf_counter()
-    st = _new_state(na, nb, nc, 1, 1.0, 1e6, n * 1e6, 0.99, np.zeros(n))
+    st = _new_state(na, nb, nc, 1, 1.0, 1e6, n * 1e6, 0.99, np.zeros(n), None, method)
     K.rels_run(st, u[:10], y[:10], err, xi, hist, 1)
     compile_s = time.perf_counter() - t0
     best = np.inf
     for _ in range(repeats):
-        st = _new_state(na, nb, nc, 1, 1.0, 1e6, n * 1e6, 0.99, np.zeros(n))
+        st = _new_state(na, nb, nc, 1, 1.0, 1e6, n * 1e6, 0.99, np.zeros(n), None, method)
         t0 = time.perf_counter()
         K.rels_run(st, u, y, err, xi, hist, 1)
         best = min(best, time.perf_counter() - t0)
@@ -131,8 +131,8 @@ def sippy_rate(u, y, na, nb, nc) -> float:
     return timed(run, y.size)
 
 
-def streaming_median_ns(na, nb, nc, calls=100_000) -> float:
-    est = RelsEstimator(na=na, nb=nb, nc=nc, delay=1)
+def streaming_median_ns(na, nb, nc, calls=100_000, method="rels") -> float:
+    est = RelsEstimator(na=na, nb=nb, nc=nc, delay=1, method=method)
     rng = np.random.default_rng(1)
     u = rng.standard_normal(calls).tolist()
     y = rng.standard_normal(calls).tolist()
@@ -162,20 +162,24 @@ def main() -> None:
     print()
     print(f"cold compile of the batch kernel (empty cache): {cold_compile_s():.2f} s")
     print()
-    print("| orders (na,nb,nc) | ehss kernel | cache load | numpy loop | padasip RLS | "
-          "SIPPY RLLS | × numpy | × SIPPY | streaming update median |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for na, nb, nc in ((4, 4, 2), (6, 6, 4)):
-        rate, comp = kernel_rate(u, y, na, nb, nc)
-        r_np = timed(lambda na=na, nb=nb, nc=nc: naive_rels(
-            u[:n_naive], y[:n_naive], na=na, nb=nb, nc=nc, delay=1), n_naive)
-        r_pa = padasip_rate(u[:n_peer], y[:n_peer], na, nb, nc)
-        r_si = sippy_rate(u[:n_sippy], y[:n_sippy], na, nb, nc)
-        med = streaming_median_ns(na, nb, nc)
-        print(f"| ({na},{nb},{nc}) | {rate / 1e6:.2f} M/s ({1e9 / rate:.0f} ns) | "
-              f"{comp:.2f} s | {r_np / 1e3:.1f} k/s | {r_pa / 1e3:.1f} k/s | "
-              f"{r_si / 1e3:.2f} k/s | {rate / r_np:.0f}× | {rate / r_si:.0f}× | "
-              f"{med:.0f} ns |")
+    print("| method | orders (na,nb,nc) | ehss kernel | cache load | numpy loop | "
+          "padasip RLS | SIPPY RLLS | × numpy | × SIPPY | streaming update median |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for method, na, nb, nc in (("rels", 4, 4, 2), ("rels", 6, 6, 4), ("rml", 6, 6, 4)):
+        rate, comp = kernel_rate(u, y, na, nb, nc, method=method)
+        r_np = timed(lambda na=na, nb=nb, nc=nc, method=method: naive_rels(
+            u[:n_naive], y[:n_naive], na=na, nb=nb, nc=nc, delay=1, method=method), n_naive)
+        med = streaming_median_ns(na, nb, nc, method=method)
+        if method == "rels":
+            r_pa = padasip_rate(u[:n_peer], y[:n_peer], na, nb, nc)
+            r_si = sippy_rate(u[:n_sippy], y[:n_sippy], na, nb, nc)
+            peers = f"{r_pa / 1e3:.1f} k/s | {r_si / 1e3:.2f} k/s"
+            x_si = f"{rate / r_si:.0f}×"
+        else:  # no RML in padasip or SIPPY
+            peers, x_si = "— | —", "—"
+        print(f"| {method} | ({na},{nb},{nc}) | {rate / 1e6:.2f} M/s ({1e9 / rate:.0f} ns) | "
+              f"{comp:.2f} s | {r_np / 1e3:.1f} k/s | {peers} | {rate / r_np:.0f}× | "
+              f"{x_si} | {med:.0f} ns |")
     print()
     print(f"samples: kernel {n_big}, numpy loop {n_naive}, padasip {n_peer}, SIPPY {n_sippy}")
 
