@@ -213,7 +213,12 @@ def _reset_P(P, n, nab, alpha, alpha_c):
 
 @njit(cache=True, inline="always")
 def _views(state):
-    """(theta, P, psi, g, ul, cw, hf) padded views of the state buffer (no copy)."""
+    """(theta, P, psi, g, ul, cw) padded views of the state buffer (no copy).
+
+    The RML rows ``hf`` are not among them: :func:`_hf_view` takes them inside the RML
+    branches only, so the RELS loop carries no extra live array (measured: ~3 % faster
+    for (4,4,2) than passing ``hf`` along unused).
+    """
     na = int(state[H_NA])
     nb = int(state[H_NB])
     nc = int(state[H_NC])
@@ -232,9 +237,19 @@ def _views(state):
     ul = state[o : o + nu]
     o += nu
     cw = state[o : o + nc + 1]
-    o += nc + 1
-    hf = state[o : o + (nc + 1) * m].reshape((nc + 1, m))
-    return theta, P, psi, g, ul, cw, hf
+    return theta, P, psi, g, ul, cw
+
+
+@njit(cache=True, inline="always")
+def _hf_view(state):
+    """RML filtered-regressor rows, shape (nc+1, m); taken on the RML path only."""
+    na = int(state[H_NA])
+    nb = int(state[H_NB])
+    nc = int(state[H_NC])
+    d = int(state[H_DELAY])
+    m = (na + nb + 1 + nc + 3) // 4 * 4
+    o = HEADER + m + m * m + m + m + (d + nb + 1) + (nc + 1)
+    return state[o : o + (nc + 1) * m].reshape((nc + 1, m))
 
 
 @njit(cache=True, inline="always")
@@ -246,7 +261,7 @@ def _clear_rows(hf):
 
 
 @njit(cache=True, inline="always")
-def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
+def _step(state, theta, P, psi, g, ul, cw, u, y, rml):
     """One RELS or RML sample with the safeguards. Returns the a-priori error.
 
     RELS: eqs (19)–(22). RML (``rml`` True; the callers pass
@@ -286,6 +301,7 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
     # kept inside c_radius, so the filter 1/Ĉ is stable. It runs on every sample
     # (also frozen or skipped ones) so that its history stays that of the data.
     if rml:
+        hf = _hf_view(state)
         r = hf[0]
         for i in range(m):
             r[i] = psi[i]
@@ -329,7 +345,7 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
             state[H_RESETS] += 1.0
             if rml:
                 # RML: the filter 1/Ĉ restarts from rest too, so ψ_f(k) = ψ̂(k)
-                _clear_rows(hf)
+                _clear_rows(_hf_view(state))
                 for i in range(m):
                     r[i] = psi[i]
             s = 0.0
@@ -401,7 +417,7 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
                 _reset_P(P, n, nab, alpha, alpha_c)
                 state[H_RESETS] += 1.0
                 if rml:
-                    _clear_rows(hf)
+                    _clear_rows(_hf_view(state))
             elif tr > state[H_TRMAX]:
                 # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the
                 # unexcited directions ("wind-up"); scaling keeps tr P ≤ tr_max.
@@ -451,6 +467,7 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
         psi[o] = xi
     # RML: ψ_f(k) becomes ψ_f((k+1)−1): shift the filtered-regressor history
     if rml:
+        hf = _hf_view(state)
         for j in range(nc, 0, -1):
             for i in range(m):
                 hf[j, i] = hf[j - 1, i]
@@ -466,14 +483,15 @@ def _is_rml(state):
 
 
 @njit(cache=True, inline="always")
-def _run(state, theta, P, psi, g, ul, cw, hf, u, y, err, xi_out, hist, hist_every, rml):
+def _run(state, u, y, err, xi_out, hist, hist_every, rml):
     """The batch loop; ``rml`` is a compile-time constant at both call sites."""
+    theta, P, psi, g, ul, cw = _views(state)
     n = hist.shape[1]
     nh = hist.shape[0]
     r = 0
     c = 0
     for k in range(u.shape[0]):
-        err[k] = _step(state, theta, P, psi, g, ul, cw, hf, u[k], y[k], rml)
+        err[k] = _step(state, theta, P, psi, g, ul, cw, u[k], y[k], rml)
         xi_out[k] = state[H_XI]
         c += 1
         if c == hist_every:
@@ -498,11 +516,10 @@ def rels_run(state, u, y, err, xi_out, hist, hist_every):
         (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
     hist_every : int ≥ 1
     """
-    theta, P, psi, g, ul, cw, hf = _views(state)
     if _is_rml(state):
-        _run(state, theta, P, psi, g, ul, cw, hf, u, y, err, xi_out, hist, hist_every, True)
+        _run(state, u, y, err, xi_out, hist, hist_every, True)
     else:
-        _run(state, theta, P, psi, g, ul, cw, hf, u, y, err, xi_out, hist, hist_every, False)
+        _run(state, u, y, err, xi_out, hist, hist_every, False)
 
 
 @njit(cache=True)
@@ -514,5 +531,5 @@ def rels_step(state, u, y):
     """
     if not (np.isfinite(u) and np.isfinite(y)):
         return np.nan
-    theta, P, psi, g, ul, cw, hf = _views(state)
-    return _step(state, theta, P, psi, g, ul, cw, hf, u, y, _is_rml(state))
+    theta, P, psi, g, ul, cw = _views(state)
+    return _step(state, theta, P, psi, g, ul, cw, u, y, _is_rml(state))
