@@ -40,6 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--nc", type=int, required=True, metavar="N", help="order of C (>= 0)")
     p.add_argument("--delay", type=int, default=1, metavar="D",
                    help="input delay in samples (default: %(default)s)")
+    p.add_argument("--method", choices=("rels", "rml"), default="rels",
+                   help="rels: the paper's recursive extended least squares (eqs 19-22); "
+                   "rml: recursive maximum likelihood, for records whose disturbance is "
+                   "mostly sensor noise at the output (use nc = na) (default: %(default)s)")
     p.add_argument("--forgetting", type=float, default=1.0, metavar="LAMBDA",
                    help="forgetting factor λ in (0, 1] (default: %(default)s)")
     p.add_argument("--p0", type=float, default=1e6, metavar="ALPHA",
@@ -103,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     with report_warnings("identify"):
         model = rels(
             u[:n_est], y[:n_est], na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
-            forgetting=args.forgetting, p0=args.p0, dt=1.0 / fs,
+            forgetting=args.forgetting, p0=args.p0, dt=1.0 / fs, method=args.method,
         )
         report = validate(model, u, y, fs=fs, band_hz=band_hz, holdout=holdout,
                           min_coherence=args.min_coherence)
@@ -159,7 +163,8 @@ def _provenance(rec, args, holdout: float, n_est: int) -> dict[str, Any]:
         "n_estimation": n_est,
         "settings": {
             "na": args.na, "nb": args.nb, "nc": args.nc, "delay": args.delay,
-            "forgetting": args.forgetting, "p0": args.p0, "holdout": holdout,
+            "method": args.method, "forgetting": args.forgetting, "p0": args.p0,
+            "holdout": holdout,
             "band_hz": None if args.band is None else list(args.band),
             "min_coherence": args.min_coherence,
         },
@@ -173,7 +178,8 @@ def _print_model(model, report, rec, args) -> None:
 
     console = Console(width=120, highlight=False)
     console.print(f"ARMAX ({model.na},{model.nb},{model.nc}), delay {model.delay}, "
-                  f"dt = {model.dt!r} s, identified by RELS on {report.n_estimation} samples "
+                  f"dt = {model.dt!r} s, identified by {args.method.upper()} on "
+                  f"{report.n_estimation} samples "
                   f"of {rec.path.name} ({args.input} → {args.output})")
     console.print(model.format_paper(), soft_wrap=True)
     console.print(f"C(q^-1) = {_poly(model.c)}", soft_wrap=True)

@@ -317,8 +317,9 @@ def _identify(
     orders: tuple[int, int, int, int],
     settings: ProgrammeSettings,
     known: tuple[np.ndarray, np.ndarray] | None = None,
+    method: str = "rels",
 ) -> ArmaxModel:
-    """RELS on the estimation part; behind ``known`` factors when given."""
+    """RELS (or RML) on the estimation part; behind ``known`` factors when given."""
     na, nb, nc, delay = orders
     u = rec.u if known is None else lfilter(known[0], known[1], rec.u)
     n = rec.n_ident
@@ -332,12 +333,13 @@ def _identify(
         forgetting=settings.forgetting,
         p0=settings.p0,
         dt=1.0 / rec.fs,
+        method=method,
     )
     return model if known is None else compose(model, *known)
 
 
-def _label(orders: tuple[int, int, int, int], known: bool) -> str:
-    text = "RELS ({},{},{},{})".format(*orders)
+def _label(orders: tuple[int, int, int, int], known: bool, method: str = "rels") -> str:
+    text = "{} ({},{},{},{})".format(method.upper(), *orders)
     return text + " behind the known generator and accelerometer coupling" if known else text
 
 
@@ -346,23 +348,25 @@ def _search(
 ) -> ModelCheck | None:
     """The simplest model that meets the acceptance, searching upwards from the paper's.
 
-    Candidates in order: for na = paper's order, then higher, RELS with nb = na − 1 and
-    the paper's nc and delay; for the acceleration loop each order is also tried behind
-    the loop's known factors (:mod:`ehss.identification.known`).
+    At each order na (from the paper's up to ``max_search_order``, nb = na − 1, the
+    paper's delay) the candidates are, in this order: RELS with the paper's nc; RML
+    (recursive maximum likelihood) with nc = na, which suits output-error records where
+    RELS is biased; and for the acceleration loop both again behind the loop's known
+    factors (:mod:`ehss.identification.known`).
     """
     na0, _, nc0, d0 = setup.orders
     num, den = known_factors(setup.loop, params)
     has_known = num.size > 1 or den.size > 1
     for na in range(na0, settings.max_search_order + 1):
-        orders = (na, na - 1, nc0, d0)
-        options = [False, True] if has_known else [False]
-        for known in options:
-            if na == na0 and not known:
-                continue  # the paper's own model, already checked
-            model = _identify(rec, orders, settings, (num, den) if known else None)
-            check = _check(_label(orders, known), model, rec)
-            if check.passes:
-                return check
+        for known in [False, True] if has_known else [False]:
+            for method, nc in (("rels", nc0), ("rml", na)):
+                if (na, known, method) == (na0, False, "rels"):
+                    continue  # the paper's own model, already checked
+                orders = (na, na - 1, nc, d0)
+                model = _identify(rec, orders, settings, (num, den) if known else None, method)
+                check = _check(_label(orders, known, method), model, rec)
+                if check.passes:
+                    return check
     return None
 
 
