@@ -76,7 +76,7 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
     mag_h1 = frf.magnitude_db[keep]
     ph_h1 = frf.phase_deg[keep]
     for ax, h1 in ((ax_m, mag_h1), (ax_p, ph_h1)):
-        ax.semilogx(f, np.where(good, h1, np.nan), ".", ms=3, color="C0",
+        ax.semilogx(f, np.where(good, h1, np.nan), ".", ms=3, color="C0", zorder=3,
                     label="H1 (Hann), γ² ≥ 0.9")
         ax.semilogx(f, np.where(good, np.nan, h1), ".", ms=2, color="0.75", label="H1, γ² < 0.9")
     for k, chk in enumerate(checks):
