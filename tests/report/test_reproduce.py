@@ -26,7 +26,7 @@ def report_dir(tmp_path_factory):
 
 @pytest.mark.slow
 def test_files_and_json_layout(report_dir):
-    for name in ("report.html", "report.md", "models.json", "summary.json",
+    for name in ("report.html", "report.md", "models.json", "best_models.json", "summary.json",
                  "fig12_steps.png", "fig13_position.png", "fig14_acceleration.png",
                  "fig15_force.png", "fig16_compensation_position.png",
                  "fig17_compensation_acceleration.png"):
@@ -37,9 +37,12 @@ def test_files_and_json_layout(report_dir):
         for key in ("a", "b", "c", "delay", "dt"):
             assert key in m
         assert m["a"][0] == 1.0 and m["dt"] == pytest.approx(1e-3)
+    best = json.loads((report_dir / "best_models.json").read_text())
     for loop in LOOPS:
         cols = read_columns(report_dir / "data" / f"{loop}.csv")
         assert list(cols)[:3] == ["t", "reference", "output"]
+        assert best[loop]["meets_acceptance"] is True
+        assert ArmaxModel.from_dict(best[loop]).is_stable()
     summary = json.loads((report_dir / "summary.json").read_text())
     assert summary["settings"]["seed"] == 3
     assert "numba" in summary["versions"] and "params" in summary

@@ -59,6 +59,14 @@ def _model_summary(model: ArmaxModel) -> dict[str, Any]:
     }
 
 
+def _model_entry(chk) -> dict[str, Any]:
+    """The model's JSON layout (``a``, ``b``, ``c``, ``delay``, ``dt``, ...) plus its verdict."""
+    entry = chk.model.to_dict()
+    entry["label"] = chk.label
+    entry["meets_acceptance"] = bool(chk.passes)
+    return entry
+
+
 def _check_summary(chk) -> dict[str, Any]:
     return {
         "label": chk.label,
@@ -327,7 +335,10 @@ def _markdown(result: ProgrammeResult, summary: dict[str, Any]) -> str:
         "",
         "## Files",
         "",
-        "- `models.json`: the three identified models (`a`, `b`, `c`, `delay`, `dt`, ...).",
+        "- `models.json`: the three models with the paper's structure (`a`, `b`, `c`, "
+        "`delay`, `dt`, ...); `best_models.json`: for each loop the model that meets the "
+        "acceptance (the paper's where it does). Both load with "
+        "`ehss.ArmaxModel.from_dict` and feed `ehss compensate`.",
         "- `data/position.csv`, `data/acceleration.csv`, `data/force.csv`: the records "
         "(`t, reference, output`, then the internal signals; SI units).",
         "- `summary.json`: every number quoted here, with the parameters and versions.",
@@ -444,8 +455,13 @@ def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
             (tmp / fname).write_bytes(data)
         for name, r in result.loops.items():
             write_csv(tmp / "data" / f"{name}.csv", r.sim.to_columns())
-        models = {name: r.paper.model.to_dict() for name, r in result.loops.items()}
+        models = {name: _model_entry(r.paper) for name, r in result.loops.items()}
         (tmp / "models.json").write_text(json.dumps(models, indent=2), encoding="utf-8")
+        best = {
+            name: _model_entry(r.paper if r.paper.passes or r.passing is None else r.passing)
+            for name, r in result.loops.items()
+        }
+        (tmp / "best_models.json").write_text(json.dumps(best, indent=2), encoding="utf-8")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
         (tmp / "report.md").write_text(md, encoding="utf-8")
         (tmp / "report.html").write_text(_html(md, figures), encoding="utf-8")
