@@ -146,7 +146,7 @@ def _model_block(title: str, m: ArmaxModel) -> list[str]:
         f"{title} (na={m.na}, nb={m.nb}, nc={m.nc}, delay={m.delay}), full precision:",
         "",
         "```",
-        f"G(z) = {m.format_paper()}",
+        m.format_paper(),
         "```",
         "",
         f"Poles: {', '.join(_cplx(p) for p in m.poles())}  ",
