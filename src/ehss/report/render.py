@@ -358,7 +358,8 @@ def _html(markdown_text: str, figures: dict[str, bytes]) -> str:
         "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;"
         "line-height:1.45;color:#222}table{border-collapse:collapse;margin:0.6em 0}"
         "td,th{border:1px solid #ccc;padding:3px 8px;text-align:left}th{background:#f3f3f3}"
-        "pre{background:#f6f6f6;padding:0.6em;overflow-x:auto}img{max-width:100%}"
+        "pre{background:#f6f6f6;padding:0.6em;white-space:pre-wrap;overflow-wrap:anywhere}"
+        "img{max-width:100%}"
         "code{background:#f6f6f6}",
         "</style></head><body>",
     ]
