@@ -112,3 +112,19 @@ def test_compensation_meets_its_targets(report_dir):
         assert c["max_abs_db_with"] <= 1.0
         assert c["max_abs_deg_with"] <= 5.0
         assert c["improvement"]["random"] >= 10.0
+
+
+@pytest.mark.slow
+def test_paper_preset_runs_and_reports_its_failures(tmp_path, capsys):
+    """Table 1/3 as printed: loops barely work, models fail; the report still says so."""
+    params = tmp_path / "paper.toml"
+    assert main(["params", "--preset", "paper", "--save", str(params)]) == 0
+    out = tmp_path / "r"
+    code = main(["reproduce", "--params", str(params), "--out", str(out), "--duration", "10",
+                 "--quiet"])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["params"]["name"] == "paper"
+    assert summary["params"]["load"]["mass_kg"] == 5000.0
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err

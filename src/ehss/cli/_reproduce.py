@@ -34,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
 
     from rich.console import Console
 
+    from ehss.cli._dataargs import report_warnings
     from ehss.errors import DataError
     from ehss.params import load_params, preset
     from ehss.report import ProgrammeSettings, run_programme, write_report
@@ -51,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
             console.log(msg)
             status.update(msg)
 
-        result = run_programme(params, settings, progress=progress)
+        with report_warnings("reproduce"):
+            result = run_programme(params, settings, progress=progress)
         status.update("writing the report")
         html_path = write_report(result, out)
     console.log(f"done in {time.perf_counter() - t0:.1f} s")

@@ -300,14 +300,21 @@ class _Record:
 def _check(label: str, model: ArmaxModel, rec: _Record) -> ModelCheck:
     # The model runs over the whole record from rest, so that the held-out part starts
     # from the state the estimation part left (no initial-condition transient).
-    yhat = model.simulate(rec.u)
     n = rec.n_ident
+    with np.errstate(over="ignore", invalid="ignore"):
+        yhat = model.simulate(rec.u)
+    if np.all(np.isfinite(yhat)):
+        fit = nrmse_fit(rec.y_band[n:], sosfiltfilt(rec.lowpass, yhat)[n:])
+        raw_fit = nrmse_fit(rec.y[n:], yhat[n:])
+    else:  # an unstable model's simulation diverges: no fit at all
+        fit = raw_fit = -math.inf
+        yhat = np.where(np.isfinite(yhat), yhat, np.nan)
     return ModelCheck(
         label=label,
         model=model,
         error=frf_error(model, rec.frf, band_hz=rec.band_hz, min_coherence=MIN_COHERENCE),
-        fit_pct=nrmse_fit(rec.y_band[n:], sosfiltfilt(rec.lowpass, yhat)[n:]),
-        raw_fit_pct=nrmse_fit(rec.y[n:], yhat[n:]),
+        fit_pct=fit,
+        raw_fit_pct=raw_fit,
         simulated=yhat + rec.output_mean,
     )
 
