@@ -50,6 +50,12 @@ with n = na + nb + 1 + nc and m = n rounded up to a multiple of 4. The padding r
 columns and entries are zero and stay zero (every update multiplies them by a zero
 of ψ̂ or g), so they change no result — adding 0.0 is exact — but every row is a whole
 number of 4-wide SIMD vectors and the row loops need no scalar remainder.
+
+Batch fusion: the batch loop knows u(k+1), so for RELS at λ = 1 the pass that writes
+P(k) in (22) also forms the next sample's g = P(k) ψ̂(k+1) (same sums, same order,
+same bits as forming it at the start of the next sample); P is then read once per
+sample instead of twice. The streaming step, RML and λ < 1 (whose diagonal floor
+changes P after the pass) form g at the start of each sample.
 """
 
 from __future__ import annotations
@@ -260,8 +266,38 @@ def _clear_rows(hf):
 
 
 @njit(cache=True, inline="always")
-def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
-    """One RELS or RML sample with the safeguards. Returns the a-priori error.
+def _push_u(ul, psi, u, na, nb, d):
+    """u delay line: ul[j] = u(k−j); ψ's u-part becomes u(k−d)..u(k−d−nb)."""
+    for j in range(ul.shape[0] - 1, 0, -1):
+        ul[j] = ul[j - 1]
+    ul[0] = u
+    for j in range(nb + 1):
+        psi[na + j] = ul[d + j]
+
+
+@njit(cache=True, inline="always")
+def _gain(P, r, g, n):
+    """g = P r for symmetric P (r zero beyond n): g_i = Σ_j P_ij r_j, j = 0..n−1 in order.
+
+    Written as g += P[j, :] r_j (rows of the symmetric P read as columns), so each g_i
+    still sums j = 0..n−1 left to right — the rounding of the plain dot product — while
+    the inner loop is element-wise over whole 4-wide vectors (P's rows are padded to a
+    multiple of 4) and vectorises. A dot-product inner loop is one serial add chain
+    that, without fastmath, cannot. Rows j ≥ n would only add P_ji · 0 and are skipped.
+    """
+    m = P.shape[1]
+    for i in range(m):
+        g[i] = 0.0
+    for j in range(n):
+        pj = r[j]
+        for i in range(m):
+            g[i] += P[j, i] * pj
+
+
+@njit(cache=True, inline="always")
+def _step(state, theta, P, psi, g, gn, ul, cw, hf, u, y, rml, pushed, g_ready, fuse,
+          u_next):
+    """One RELS or RML sample with the safeguards. Returns (e, next_g_ready).
 
     RELS: eqs (19)–(22). RML (``rml`` True; the callers pass
     ``state[H_METHOD] == METHOD_RML and nc > 0``, see :func:`_is_rml`): the same
@@ -271,6 +307,15 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
     (checked by the callers). The array arguments are the views returned by
     :func:`_views` (taken once per batch). The batch kernel passes ``rml`` as a
     constant, so each method compiles to its own loop and RELS keeps its speed.
+
+    Batch fusion (``fuse``, the batch loop knows u(k+1) = ``u_next``): the regressor
+    ψ̂(k+1) is complete before P(k) is formed, so the pass that writes P(k) also
+    accumulates ``gn`` = P(k) ψ̂(k+1), the next sample's g, column by column — the same
+    sums in the same order as :func:`_gain` (P is exactly symmetric), hence the same
+    bits — and P is read once per sample instead of twice. Returns True as the second
+    value when ``gn`` holds that product; the next call then gets ``pushed`` (ψ̂ already
+    holds u(k)) and ``g_ready`` (``g`` is P(k−1) ψ̂(k)). Used for RELS with λ = 1 and no
+    reset or trace scaling after the update (those change P after the pass).
     """
     na = int(state[H_NA])
     nb = int(state[H_NB])
@@ -278,14 +323,9 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
     d = int(state[H_DELAY])
     n = na + nb + 1 + nc
     m = P.shape[0]  # padded size, multiple of 4
-    nu = d + nb + 1
 
-    # u delay line: ul[j] = u(k−j); ψ's u-part is u(k−d)..u(k−d−nb)
-    for j in range(nu - 1, 0, -1):
-        ul[j] = ul[j - 1]
-    ul[0] = u
-    for j in range(nb + 1):
-        psi[na + j] = ul[d + j]
+    if not pushed:
+        _push_u(ul, psi, u, na, nb, d)
 
     # ŷ(k|k−1) = ψ̂ᵀ(k) θ̂(k−1);  e(k) = y(k) − ŷ  (the bracket of eq 20)
     yhat = 0.0
@@ -312,25 +352,18 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
     # ξ̂(k) of eq (19); equals e(k) whenever θ̂ is not updated (frozen or skipped)
     xi = e
     xi_direct = False
+    update = False
+    den = 1.0
+    lam = state[H_LAM]
 
     if state[H_ENABLED] != 0.0 and np.isfinite(e):
-        lam = state[H_LAM]
         alpha = state[H_ALPHA]
         alpha_c = state[H_ALPHA_C]
         nab = na + nb + 1
         # g = P(k−1) ψ̂(k), shared by (21) and (22);  s = ψ̂ᵀ P ψ̂
-        # Readable form: g_i = Σ_j P_ij ψ_j. Written as g += P[j, :] ψ_j (rows of the
-        # symmetric P read as columns), so each g_i still sums j = 0..m−1 in order —
-        # the rounding of the plain dot product — while the inner loop is element-wise
-        # over whole 4-wide vectors (m is a multiple of 4) and vectorises. A dot-product
-        # inner loop is one serial add chain that, without fastmath, cannot.
         # (RML: g = P(k−1) ψ_f(k), s = ψ_fᵀ P ψ_f; r is ψ_f)
-        for i in range(m):
-            g[i] = 0.0
-        for j in range(m):
-            pj = r[j]
-            for i in range(m):
-                g[i] += P[j, i] * pj
+        if not g_ready:
+            _gain(P, r, g, n)
         s = 0.0
         for i in range(n):
             s += r[i] * g[i]
@@ -347,6 +380,8 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
                 for i in range(m):
                     r[i] = psi[i]
             s = 0.0
+            for i in range(m):
+                g[i] = 0.0
             for i in range(n):
                 g[i] = P[i, i] * r[i]
                 s += r[i] * g[i]
@@ -358,6 +393,7 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
                 gmax = abs(g[i])
         if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
             inv_den = 1.0 / den
+            update = True
             # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
             # (RML: K = P ψ_f / (λ + ψ_fᵀ P ψ_f); θ̂(k) = θ̂(k−1) + K e, e with ψ̂)
             for i in range(n):
@@ -374,57 +410,8 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
                 # ξ̂(k) = e − (s/den) e = e λ/den (exact algebra; used unless C is
                 # projected)
                 xi = e * (lam * inv_den)
-            # (22) P(k) = [I − K ψ̂ᵀ] P(k−1) / λ  — textbook form, NOT used: rounding makes
-            # it drift from symmetry and, with λ < 1, diverge. Since K ψ̂ᵀ P = g gᵀ / den
-            # for symmetric P, we use the symmetric rank-1 form
-            #     P(k) = (P(k−1) − g gᵀ / den) / λ
-            # (RML: the same with g = P ψ_f, i.e. P(k) = [I − K ψ_fᵀ] P(k−1) / λ)
-            # computing each entry as (P_ij − (g_i g_j) · inv_den) · inv_lam. IEEE products
-            # commute, so entry (i, j) and (j, i) get bit-identical values: P stays exactly
-            # symmetric by construction (no separate symmetrisation pass needed), and the
-            # full-row loop vectorises, which is faster than a triangle + mirror.
-            inv_lam = 1.0 / lam
-            for i in range(m):
-                gi = g[i]
-                for j in range(m):
-                    P[i, j] = (P[i, j] - (gi * g[j]) * inv_den) * inv_lam
-            tr = 0.0
-            dmin = np.inf
-            for i in range(n):
-                pii = P[i, i]
-                tr += pii
-                if pii < dmin:
-                    dmin = pii
-            # floor (λ < 1 only): the rank-1 downdate cancels; its rounding error is
-            # about n·eps·‖P‖. With forgetting and poor excitation (long constant
-            # stretches) the unexcited directions of P grow to the trace bound while
-            # the excited one shrinks to ~(1−λ)/|ψ̂|², and that error makes the small
-            # eigenvalue slightly negative. δ = 8·n·eps·tr P on the diagonal keeps P
-            # positive definite; next to the forgetting it is negligible. At λ = 1, P
-            # only shrinks, rounding stays benign, and a floor proportional to the large
-            # early tr P would act like process noise and bias the LS limit, so none.
-            if lam < 1.0:
-                delta = EPS_FLOOR * n * tr
-                for i in range(n):
-                    P[i, i] += delta
-                tr += n * delta
-            # guard: a non-positive diagonal means P is no longer positive definite;
-            # a non-finite trace means overflow. Reset P = P(0) and keep θ̂
-            # (RML: and restart the filter 1/Ĉ from rest, ψ_f history = 0).
-            if not (dmin > 0.0 and np.isfinite(tr)):
-                _reset_P(P, n, nab, alpha, alpha_c)
-                state[H_RESETS] += 1.0
-                if rml:
-                    _clear_rows(hf)
-            elif tr > state[H_TRMAX]:
-                # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the
-                # unexcited directions ("wind-up"); scaling keeps tr P ≤ tr_max.
-                f = state[H_TRMAX] / tr
-                for i in range(m):
-                    for j in range(m):
-                        P[i, j] *= f
-                state[H_TRSCALE] += 1.0
             # keep C(q⁻¹) stable (inside c_radius), else ξ̂ feedback can blow up
+            # (reads θ̂ only, so it may precede the P update of (22))
             if nc > 0:
                 c = theta[o:n]
                 if not _c_within(c, nc, state[H_CRADIUS], cw):
@@ -448,14 +435,19 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
     state[H_XI] = xi
     # running innovation variance: mean of ξ̂² over the last min(k, 1/(1−λ)) samples
     cnt = state[H_COUNT]
-    lam = state[H_LAM]
     if lam < 1.0 and cnt * (1.0 - lam) > 1.0:
         cnt = 1.0 / (1.0 - lam)
     nv = state[H_NV] + (xi * xi - state[H_NV]) / cnt
     if np.isfinite(nv):
         state[H_NV] = nv
 
-    # shift the regressor for k+1: y-part gets −y(k), c-part gets ξ̂(k)
+    # shift the regressor for k+1: y-part gets −y(k), c-part gets ξ̂(k); ψ̂(k) itself
+    # is still needed by RML's history below and by nothing else
+    if rml:
+        # RML: ψ_f(k) becomes ψ_f((k+1)−1): shift the filtered-regressor history
+        for j in range(nc, 0, -1):
+            for i in range(m):
+                hf[j, i] = hf[j - 1, i]
     for i in range(na - 1, 0, -1):
         psi[i] = psi[i - 1]
     psi[0] = -y
@@ -463,14 +455,86 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
         psi[o + i] = psi[o + i - 1]
     if nc > 0:
         psi[o] = xi
-    # RML: ψ_f(k) becomes ψ_f((k+1)−1): shift the filtered-regressor history
-    if rml:
-        for j in range(nc, 0, -1):
-            for i in range(m):
-                hf[j, i] = hf[j - 1, i]
+    if fuse:
+        _push_u(ul, psi, u_next, na, nb, d)
+
+    ready = False
+    if update:
+        inv_den = 1.0 / den
+        # (22) P(k) = [I − K ψ̂ᵀ] P(k−1) / λ  — textbook form, NOT used: rounding makes
+        # it drift from symmetry and, with λ < 1, diverge. Since K ψ̂ᵀ P = g gᵀ / den
+        # for symmetric P, we use the symmetric rank-1 form
+        #     P(k) = (P(k−1) − g gᵀ / den) / λ
+        # (RML: the same with g = P ψ_f, i.e. P(k) = [I − K ψ_fᵀ] P(k−1) / λ)
+        # computing each entry as (P_ij − (g_i g_j) · inv_den) · inv_lam. IEEE products
+        # commute, so entry (i, j) and (j, i) get bit-identical values: P stays exactly
+        # symmetric by construction (no separate symmetrisation pass needed), and the
+        # full-row loop vectorises, which is faster than a triangle + mirror. Rows
+        # i ≥ n are zero (g_i = 0) and stay so; at λ = 1 the exact ·1 is left out.
+        if fuse and not rml and lam == 1.0:
+            # the same pass accumulates gn = P(k) ψ̂(k+1) (see the docstring)
+            for j in range(m):
+                gn[j] = 0.0
+            for i in range(n):
+                gi = g[i]
+                pi = psi[i]
+                for j in range(m):
+                    v = P[i, j] - (gi * g[j]) * inv_den
+                    P[i, j] = v
+                    gn[j] += v * pi
+            ready = True
+        elif lam == 1.0:
+            for i in range(n):
+                gi = g[i]
+                for j in range(m):
+                    P[i, j] = P[i, j] - (gi * g[j]) * inv_den
+        else:
+            inv_lam = 1.0 / lam
+            for i in range(n):
+                gi = g[i]
+                for j in range(m):
+                    P[i, j] = (P[i, j] - (gi * g[j]) * inv_den) * inv_lam
+        tr = 0.0
+        dmin = np.inf
+        for i in range(n):
+            pii = P[i, i]
+            tr += pii
+            if pii < dmin:
+                dmin = pii
+        # floor (λ < 1 only): the rank-1 downdate cancels; its rounding error is
+        # about n·eps·‖P‖. With forgetting and poor excitation (long constant
+        # stretches) the unexcited directions of P grow to the trace bound while
+        # the excited one shrinks to ~(1−λ)/|ψ̂|², and that error makes the small
+        # eigenvalue slightly negative. δ = 8·n·eps·tr P on the diagonal keeps P
+        # positive definite; next to the forgetting it is negligible. At λ = 1, P
+        # only shrinks, rounding stays benign, and a floor proportional to the large
+        # early tr P would act like process noise and bias the LS limit, so none.
+        if lam < 1.0:
+            delta = EPS_FLOOR * n * tr
+            for i in range(n):
+                P[i, i] += delta
+            tr += n * delta
+        # guard: a non-positive diagonal means P is no longer positive definite;
+        # a non-finite trace means overflow. Reset P = P(0) and keep θ̂
+        # (RML: and restart the filter 1/Ĉ from rest, ψ_f history = 0).
+        if not (dmin > 0.0 and np.isfinite(tr)):
+            _reset_P(P, n, na + nb + 1, state[H_ALPHA], state[H_ALPHA_C])
+            state[H_RESETS] += 1.0
+            ready = False
+            if rml:
+                _clear_rows(hf)
+        elif tr > state[H_TRMAX]:
+            # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the
+            # unexcited directions ("wind-up"); scaling keeps tr P ≤ tr_max.
+            f = state[H_TRMAX] / tr
+            for i in range(n):
+                for j in range(m):
+                    P[i, j] *= f
+            state[H_TRSCALE] += 1.0
+            ready = False
     if not np.isfinite(e):
         e = 0.0
-    return e
+    return e, ready
 
 
 @njit(cache=True, inline="always")
@@ -485,12 +549,26 @@ def _run(state, u, y, err, xi_out, hist, hist_every, rml):
     theta, P, psi, g, ul, cw = _views(state)
     # the RELS loop gets P in place of the (unused) RML rows: no extra live array
     hf = _hf_view(state) if rml else P
+    m = P.shape[0]
+    # two g buffers: the fused pass of sample k writes the next g into the other one
+    ga = np.zeros(m)
+    gb = np.zeros(m)
     n = hist.shape[1]
     nh = hist.shape[0]
+    N = u.shape[0]
     r = 0
     c = 0
-    for k in range(u.shape[0]):
-        err[k] = _step(state, theta, P, psi, g, ul, cw, hf, u[k], y[k], rml)
+    pushed = False
+    ready = False
+    for k in range(N):
+        fuse = k + 1 < N
+        un = u[k + 1] if fuse else 0.0
+        e, ready = _step(state, theta, P, psi, ga, gb, ul, cw, hf, u[k], y[k], rml,
+                         pushed, ready, fuse, un)
+        pushed = fuse
+        if ready:
+            ga, gb = gb, ga
+        err[k] = e
         xi_out[k] = state[H_XI]
         c += 1
         if c == hist_every:
@@ -531,4 +609,5 @@ def rels_step(state, u, y):
     if not (np.isfinite(u) and np.isfinite(y)):
         return np.nan
     theta, P, psi, g, ul, cw = _views(state)
-    return _step(state, theta, P, psi, g, ul, cw, _hf_view(state), u, y, _is_rml(state))
+    return _step(state, theta, P, psi, g, g, ul, cw, _hf_view(state), u, y,
+                 _is_rml(state), False, False, False, 0.0)[0]
