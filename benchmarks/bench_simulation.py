@@ -70,9 +70,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--markdown", metavar="FILE", help="also write the table as markdown")
     args = ap.parse_args(argv)
 
+    import control
     import numba
 
-    import control
     from ehss.params import preset
     from ehss.simulation import simulate
 
