@@ -123,3 +123,45 @@ def test_model_with_known_factors_needs_band_and_inverts_them(tmp_path, capsys):
     y = scipy.signal.lfilter(num, den, rest.simulate(drive))
     # Exact in band up to rounding near F's roots at z ≈ 0.997 (see test_inverse).
     assert_allclose(y, r, rtol=0, atol=1e-8)
+
+
+def test_drive_file_iteration_from_a_run(tmp_path, reference, capsys):
+    """u+ = u + L F (r − y): with a plant 10 % weaker than the model, the correction after
+    one run is exactly L F (r − y) (checked sample by sample), and for L = 1 the next
+    run's error is 10 % of the previous one (the plant is the model scaled by 0.9)."""
+    model = _write_model(tmp_path / "m.json")
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    d0 = tmp_path / "d0.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(d0)]) == 0
+    u0 = read_columns(d0)["drive"]
+    a, b = [1.0, -1.5, 0.7], [0.0, 0.0, 0.1, 0.05]  # delay 2 as leading zeros
+
+    def plant(u):
+        return 0.9 * scipy.signal.lfilter(b, a, u)
+
+    y0 = plant(u0)
+    run = tmp_path / "run0.csv"
+    write_csv(run, {"t": np.arange(u0.size) * DT, "reference": u0, "output": y0})
+    d1 = tmp_path / "d1.csv"
+    assert main(["compensate", str(model), str(ref), "--update", str(run), "--out",
+                 str(d1)]) == 0
+    assert "RMS tracking error" in capsys.readouterr().out
+    u1 = read_columns(d1)["drive"]
+    e0 = reference - y0
+    e1 = reference - plant(u1)
+    # Linear plant, exact inverse: the error contracts by |1 − 0.9| = 0.1 (rounding only).
+    assert_allclose(e1[50:-50], 0.1 * e0[50:-50], rtol=0, atol=1e-9 * np.max(np.abs(e0)))
+    side = json.loads(d1.with_suffix(".json").read_text())
+    assert side["update"]["gain"] == 1.0
+
+
+def test_drive_file_iteration_rejects_other_rates(tmp_path, reference, capsys):
+    model = _write_model(tmp_path / "m.json")
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    run = tmp_path / "run.csv"
+    write_csv(run, {"t": np.arange(reference.size) * 2 * DT, "reference": reference,
+                    "output": reference})
+    out = tmp_path / "d.csv"
+    assert main(["compensate", str(model), str(ref), "--update", str(run), "--out",
+                 str(out)]) == 2
+    assert "sampled at 500 Hz" in capsys.readouterr().err and not out.exists()

@@ -32,6 +32,23 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "for models identified behind known factors, e.g. the acceleration loop)")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate if the file has no time column t")
+    it = p.add_argument_group(
+        "drive-file iteration",
+        "Correct the drive of a previous run from what the rig did: "
+        "u+ = u + L F (r - y), F the inverse of the model (re-identified from the run "
+        "with --reidentify). A run file from `ehss simulate --reference DRIVE.csv --column "
+        "drive` has the played drive in `reference` and the measurement in `output`.",
+    )
+    it.add_argument("--update", metavar="RUN.csv",
+                    help="record of the previous run (played drive and measured output)")
+    it.add_argument("--drive-column", default="reference",
+                    help="played drive column in RUN.csv (default: %(default)s)")
+    it.add_argument("--output-column", default="output",
+                    help="measured output column in RUN.csv (default: %(default)s)")
+    it.add_argument("--gain", type=float, default=1.0, metavar="L",
+                    help="learning gain L in (0, 2) (default: %(default)s)")
+    it.add_argument("--reidentify", action="store_true",
+                    help="re-identify the loop from the run before inverting it")
     p.set_defaults(func=run)
 
     d = sub.add_parser(
@@ -64,8 +81,26 @@ def run(args: argparse.Namespace) -> int:
     table = read_columns(args.reference, [args.column])
     fs = sample_rate(table, args.fs)
     r = table[args.column]
-    drive = compensate(model, r, method=args.method,
-                       band_hz=None if args.band is None else tuple(args.band), fs=fs)
+    band = None if args.band is None else tuple(args.band)
+    extra = {}
+    if args.update is None:
+        drive = compensate(model, r, method=args.method, band_hz=band, fs=fs)
+    else:
+        from ehss.compensation import update_drive
+
+        run_table = read_columns(args.update, [args.drive_column, args.output_column])
+        run_fs = sample_rate(run_table, args.fs)
+        if abs(run_fs - fs) > 1e-9 * fs:
+            raise DataError(f"{args.update!r} is sampled at {run_fs:g} Hz, the reference at "
+                            f"{fs:g} Hz")
+        step = update_drive(model, r, run_table[args.drive_column],
+                            run_table[args.output_column], method=args.method, band_hz=band,
+                            learning_gain=args.gain, reidentify=args.reidentify)
+        drive = step.drive
+        extra = {"update": {"run": str(args.update), "gain": args.gain,
+                            "reidentify": args.reidentify,
+                            "rms_error_of_run": step.rms_error}}
+        print(f"previous run: RMS tracking error {step.rms_error:.6g}")
     t = table.time if table.time is not None else np.arange(r.size) / fs
     if not np.all(np.isfinite(drive)):
         raise DataError("the compensated drive is not finite (badly conditioned model?)")
@@ -79,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         "band_hz": None if args.band is None else list(args.band),
         "units": "drive and reference in the units of the model's input",
         "versions": versions(),
+        **extra,
     }
     write_outputs({out: lambda tmp: write_csv(tmp, {"t": t, "reference": r, "drive": drive}),
                    out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})

@@ -13,7 +13,7 @@ from ehss.compensation.inverse import (
     zmetc_phase,
     zpetc_magnitude,
 )
-from ehss.compensation.refine import RefineResult, refine
+from ehss.compensation.refine import DriveUpdate, RefineResult, refine, update_drive
 
 __all__ = [
     "compensate",
@@ -23,6 +23,8 @@ __all__ = [
     "write_demo_report",
     "RefineResult",
     "refine",
+    "DriveUpdate",
+    "update_drive",
     "reference_rate",
     "METHODS",
     "InverseModel",

@@ -32,7 +32,7 @@ import scipy.signal
 from ehss.compensation.inverse import InverseModel, _as_reference, design_inverse
 from ehss.errors import ParameterError
 
-__all__ = ["RefineResult", "refine", "rms"]
+__all__ = ["RefineResult", "refine", "rms", "DriveUpdate", "update_drive"]
 
 
 def rms(x: np.ndarray) -> float:
@@ -116,7 +116,6 @@ def refine(
     -------
     RefineResult
     """
-    from ehss.identification.rels import rels
     from ehss.simulation import simulate
 
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
@@ -153,25 +152,99 @@ def refine(
         errors.append(rms(y - r))
         if k == iterations:
             break
-        if reidentify:
-            current = models[-1]
-            u_id = drive if known is None else scipy.signal.lfilter(known[0], known[1], drive)
-            try:
-                new = rels(u_id, y, na=na, nb=nb,
-                           nc=current.nc if nc is None else nc, delay=current.delay,
-                           dt=current.dt)
-                inverse = design_inverse(new, method=method, band_hz=band_hz, known=known)
-                models.append(new)
-                inverses.append(inverse)
-            except ParameterError:
-                # An unusable re-identification (e.g. unstable): keep the previous inverse.
-                models.append(current)
-                inverses.append(inverse)
-        # u_{k+1} = u_k + L F_k (r - y_k)
-        drive = drive + learning_gain * inverse.apply(r - y)
+        step = update_drive(
+            models[-1], r, drive, y, inverse=inverse, method=method, band_hz=band_hz,
+            learning_gain=learning_gain, reidentify=reidentify, nc=nc, known=known,
+            orders=(na, nb),
+        )
+        drive, inverse = step.drive, step.inverse
+        models.append(step.model)
+        inverses.append(inverse)
     best = int(np.argmin(errors))
     return RefineResult(drive=drives[best], drives=drives, outputs=outputs,
                         rms_error=np.asarray(errors), models=models, inverses=inverses)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriveUpdate:
+    """One learning update of a drive file (see :func:`update_drive`)."""
+
+    drive: np.ndarray
+    model: Any
+    inverse: InverseModel
+    rms_error: float
+
+
+def update_drive(
+    model: Any,
+    reference: Any,
+    drive: Any,
+    output: Any,
+    *,
+    inverse: InverseModel | None = None,
+    method: str = "zpetc",
+    band_hz: tuple[float, float] | None = None,
+    learning_gain: float = 1.0,
+    reidentify: bool = False,
+    nc: int | None = None,
+    known: tuple[Any, Any] | None = None,
+    orders: tuple[int, int] | None = None,
+) -> DriveUpdate:
+    """One drive-file iteration from a measured run: u⁺ = u + L F (r − y).
+
+    This is the step a rig user takes between test runs: play ``drive``, record
+    ``output``, then correct the drive with the inverse ``F`` of the closed-loop model —
+    of ``model``, or, with ``reidentify``, of a model re-identified (RELS, the model's
+    orders and delay) from this run's drive → output.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+        Closed-loop model (reference → output).
+    reference, drive, output : array_like, shape (n_samples,)
+        Desired output, the drive that was played, and the measured output.
+    inverse : InverseModel, optional
+        The inverse of ``model`` if already designed.
+    learning_gain : float
+        ``L`` in (0, 2).
+
+    Returns
+    -------
+    DriveUpdate
+        The next drive, the model and inverse used, and the RMS error of this run.
+    """
+    from ehss.identification.rels import rels
+
+    if not 0.0 < learning_gain < 2.0:
+        raise ParameterError(f"learning_gain={learning_gain!r} must be in (0, 2)")
+    r = _as_reference(reference)
+    u = _as_reference(drive)
+    y = _as_reference(output)
+    if not r.size == u.size == y.size:
+        raise ParameterError(
+            f"reference, drive and output must have the same length, got {r.size}, "
+            f"{u.size} and {y.size}"
+        )
+    if inverse is None:
+        inverse = design_inverse(model, method=method, band_hz=band_hz, known=known)
+    if inverse.has_known:
+        known = (inverse.known_num, inverse.known_den)
+    used = model
+    if reidentify:
+        na, nb = (model.na, model.nb) if orders is None else orders
+        if orders is None and known is not None and _composed(model, known):
+            na, nb = na - (known[1].size - 1), nb - (known[0].size - 1)
+        u_id = u if known is None else scipy.signal.lfilter(known[0], known[1], u)
+        try:
+            new = rels(u_id, y, na=na, nb=nb, nc=model.nc if nc is None else nc,
+                       delay=model.delay, dt=model.dt)
+            inverse = design_inverse(new, method=method, band_hz=band_hz, known=known)
+            used = new
+        except ParameterError:
+            pass  # an unusable re-identification (e.g. unstable): keep the inverse
+    # u_{k+1} = u_k + L F_k (r - y_k)
+    new_drive = u + learning_gain * inverse.apply(r - y)
+    return DriveUpdate(drive=new_drive, model=used, inverse=inverse, rms_error=rms(y - r))
 
 
 def _composed(model: Any, known: tuple[np.ndarray, np.ndarray]) -> bool:
