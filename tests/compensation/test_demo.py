@@ -7,6 +7,7 @@ import pytest
 
 from ehss.cli import main
 from ehss.compensation import demonstrate, plot_demo
+from ehss.simulation import simulate
 
 
 @pytest.fixture(scope="module")
@@ -36,11 +37,16 @@ def test_acceleration_loop_within_1db_5deg_and_10x():
     assert d.improvement["random"] >= 10.0
     assert d.max_abs_deg_without > 5.0
     # The model alone does it: the one-shot inverse already reduces the random error
-    # ≥ 10× (measured 11.6-13.8× over seeds 0-4), and the drive-file iteration only
-    # lowers it further, run after run.
+    # ≥ 10× (measured ~10× over seeds 0-3 with tests inside the rig's limits), and the
+    # drive-file iteration lowers it run after run until the sensor-noise floor: the
+    # loop's output noise with a zero reference (~0.019 m/s² RMS); within 20 % of that
+    # floor the next run may be no better.
     assert d.rms_error_without["random"] / d.one_shot_rms_error["random"] >= 10.0
+    zero = simulate("acceleration", np.zeros(8000), seed=1).output[1000:]
+    floor = float(np.sqrt(np.mean(zero**2)))
     for history in d.refine_rms_error.values():
-        assert np.all(np.diff(history) < 0)
+        assert np.all((np.diff(history) < 0) | (history[1:] < 1.2 * floor))
+        assert history[-1] < 1.2 * floor or history[-1] < history[0]
     # The complete model carries its known factors, so its JSON is self-contained.
     assert "known_factors" in d.model.meta
     assert d.inverse.has_known
