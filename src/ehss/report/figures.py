@@ -42,61 +42,49 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
     """Figs 13–15: (a) time response, (b) magnitude and (c) phase of the models vs H1.
 
     The paper-order model is drawn, and, when it fails the acceptance, the simplest model
-    that meets it.
+    that meets it. The Bode panels are :func:`ehss.plots.bode_compare`'s.
     """
+    from ehss.plots import bode_compare, time_compare
+
     label, unit, scale = LOOP_UNITS[res.setup.loop]
     checks = [res.paper] + ([res.passing] if res.passing is not None else [])
-    fig = Figure(figsize=(11, 7.5), layout="constrained")
-    gs = fig.add_gridspec(2, 2)
+    fig = Figure(figsize=(11, 8.5), layout="constrained")
+    gs = fig.add_gridspec(3, 2, height_ratios=[3, 3, 1.2])
     ax_t = fig.add_subplot(gs[0, :])
     ax_m = fig.add_subplot(gs[1, 0])
-    ax_p = fig.add_subplot(gs[1, 1])
+    ax_p = fig.add_subplot(gs[1, 1], sharex=ax_m)
+    ax_c = fig.add_subplot(gs[2, :])
 
     sim = res.sim
     fs = res.frf.fs
     i0 = res.n_ident
     i1 = min(sim.t.size, i0 + int(round(window_s * fs)))
-    t = sim.t[i0:i1]
-    ax_t.plot(t, sim.reference[i0:i1] * scale, color="0.6", lw=0.8, label="reference")
-    ax_t.plot(t, sim.output[i0:i1] * scale, lw=1.2, label="measured")
-    for k, chk in enumerate(checks):
-        ax_t.plot(t, chk.simulated[i0:i1] * scale, "--", lw=1.2, color=f"C{k + 1}",
-                  label=f"{chk.label}: fit {chk.fit_pct:.1f} %")
-    ax_t.set_xlabel("time (s)")
-    ax_t.set_ylabel(f"{label} ({unit})")
-    ax_t.set_title("(a) time response on held-out data", fontsize=10)
+    window = (sim.t[i0], sim.t[i1 - 1])
+    ax_t.plot(sim.t[i0:i1], sim.reference[i0:i1] * scale, color="0.7", lw=0.8,
+              label="reference")
+    time_compare(
+        sim.t,
+        sim.output * scale,
+        {f"{c.label}: fit {c.fit_pct:.1f} %": c.simulated * scale for c in checks},
+        window_s=window,
+        ylabel=f"{label} ({unit})",
+        title="(a) time response on held-out data",
+        ax=ax_t,
+    )
     ax_t.legend(fontsize=8, loc="upper right")
-    ax_t.grid(True, alpha=0.3)
 
-    frf = res.frf
-    lo, hi = res.paper.error.band_hz
-    keep = (frf.freq_hz > 0) & (frf.freq_hz <= hi)
-    f = frf.freq_hz[keep]
-    good = frf.coherence[keep] >= 0.9
-    mag_h1 = frf.magnitude_db[keep]
-    ph_h1 = frf.phase_deg[keep]
-    for ax, h1 in ((ax_m, mag_h1), (ax_p, ph_h1)):
-        ax.semilogx(f, np.where(good, h1, np.nan), ".", ms=3, color="C0", zorder=3,
-                    label="H1 (Hann), γ² ≥ 0.9")
-        ax.semilogx(f, np.where(good, np.nan, h1), ".", ms=2, color="0.75", label="H1, γ² < 0.9")
-    for k, chk in enumerate(checks):
-        g = chk.model.frequency_response(f)
-        ph = np.degrees(np.unwrap(np.angle(g)))
-        if np.any(good):  # align the unwrapped phase with H1's at the first good point
-            j = int(np.flatnonzero(good)[0])
-            ph += 360.0 * np.round((ph_h1[j] - ph[j]) / 360.0)
-        e = chk.error
-        tag = f"{chk.label}: {e.max_magnitude_db:.2f} dB, {e.max_phase_deg:.1f}°"
-        ax_m.semilogx(f, 20 * np.log10(np.abs(g)), lw=1.4, color=f"C{k + 1}", label=tag)
-        ax_p.semilogx(f, ph, lw=1.4, color=f"C{k + 1}")
-    for ax, ylabel in ((ax_m, "magnitude (dB)"), (ax_p, "phase (deg)")):
-        ax.axvspan(lo, hi, color="C2", alpha=0.06)
-        ax.set_xlabel("frequency (Hz)")
-        ax.set_ylabel(ylabel)
-        ax.grid(True, which="both", alpha=0.3)
+    band = res.paper.error.band_hz
+    models = {
+        f"{c.label}: {c.error.max_magnitude_db:.2f} dB, {c.error.max_phase_deg:.1f}°": c.model
+        for c in checks
+    }
+    # Above the band the reference has no content and H1 means nothing: stop there.
+    bode_compare(res.frf.band(0.0, band[1]), models, band_hz=band, axes=(ax_m, ax_p, ax_c))
     ax_m.set_title("(b) magnitude (max errors where γ² ≥ 0.9)", fontsize=10)
     ax_p.set_title("(c) phase", fontsize=10)
     ax_m.legend(fontsize=7, loc="lower left")
+    ax_p.set_xlabel("frequency (Hz)")
+    ax_m.set_xlabel("frequency (Hz)")
     fig.suptitle(title)
     return fig
 
