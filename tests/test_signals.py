@@ -223,3 +223,20 @@ def test_random_signals_respect_peak(lo, width, peak, seed):
 def test_sine_bounds(amp, off, f):
     s = sg.sine(amp, f, duration_s=0.5, fs=FS, offset=off, ramp_s=0.05)
     assert np.all(np.abs(s.values - off) <= abs(amp) * (1 + 1e-12))
+
+
+def test_records_longer_than_the_limit_are_refused():
+    from ehss.signals import MAX_SAMPLES, sine
+
+    with pytest.raises(ParameterError, match="at most 20000000"):
+        sine(1.0, 5.0, duration_s=(MAX_SAMPLES + 10) / 1000.0, fs=1000.0)
+
+
+def test_cli_refuses_an_impossible_duration(tmp_path, capsys):
+    from ehss.cli import main
+
+    out = tmp_path / "x.csv"
+    code = main(["simulate", "--loop", "position", "--signal", "sine", "--amplitude", "1e-3",
+                 "--freq", "5", "--duration", "1e9", "--out", str(out)])
+    assert code == 2 and not out.exists()
+    assert capsys.readouterr().err.count("\n") == 1

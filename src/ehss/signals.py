@@ -36,6 +36,7 @@ __all__ = [
     "with_fade",
     "check_feasible",
     "STROKE_MARGIN",
+    "MAX_SAMPLES",
 ]
 
 #: Fraction of the half stroke a position or implied displacement may use.
@@ -108,12 +109,22 @@ def _positive(name: str, value: Any) -> float:
     return v
 
 
+#: Longest record a generator makes: 2e7 samples (5.5 h at 1 kHz). A closed-loop
+#: simulation keeps about 25 columns of it, some 4 GB, within this machine class's memory.
+MAX_SAMPLES = 20_000_000
+
+
 def _n_samples(duration_s: float, fs: float) -> int:
     _positive("duration_s", duration_s)
     _positive("fs", fs)
     n = int(round(duration_s * fs))
     if n < 2:
         raise ParameterError(f"duration_s={duration_s!r} must give at least 2 samples at fs={fs!r}")
+    if n > MAX_SAMPLES:
+        raise ParameterError(
+            f"duration_s={duration_s!r} at fs={fs!r} gives {n} samples; at most "
+            f"{MAX_SAMPLES} are allowed (split the test into shorter records)"
+        )
     return n
 
 

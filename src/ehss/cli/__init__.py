@@ -77,6 +77,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except EhssError as exc:
         print(f"ehss {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    except MemoryError:
+        print(f"ehss {args.command}: error: not enough memory for this job (shorten the "
+              "record or lower the sample rate)", file=sys.stderr)
+        return EXIT_FAILURE
     except KeyboardInterrupt:
         print(f"ehss {args.command}: interrupted", file=sys.stderr)
         return 130
