@@ -333,16 +333,10 @@ def position_closed_loop(params: RigParams, *, discrete: bool = False, exact: bo
         Continuous model only: use the exact plant cubic (see :func:`position_open_loop`).
     """
     g = params.position
+    gains = (g.kp_v_per_m, g.ki_v_per_m_per_s, g.kd_v_s_per_m, g.derivative_filter_hz)
     if discrete:
-        ce, cfb = _pid_discrete(
-            g.kp_v_per_m, g.ki_v_per_m_per_s, g.kd_v_s_per_m, g.derivative_filter_hz,
-            params.timing.dt_s,
-        )
-        plant = _sampled_plant(params, "position")
-        return ct.feedback(plant, cfb) * ce
-    n_p, d_p = _with_valve(params, *_position_plant(params, exact))
-    return _closed(n_p, d_p, *_pid_polys(
-        g.kp_v_per_m, g.ki_v_per_m_per_s, g.kd_v_s_per_m, g.derivative_filter_hz))
+        return _pid_loop_discrete(params, "position", gains)
+    return _closed(*_with_valve(params, *_position_plant(params, exact)), *_pid_polys(*gains))
 
 
 def force_closed_loop(params: RigParams, *, discrete: bool = False):
@@ -352,16 +346,17 @@ def force_closed_loop(params: RigParams, *, discrete: bool = False):
     :func:`position_closed_loop` for ``discrete``.
     """
     g = params.force
+    gains = (g.kp_v_per_n, g.ki_v_per_n_per_s, g.kd_v_s_per_n, g.derivative_filter_hz)
     if discrete:
-        ce, cfb = _pid_discrete(
-            g.kp_v_per_n, g.ki_v_per_n_per_s, g.kd_v_s_per_n, g.derivative_filter_hz,
-            params.timing.dt_s,
-        )
-        plant = _sampled_plant(params, "force")
-        return ct.feedback(plant, cfb) * ce
-    n_p, d_p = _with_valve(params, *_force_plant(params))
-    return _closed(n_p, d_p, *_pid_polys(
-        g.kp_v_per_n, g.ki_v_per_n_per_s, g.kd_v_s_per_n, g.derivative_filter_hz))
+        return _pid_loop_discrete(params, "force", gains)
+    return _closed(*_with_valve(params, *_force_plant(params)), *_pid_polys(*gains))
+
+
+def _pid_loop_discrete(params: RigParams, loop: str, gains: tuple[float, float, float, float]):
+    """Sampled PID loop: the controller's error path ``ce`` closed around the plant by its
+    derivative-on-measurement path ``cfb`` (ZOH, delay and valve in the plant)."""
+    ce, cfb = _pid_discrete(*gains, params.timing.dt_s)
+    return ct.feedback(_sampled_plant(params, loop), cfb) * ce
 
 
 def acceleration_closed_loop(
