@@ -145,4 +145,6 @@ def test_schur_cohn_matches_roots(c):
     c = np.array(c)
     for radius in (0.99, 0.9, 0.5):
         expect = np.max(np.abs(np.roots(np.r_[1.0, c]))) < radius
-        assert K._c_within(c, c.size, radius, np.zeros(c.size + 1)) == expect
+        # the coefficients sit at an offset inside θ̂ (here after two other entries)
+        theta = np.r_[7.0, -7.0, c]
+        assert K._c_within(theta, 2, c.size, radius, np.zeros(c.size + 1)) == expect

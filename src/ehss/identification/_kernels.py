@@ -13,9 +13,11 @@ Two estimators share one compiled step (:func:`_step`), selected by ``state[H_ME
   for output-error records (C ≈ A with lightly damped roots).
 
 The whole estimator state lives in **one** contiguous float64 buffer so that the
-streaming wrapper pays the Python→numba dispatch cost for a single array per sample,
-and so that the batch kernel and the streaming step run literally the same code
-(:func:`_step`). The kernels do no validation; :mod:`ehss.identification.rels` does.
+streaming wrapper pays the Python→numba dispatch cost for a single array per sample.
+The streaming step and the RML batch run :func:`_step`; the RELS batch runs the same
+sequence of operations in :func:`_rels_batch` (counters in locals, next gain fused
+into the P update), held to the same bits by the tests. The kernels do no validation;
+:mod:`ehss.identification.rels` does.
 
 Symbol table (paper → code)
 ---------------------------
@@ -51,17 +53,22 @@ columns and entries are zero and stay zero (every update multiplies them by a ze
 of ψ̂ or g), so they change no result — adding 0.0 is exact — but every row is a whole
 number of 4-wide SIMD vectors and the row loops need no scalar remainder.
 
-Batch fusion: the batch loop knows u(k+1), so for RELS at λ = 1 the pass that writes
-P(k) in (22) also forms the next sample's g = P(k) ψ̂(k+1) (same sums, same order,
-same bits as forming it at the start of the next sample); P is then read once per
-sample instead of twice. The streaming step, RML and λ < 1 (whose diagonal floor
-changes P after the pass) form g at the start of each sample.
+The P update (22) is the symmetric rank-1 form P ← (P − g gᵀ/den)/λ with g = P ψ̂,
+den = λ + ψ̂ᵀPψ̂, run by 4-wide kernels in :mod:`._simd` (plain loops beyond
+SIMD_MAX, same arithmetic). Batch fusion: the batch loop knows u(k+1), so for RELS at
+λ = 1 the pass that writes P(k) also forms the next sample's g = P(k) ψ̂(k+1) in
+vector registers (same sums, same order, same bits as forming it at the start of the
+next sample); P is then read once per sample instead of twice. The streaming step,
+RML and λ < 1 (whose diagonal floor changes P after the pass) form g at the start of
+each sample.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from ehss.identification._simd import SIMD_MAX, downdate, downdate_gain
 
 __all__: list[str] = []  # private module: the public API is in rels.py
 
@@ -127,20 +134,21 @@ def state_views(state: np.ndarray) -> tuple[np.ndarray, ...]:
     return theta, P, psi, g, ul, cw, hf
 
 
-@njit(cache=True)
-def _c_within(c, nc, radius, cw):
+@njit(cache=True, inline="always")
+def _c_within(c, o, nc, radius, cw):
     """True if all roots of z^nc + c1 z^(nc−1) + … + c_nc lie strictly inside ``radius``.
 
     Cheap sufficient test first (Rouché: Σ|c_i| r^−i < 1 ⇒ stable), then the exact
     Schur–Cohn step-down (reflection coefficients |k_m| < 1) on q_i = c_i r^−i, which is
-    O(nc²) and allocation free. ``c`` is the c-part of θ (length nc), ``cw`` work (nc+1).
+    O(nc²) and allocation free. The coefficients are c[o:o+nc] (θ̂ and the offset of
+    its c-part, so no slice is made per sample); ``cw`` is work (nc+1).
     """
     s = 0.0
     rp = 1.0
     inv_r = 1.0 / radius
     for i in range(nc):
         rp *= inv_r
-        cw[i + 1] = c[i] * rp
+        cw[i + 1] = c[o + i] * rp
         s += abs(cw[i + 1])
     if s < 1.0:
         return True
@@ -295,9 +303,128 @@ def _gain(P, r, g, n):
 
 
 @njit(cache=True, inline="always")
-def _step(state, theta, P, psi, g, gn, ul, cw, hf, u, y, rml, pushed, g_ready, fuse,
-          u_next):
-    """One RELS or RML sample with the safeguards. Returns (e, next_g_ready).
+def _trace_min(P, n):
+    """(tr P, smallest diagonal entry), summed i = 0..n−1 left to right."""
+    tr = 0.0
+    dmin = np.inf
+    for i in range(n):
+        pii = P[i, i]
+        tr += pii
+        if pii < dmin:
+            dmin = pii
+    return tr, dmin
+
+
+@njit(cache=True, inline="always")
+def _downdate(P, g, n, inv_den, inv_lam):
+    """(22) in place: P ← (P − g gᵀ·inv_den)·inv_lam; returns (tr P, min P_ii).
+
+    The 4-wide intrinsic for m ≤ SIMD_MAX, else the same arithmetic as plain loops.
+    """
+    m = P.shape[0]
+    if m <= SIMD_MAX:
+        downdate(P, g, n, inv_den, inv_lam)
+    else:
+        for i in range(n):
+            gi = g[i]
+            for j in range(m):
+                P[i, j] = (P[i, j] - (gi * g[j]) * inv_den) * inv_lam
+    return _trace_min(P, n)
+
+
+@njit(cache=True, inline="always")
+def _downdate_gain(P, g, r, n, inv_den, work):
+    """(22) at λ = 1 fused with the next gain: P ← P − g gᵀ·inv_den, then g ← P r.
+
+    Returns (tr P, min P_ii). Intrinsic for m ≤ SIMD_MAX, else plain loops with the
+    same arithmetic (``work``, length m, holds the next gain while it is summed).
+    """
+    m = P.shape[0]
+    if m <= SIMD_MAX:
+        downdate_gain(P, g, r, n, inv_den)
+    else:
+        for j in range(m):
+            work[j] = 0.0
+        for i in range(n):
+            gi = g[i]
+            ri = r[i]
+            for j in range(m):
+                v = P[i, j] - (gi * g[j]) * inv_den
+                P[i, j] = v
+                work[j] += v * ri
+        for j in range(m):
+            g[j] = work[j]
+    return _trace_min(P, n)
+
+
+@njit(cache=True, inline="always")
+def _floor_and_bound(P, n, lam, tr, dmin, trmax):
+    """After (22): diagonal floor (λ < 1), definiteness guard, trace bound.
+
+    Returns 0 (P kept), 1 (P must be reset: a non-positive diagonal or a non-finite
+    trace) or 2 (P was scaled down to tr P = trmax).
+
+    Floor (λ < 1 only): the rank-1 downdate cancels; its rounding error is about
+    n·eps·‖P‖. With forgetting and poor excitation (long constant stretches) the
+    unexcited directions of P grow to the trace bound while the excited one shrinks to
+    ~(1−λ)/|ψ̂|², and that error makes the small eigenvalue slightly negative.
+    δ = 8·n·eps·tr P on the diagonal keeps P positive definite; next to the forgetting
+    it is negligible. At λ = 1, P only shrinks, rounding stays benign, and a floor
+    proportional to the large early tr P would act like process noise and bias the LS
+    limit, so none. Trace bound: with λ < 1 and poor excitation P grows like λ^−k in
+    the unexcited directions ("wind-up"); scaling keeps tr P ≤ trmax.
+    """
+    if lam < 1.0:
+        delta = EPS_FLOOR * n * tr
+        for i in range(n):
+            P[i, i] += delta
+        tr += n * delta
+    if not (dmin > 0.0 and np.isfinite(tr)):
+        return 1
+    if tr > trmax:
+        f = trmax / tr
+        m = P.shape[1]
+        for i in range(n):
+            for j in range(m):
+                P[i, j] *= f
+        return 2
+    return 0
+
+
+@njit(cache=True, inline="always")
+def _keep_c_stable(theta, o, nc, radius, cw):
+    """Project Ĉ(q⁻¹) = 1 + θ̂[o:o+nc] q⁻¹ + … inside ``radius`` if it left; True if moved."""
+    if _c_within(theta, o, nc, radius, cw):
+        return False
+    _project_c(theta[o : o + nc], nc, radius)
+    return True
+
+
+@njit(cache=True, inline="always")
+def _shift_regressor(psi, na, nc, o, y, xi):
+    """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: :func:`_push_u`)."""
+    for i in range(na - 1, 0, -1):
+        psi[i] = psi[i - 1]
+    psi[0] = -y
+    for i in range(nc - 1, 0, -1):
+        psi[o + i] = psi[o + i - 1]
+    if nc > 0:
+        psi[o] = xi
+
+
+@njit(cache=True, inline="always")
+def _innovation_variance(nv, xi, count, lam):
+    """Running mean of ξ̂² over the last min(k, 1/(1−λ)) samples (kept if not finite)."""
+    cnt = count
+    if lam < 1.0 and cnt * (1.0 - lam) > 1.0:
+        cnt = 1.0 / (1.0 - lam)
+    new = nv + (xi * xi - nv) / cnt
+    return new if np.isfinite(new) else nv
+
+
+@njit(cache=True, inline="always")
+def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
+    """One RELS or RML sample with the safeguards (streaming, and the RML batch loop).
 
     RELS: eqs (19)–(22). RML (``rml`` True; the callers pass
     ``state[H_METHOD] == METHOD_RML and nc > 0``, see :func:`_is_rml`): the same
@@ -305,17 +432,11 @@ def _step(state, theta, P, psi, g, gn, ul, cw, hf, u, y, rml, pushed, g_ready, f
     (22) (Ljung & Söderström 1983, RML/RPEM for ARMAX); with nc = 0 the filter is the
     identity and RML is RELS bit for bit. ``u``/``y`` are already scaled and finite
     (checked by the callers). The array arguments are the views returned by
-    :func:`_views` (taken once per batch). The batch kernel passes ``rml`` as a
-    constant, so each method compiles to its own loop and RELS keeps its speed.
+    :func:`_views`. Returns the a-priori error e(k) (0 if it is not finite).
 
-    Batch fusion (``fuse``, the batch loop knows u(k+1) = ``u_next``): the regressor
-    ψ̂(k+1) is complete before P(k) is formed, so the pass that writes P(k) also
-    accumulates ``gn`` = P(k) ψ̂(k+1), the next sample's g, column by column — the same
-    sums in the same order as :func:`_gain` (P is exactly symmetric), hence the same
-    bits — and P is read once per sample instead of twice. Returns True as the second
-    value when ``gn`` holds that product; the next call then gets ``pushed`` (ψ̂ already
-    holds u(k)) and ``g_ready`` (``g`` is P(k−1) ψ̂(k)). Used for RELS with λ = 1 and no
-    reset or trace scaling after the update (those change P after the pass).
+    The RELS batch loop (:func:`_rels_batch`) runs the same sequence of operations
+    with its counters in locals and the gain of the next sample fused into the P
+    update; a test holds the two to the same bits.
     """
     na = int(state[H_NA])
     nb = int(state[H_NB])
@@ -324,8 +445,7 @@ def _step(state, theta, P, psi, g, gn, ul, cw, hf, u, y, rml, pushed, g_ready, f
     n = na + nb + 1 + nc
     m = P.shape[0]  # padded size, multiple of 4
 
-    if not pushed:
-        _push_u(ul, psi, u, na, nb, d)
+    _push_u(ul, psi, u, na, nb, d)
 
     # ŷ(k|k−1) = ψ̂ᵀ(k) θ̂(k−1);  e(k) = y(k) − ŷ  (the bracket of eq 20)
     yhat = 0.0
@@ -362,8 +482,7 @@ def _step(state, theta, P, psi, g, gn, ul, cw, hf, u, y, rml, pushed, g_ready, f
         nab = na + nb + 1
         # g = P(k−1) ψ̂(k), shared by (21) and (22);  s = ψ̂ᵀ P ψ̂
         # (RML: g = P(k−1) ψ_f(k), s = ψ_fᵀ P ψ_f; r is ψ_f)
-        if not g_ready:
-            _gain(P, r, g, n)
+        _gain(P, r, g, n)
         s = 0.0
         for i in range(n):
             s += r[i] * g[i]
@@ -412,12 +531,9 @@ def _step(state, theta, P, psi, g, gn, ul, cw, hf, u, y, rml, pushed, g_ready, f
                 xi = e * (lam * inv_den)
             # keep C(q⁻¹) stable (inside c_radius), else ξ̂ feedback can blow up
             # (reads θ̂ only, so it may precede the P update of (22))
-            if nc > 0:
-                c = theta[o:n]
-                if not _c_within(c, nc, state[H_CRADIUS], cw):
-                    _project_c(c, nc, state[H_CRADIUS])
-                    state[H_CPROJ] += 1.0
-                    xi_direct = True
+            if nc > 0 and _keep_c_stable(theta, o, nc, state[H_CRADIUS], cw):
+                state[H_CPROJ] += 1.0
+                xi_direct = True
         else:
             state[H_SKIPPED] += 1.0
     elif state[H_ENABLED] != 0.0:
@@ -433,108 +549,38 @@ def _step(state, theta, P, psi, g, gn, ul, cw, hf, u, y, rml, pushed, g_ready, f
     if not np.isfinite(xi):
         xi = 0.0
     state[H_XI] = xi
-    # running innovation variance: mean of ξ̂² over the last min(k, 1/(1−λ)) samples
-    cnt = state[H_COUNT]
-    if lam < 1.0 and cnt * (1.0 - lam) > 1.0:
-        cnt = 1.0 / (1.0 - lam)
-    nv = state[H_NV] + (xi * xi - state[H_NV]) / cnt
-    if np.isfinite(nv):
-        state[H_NV] = nv
+    state[H_NV] = _innovation_variance(state[H_NV], xi, state[H_COUNT], lam)
 
-    # shift the regressor for k+1: y-part gets −y(k), c-part gets ξ̂(k); ψ̂(k) itself
-    # is still needed by RML's history below and by nothing else
     if rml:
         # RML: ψ_f(k) becomes ψ_f((k+1)−1): shift the filtered-regressor history
+        # (before ψ̂ is shifted: r = ψ_f(k) is row 0)
         for j in range(nc, 0, -1):
             for i in range(m):
                 hf[j, i] = hf[j - 1, i]
-    for i in range(na - 1, 0, -1):
-        psi[i] = psi[i - 1]
-    psi[0] = -y
-    for i in range(nc - 1, 0, -1):
-        psi[o + i] = psi[o + i - 1]
-    if nc > 0:
-        psi[o] = xi
-    if fuse:
-        _push_u(ul, psi, u_next, na, nb, d)
+    _shift_regressor(psi, na, nc, o, y, xi)
 
-    ready = False
     if update:
-        inv_den = 1.0 / den
         # (22) P(k) = [I − K ψ̂ᵀ] P(k−1) / λ  — textbook form, NOT used: rounding makes
         # it drift from symmetry and, with λ < 1, diverge. Since K ψ̂ᵀ P = g gᵀ / den
         # for symmetric P, we use the symmetric rank-1 form
         #     P(k) = (P(k−1) − g gᵀ / den) / λ
-        # (RML: the same with g = P ψ_f, i.e. P(k) = [I − K ψ_fᵀ] P(k−1) / λ)
-        # computing each entry as (P_ij − (g_i g_j) · inv_den) · inv_lam. IEEE products
-        # commute, so entry (i, j) and (j, i) get bit-identical values: P stays exactly
-        # symmetric by construction (no separate symmetrisation pass needed), and the
-        # full-row loop vectorises, which is faster than a triangle + mirror. Rows
-        # i ≥ n are zero (g_i = 0) and stay so; at λ = 1 the exact ·1 is left out.
-        if fuse and not rml and lam == 1.0:
-            # the same pass accumulates gn = P(k) ψ̂(k+1) (see the docstring)
-            for j in range(m):
-                gn[j] = 0.0
-            for i in range(n):
-                gi = g[i]
-                pi = psi[i]
-                for j in range(m):
-                    v = P[i, j] - (gi * g[j]) * inv_den
-                    P[i, j] = v
-                    gn[j] += v * pi
-            ready = True
-        elif lam == 1.0:
-            for i in range(n):
-                gi = g[i]
-                for j in range(m):
-                    P[i, j] = P[i, j] - (gi * g[j]) * inv_den
-        else:
-            inv_lam = 1.0 / lam
-            for i in range(n):
-                gi = g[i]
-                for j in range(m):
-                    P[i, j] = (P[i, j] - (gi * g[j]) * inv_den) * inv_lam
-        tr = 0.0
-        dmin = np.inf
-        for i in range(n):
-            pii = P[i, i]
-            tr += pii
-            if pii < dmin:
-                dmin = pii
-        # floor (λ < 1 only): the rank-1 downdate cancels; its rounding error is
-        # about n·eps·‖P‖. With forgetting and poor excitation (long constant
-        # stretches) the unexcited directions of P grow to the trace bound while
-        # the excited one shrinks to ~(1−λ)/|ψ̂|², and that error makes the small
-        # eigenvalue slightly negative. δ = 8·n·eps·tr P on the diagonal keeps P
-        # positive definite; next to the forgetting it is negligible. At λ = 1, P
-        # only shrinks, rounding stays benign, and a floor proportional to the large
-        # early tr P would act like process noise and bias the LS limit, so none.
-        if lam < 1.0:
-            delta = EPS_FLOOR * n * tr
-            for i in range(n):
-                P[i, i] += delta
-            tr += n * delta
-        # guard: a non-positive diagonal means P is no longer positive definite;
-        # a non-finite trace means overflow. Reset P = P(0) and keep θ̂
-        # (RML: and restart the filter 1/Ĉ from rest, ψ_f history = 0).
-        if not (dmin > 0.0 and np.isfinite(tr)):
+        # (RML: the same with g = P ψ_f, i.e. P(k) = [I − K ψ_fᵀ] P(k−1) / λ),
+        # each entry as (P_ij − (g_i g_j) · inv_den) · inv_lam. IEEE products commute,
+        # so entries (i, j) and (j, i) get bit-identical values: P stays exactly
+        # symmetric by construction. Rows i ≥ n are zero (g_i = 0) and stay so.
+        tr, dmin = _downdate(P, g, n, 1.0 / den, 1.0 / lam)
+        verdict = _floor_and_bound(P, n, lam, tr, dmin, state[H_TRMAX])
+        if verdict == 1:
+            # guard: reset P = P(0) and keep θ̂ (RML: and restart the filter 1/Ĉ)
             _reset_P(P, n, na + nb + 1, state[H_ALPHA], state[H_ALPHA_C])
             state[H_RESETS] += 1.0
-            ready = False
             if rml:
                 _clear_rows(hf)
-        elif tr > state[H_TRMAX]:
-            # trace bound: with λ < 1 and poor excitation P grows like λ^−k in the
-            # unexcited directions ("wind-up"); scaling keeps tr P ≤ tr_max.
-            f = state[H_TRMAX] / tr
-            for i in range(n):
-                for j in range(m):
-                    P[i, j] *= f
+        elif verdict == 2:
             state[H_TRSCALE] += 1.0
-            ready = False
     if not np.isfinite(e):
         e = 0.0
-    return e, ready
+    return e
 
 
 @njit(cache=True, inline="always")
@@ -544,44 +590,169 @@ def _is_rml(state):
 
 
 @njit(cache=True, inline="always")
-def _run(state, u, y, err, xi_out, hist, hist_every, rml):
-    """The batch loop; ``rml`` is a compile-time constant at both call sites."""
+def _save_history(hist, theta, row, n):
+    """hist[row] = θ̂ (if the history has that row)."""
+    if row < hist.shape[0]:
+        for i in range(n):
+            hist[row, i] = theta[i]
+
+
+@njit(cache=True)
+def _rml_batch(state, u, y, err, xi_out, hist, hist_every):
+    """The RML batch loop: :func:`_step` per sample."""
     theta, P, psi, g, ul, cw = _views(state)
-    # the RELS loop gets P in place of the (unused) RML rows: no extra live array
-    hf = _hf_view(state) if rml else P
-    m = P.shape[0]
-    # two g buffers: the fused pass of sample k writes the next g into the other one
-    ga = np.zeros(m)
-    gb = np.zeros(m)
+    hf = _hf_view(state)
     n = hist.shape[1]
-    nh = hist.shape[0]
-    N = u.shape[0]
-    r = 0
     c = 0
-    pushed = False
-    ready = False
-    for k in range(N):
-        fuse = k + 1 < N
-        un = u[k + 1] if fuse else 0.0
-        e, ready = _step(state, theta, P, psi, ga, gb, ul, cw, hf, u[k], y[k], rml,
-                         pushed, ready, fuse, un)
-        pushed = fuse
-        if ready:
-            ga, gb = gb, ga
-        err[k] = e
+    row = 0
+    for k in range(u.shape[0]):
+        err[k] = _step(state, theta, P, psi, g, ul, cw, hf, u[k], y[k], True)
         xi_out[k] = state[H_XI]
         c += 1
         if c == hist_every:
             c = 0
-            if r < nh:
+            _save_history(hist, theta, row, n)
+            row += 1
+
+
+@njit(cache=True)
+def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
+    """The RELS batch loop: :func:`_step`'s RELS sequence with two batch-only changes.
+
+    1. Header values and counters live in locals (written back at the end), so
+       nothing in the loop reloads them after every store to θ̂ or P.
+    2. The batch knows u(k+1), so ψ̂(k+1) is complete before P(k) is formed: at λ = 1
+       the pass that writes P(k) also forms the next sample's g = P(k) ψ̂(k+1)
+       (:func:`_downdate_gain`, the same sums in the same order as :func:`_gain`,
+       hence the same bits), and P is read once per sample instead of twice. After a
+       reset or a trace scaling, or with λ < 1 (the diagonal floor changes P after the
+       pass), g is formed at the start of the next sample as in the streaming step.
+
+    Same arguments as :func:`rels_run`.
+    """
+    theta, P, psi, g, ul, cw = _views(state)
+    na = int(state[H_NA])
+    nb = int(state[H_NB])
+    nc = int(state[H_NC])
+    d = int(state[H_DELAY])
+    n = na + nb + 1 + nc
+    o = na + nb + 1
+    m = P.shape[0]
+    lam = state[H_LAM]
+    inv_lam = 1.0 / lam
+    alpha = state[H_ALPHA]
+    alpha_c = state[H_ALPHA_C]
+    trmax = state[H_TRMAX]
+    radius = state[H_CRADIUS]
+    enabled = state[H_ENABLED] != 0.0
+    count = state[H_COUNT]
+    resets = state[H_RESETS]
+    cproj = state[H_CPROJ]
+    trscale = state[H_TRSCALE]
+    skipped = state[H_SKIPPED]
+    nv = state[H_NV]
+    xi = state[H_XI]
+    work = np.empty(m)
+    N = u.shape[0]
+    c = 0
+    row = 0
+    ready = False  # g holds P(k−1) ψ̂(k)
+    if N > 0:
+        _push_u(ul, psi, u[0], na, nb, d)
+    for k in range(N):
+        yk = y[k]
+        yhat = 0.0
+        for i in range(n):
+            yhat += psi[i] * theta[i]
+        e = yk - yhat
+        count += 1.0
+        xi = e
+        xi_direct = False
+        update = False
+        den = 1.0
+        if enabled and np.isfinite(e):
+            if not ready:
+                _gain(P, psi, g, n)
+            s = 0.0
+            for i in range(n):
+                s += psi[i] * g[i]
+            den = lam + s
+            if not (s >= 0.0 and np.isfinite(den)):
+                _reset_P(P, n, o, alpha, alpha_c)
+                resets += 1.0
+                s = 0.0
+                for i in range(m):
+                    g[i] = 0.0
                 for i in range(n):
-                    hist[r, i] = theta[i]
-                r += 1
+                    g[i] = P[i, i] * psi[i]
+                    s += psi[i] * g[i]
+                den = lam + s
+            gmax = 0.0
+            for i in range(n):
+                if abs(g[i]) > gmax:
+                    gmax = abs(g[i])
+            if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
+                inv_den = 1.0 / den
+                update = True
+                for i in range(n):
+                    theta[i] += (g[i] * inv_den) * e
+                xi = e * (lam * inv_den)
+                if nc > 0 and _keep_c_stable(theta, o, nc, radius, cw):
+                    cproj += 1.0
+                    xi_direct = True
+            else:
+                skipped += 1.0
+        elif enabled:
+            skipped += 1.0
+        if xi_direct:
+            acc = 0.0
+            for i in range(n):
+                acc += psi[i] * theta[i]
+            xi = yk - acc
+        if not np.isfinite(xi):
+            xi = 0.0
+        nv = _innovation_variance(nv, xi, count, lam)
+        _shift_regressor(psi, na, nc, o, yk, xi)
+        fuse = k + 1 < N
+        if fuse:
+            _push_u(ul, psi, u[k + 1], na, nb, d)
+        ready = False
+        if update:
+            inv_den = 1.0 / den
+            if fuse and lam == 1.0:
+                tr, dmin = _downdate_gain(P, g, psi, n, inv_den, work)
+                ready = True
+            else:
+                tr, dmin = _downdate(P, g, n, inv_den, inv_lam)
+            verdict = _floor_and_bound(P, n, lam, tr, dmin, trmax)
+            if verdict == 1:
+                _reset_P(P, n, o, alpha, alpha_c)
+                resets += 1.0
+                ready = False
+            elif verdict == 2:
+                trscale += 1.0
+                ready = False
+        if not np.isfinite(e):
+            e = 0.0
+        err[k] = e
+        xi_out[k] = xi
+        c += 1
+        if c == hist_every:
+            c = 0
+            _save_history(hist, theta, row, n)
+            row += 1
+    state[H_COUNT] = count
+    state[H_RESETS] = resets
+    state[H_CPROJ] = cproj
+    state[H_TRSCALE] = trscale
+    state[H_SKIPPED] = skipped
+    state[H_NV] = nv
+    state[H_XI] = xi
 
 
 @njit(cache=True)
 def rels_run(state, u, y, err, xi_out, hist, hist_every):
-    """Run :func:`_step` over whole records (batch RELS or RML, one compiled loop).
+    """Run the estimator over whole records (batch RELS or RML).
 
     Parameters
     ----------
@@ -594,9 +765,9 @@ def rels_run(state, u, y, err, xi_out, hist, hist_every):
     hist_every : int ≥ 1
     """
     if _is_rml(state):
-        _run(state, u, y, err, xi_out, hist, hist_every, True)
+        _rml_batch(state, u, y, err, xi_out, hist, hist_every)
     else:
-        _run(state, u, y, err, xi_out, hist, hist_every, False)
+        _rels_batch(state, u, y, err, xi_out, hist, hist_every)
 
 
 @njit(cache=True)
@@ -609,5 +780,4 @@ def rels_step(state, u, y):
     if not (np.isfinite(u) and np.isfinite(y)):
         return np.nan
     theta, P, psi, g, ul, cw = _views(state)
-    return _step(state, theta, P, psi, g, g, ul, cw, _hf_view(state), u, y,
-                 _is_rml(state), False, False, False, 0.0)[0]
+    return _step(state, theta, P, psi, g, ul, cw, _hf_view(state), u, y, _is_rml(state))

@@ -1,0 +1,160 @@
+"""AVX-width (4 × float64) kernels of the P update (22), written as numba intrinsics.
+
+Why intrinsics: numba runs LLVM with the SLP vectoriser off and cannot tell LLVM that
+P, g and the next g do not alias, so the plain-loop form of the fused pass (update
+P(k), accumulate the next gain P(k)ψ̂(k+1) in the same pass) keeps the next gain in
+memory and is bound by stores. Here the rows of P are processed as ``m/4`` vectors of
+``<4 x double>`` and the next gain lives in ``m/4`` vector registers for the whole pass
+(``m`` is the padded size, a multiple of 4, see :mod:`._kernels`). The code is generated
+once per vector count K = m/4 = 1..KMAX and selected by a switch on m at run time.
+
+Arithmetic, element by element, in this order (plain IEEE operations, no FMA, no
+reassociation, so the results are bit for bit those of the obvious loops, and of the
+numpy reference in the tests):
+
+* P_ij ← P_ij − (g_i · g_j) · inv_den               (rows i < n, all m columns;
+  ``downdate_gain``; inv_den = 1/(λ + ψ̂ᵀPψ̂))
+* P_ij ← (P_ij − (g_i · g_j) · inv_den) · inv_lam   (``downdate``)
+* g_j ← Σ_i P_ij r_i, i = 0..n−1 left to right, starting from 0.0 (``downdate_gain``)
+
+g_i g_j = g_j g_i exactly, so the updated P is exactly symmetric. Rows i ≥ n are the
+zero padding and are not touched. (Two variants were measured slower: w = g·√inv_den
+with P − w wᵀ, one multiply less per entry but a square root on the critical path; and
+the trace and smallest diagonal entry summed inside the pass, which delays the row
+stores. The callers sum those after the pass.)
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+
+__all__: list[str] = []  # private: used by _kernels
+
+#: largest number of 4-wide vectors per row handled here (m ≤ 4 · KMAX); larger
+#: problems take the plain loops in _kernels (same arithmetic, same bits)
+KMAX = 8
+SIMD_MAX = 4 * KMAX
+
+_F64 = ir.DoubleType()
+_I64 = ir.IntType(64)
+_I32 = ir.IntType(32)
+_V4 = ir.VectorType(_F64, 4)
+_ZERO_V4 = ir.Constant(_V4, [0.0, 0.0, 0.0, 0.0])
+_SPLAT0 = ir.Constant(ir.VectorType(_I32, 4), [0, 0, 0, 0])
+
+
+def _splat(builder, x):
+    v = builder.insert_element(ir.Constant(_V4, ir.Undefined), x, ir.Constant(_I32, 0))
+    return builder.shuffle_vector(v, ir.Constant(_V4, ir.Undefined), _SPLAT0)
+
+
+def _vec_ptr(builder, base, index):
+    return builder.bitcast(builder.gep(base, [index]), _V4.as_pointer())
+
+
+def _i64(k):
+    return ir.Constant(_I64, k)
+
+
+def _emit_pass(context, builder, sig, args, fused):
+    """IR of the row pass (void)."""
+    P = context.make_array(sig.args[0])(context, builder, value=args[0])
+    g = context.make_array(sig.args[1])(context, builder, value=args[1])
+    if fused:
+        r = context.make_array(sig.args[2])(context, builder, value=args[2])
+        n_arg, den_arg = 3, 4
+    else:
+        n_arg, den_arg = 2, 3
+    nrow = context.cast(builder, args[n_arg], sig.args[n_arg], types.intp)
+    inv_den = context.cast(builder, args[den_arg], sig.args[den_arg], types.float64)
+    inv_lam = None if fused else context.cast(builder, args[4], sig.args[4], types.float64)
+    m = builder.extract_value(P.shape, 1)
+
+    fn = builder.function
+    done = fn.append_basic_block("pass.done")
+    other = fn.append_basic_block("pass.unsupported")
+    switch = builder.switch(builder.lshr(m, _i64(2)), other)
+    for k in range(1, KMAX + 1):
+        entry = fn.append_basic_block(f"pass.k{k}")
+        switch.add_case(_i64(k), entry)
+        builder.position_at_end(entry)
+        den_v = _splat(builder, inv_den)
+        lam_v = None if fused else _splat(builder, inv_lam)
+        # g as vectors, loaded once: g is not written until the pass is over
+        g_v = [builder.load(_vec_ptr(builder, g.data, _i64(4 * c)), align=8)
+               for c in range(k)]
+        head = fn.append_basic_block(f"pass.k{k}.head")
+        body = fn.append_basic_block(f"pass.k{k}.body")
+        tail = fn.append_basic_block(f"pass.k{k}.tail")
+        builder.branch(head)
+
+        builder.position_at_end(head)
+        i = builder.phi(_I64)
+        acc = [builder.phi(_V4) for _ in range(k)] if fused else []
+        i.add_incoming(_i64(0), entry)
+        for a in acc:
+            a.add_incoming(_ZERO_V4, entry)
+        builder.cbranch(builder.icmp_signed("<", i, nrow), body, tail)
+
+        builder.position_at_end(body)
+        gi_v = _splat(builder, builder.load(builder.gep(g.data, [i])))
+        row = builder.mul(i, m)
+        if fused:
+            ri_v = _splat(builder, builder.load(builder.gep(r.data, [i])))
+        acc_next = []
+        for c in range(k):
+            ptr = _vec_ptr(builder, P.data, builder.add(row, _i64(4 * c)))
+            t = builder.fmul(builder.fmul(gi_v, g_v[c]), den_v)
+            v = builder.fsub(builder.load(ptr, align=8), t)
+            if not fused:
+                v = builder.fmul(v, lam_v)
+            builder.store(v, ptr, align=8)
+            if fused:
+                acc_next.append(builder.fadd(acc[c], builder.fmul(v, ri_v)))
+        latch = builder.block
+        i.add_incoming(builder.add(i, _i64(1)), latch)
+        for a, a_next in zip(acc, acc_next, strict=True):
+            a.add_incoming(a_next, latch)
+        builder.branch(head)
+
+        builder.position_at_end(tail)
+        for c, a in enumerate(acc):
+            builder.store(a, _vec_ptr(builder, g.data, _i64(4 * c)), align=8)
+        builder.branch(done)
+
+    # m > 4·KMAX: the callers never get here (they check SIMD_MAX first)
+    builder.position_at_end(other)
+    builder.branch(done)
+    builder.position_at_end(done)
+    return context.get_dummy_value()
+
+
+@intrinsic
+def downdate_gain(typingctx, P, g, r, n, inv_den):
+    """In place: P ← P − g gᵀ·inv_den (rows < n), then g ← P r.
+
+    ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g`` and ``r``
+    length m, zero beyond n (``r`` may not alias ``g``).
+    """
+    sig = types.void(P, g, r, n, inv_den)
+
+    def codegen(context, builder, sig, args):
+        return _emit_pass(context, builder, sig, args, fused=True)
+
+    return sig, codegen
+
+
+@intrinsic
+def downdate(typingctx, P, g, n, inv_den, inv_lam):
+    """In place: P ← (P − g gᵀ·inv_den)·inv_lam (rows < n).
+
+    ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g`` length m.
+    """
+    sig = types.void(P, g, n, inv_den, inv_lam)
+
+    def codegen(context, builder, sig, args):
+        return _emit_pass(context, builder, sig, args, fused=False)
+
+    return sig, codegen

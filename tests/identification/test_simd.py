@@ -1,0 +1,147 @@
+"""The 4-wide P-update kernels (identification/_simd.py) and the RELS batch loop, bit for bit.
+
+The intrinsics are checked against plain numpy doing the documented arithmetic, for
+every vector count they are generated for and for the plain-loop fallback beyond
+SIMD_MAX; the RELS batch loop (fused gain, counters in locals) against the streaming
+step, sample by sample.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit
+from numpy.testing import assert_array_equal
+
+from ehss.identification import _kernels as K
+from ehss.identification._simd import SIMD_MAX
+from ehss.identification.rels import _new_state
+
+from .systems import armax_data, system
+
+
+def _reference(P, g, r, n, inv_den, inv_lam, fused):
+    """Row i < n: P_i ← (P_i − (g_i g)·inv_den)·inv_lam; then Σ_i P_i r_i left to right."""
+    P = P.copy()
+    for i in range(n):
+        P[i] = P[i] - (g[i] * g) * inv_den
+        if not fused:
+            P[i] = P[i] * inv_lam
+    tr = 0.0
+    dmin = np.inf
+    for i in range(n):
+        tr += P[i, i]
+        dmin = min(dmin, P[i, i])
+    gn = np.zeros(P.shape[0])
+    for i in range(n):
+        gn = gn + P[i] * r[i]
+    return P, gn, tr, dmin
+
+
+@njit
+def _call_downdate(P, g, n, inv_den, inv_lam):
+    return K._downdate(P, g, n, inv_den, inv_lam)
+
+
+@njit
+def _call_downdate_gain(P, g, r, n, inv_den, work):
+    return K._downdate_gain(P, g, r, n, inv_den, work)
+
+
+def _problem(rng, m, n):
+    A = rng.standard_normal((n, n))
+    P = np.zeros((m, m))
+    P[:n, :n] = A @ A.T + n * np.eye(n)
+    r = np.zeros(m)
+    r[:n] = rng.standard_normal(n)
+    return P, P @ r, r  # g = P r as in (21)
+
+
+# every vector count of the intrinsic (m = 4..32), n = m and n < m (zero padding), and
+# two sizes beyond SIMD_MAX that take the plain loops
+SIZES = [(4 * k, 4 * k - j) for k in range(1, SIMD_MAX // 4 + 1) for j in (0, 3) if 4 * k - j > 0]
+SIZES += [(SIMD_MAX + 4, SIMD_MAX + 1), (SIMD_MAX + 8, SIMD_MAX + 8)]
+
+
+@pytest.mark.parametrize(("m", "n"), SIZES)
+def test_downdate_gain_bit_for_bit(rng, m, n):
+    P, g, r = _problem(rng, m, n)
+    inv_den = 1.0 / (1.0 + r @ g)
+    P_ref, gn_ref, tr_ref, dmin_ref = _reference(P, g, r, n, inv_den, 1.0, fused=True)
+    P_k, g_k = P.copy(), g.copy()
+    tr, dmin = _call_downdate_gain(P_k, g_k, r, n, inv_den, np.empty(m))
+    assert_array_equal(P_k, P_ref)
+    assert_array_equal(g_k, gn_ref)
+    assert (tr, dmin) == (tr_ref, dmin_ref)
+    assert_array_equal(P_k, P_k.T)
+
+
+@pytest.mark.parametrize(("m", "n"), SIZES)
+@pytest.mark.parametrize("lam", [1.0, 0.97])
+def test_downdate_bit_for_bit(rng, m, n, lam):
+    P, g, r = _problem(rng, m, n)
+    inv_den = 1.0 / (lam + r @ g)
+    P_ref, _, tr_ref, dmin_ref = _reference(P, g, r, n, inv_den, 1.0 / lam, fused=False)
+    P_k = P.copy()
+    tr, dmin = _call_downdate(P_k, g.copy(), n, inv_den, 1.0 / lam)
+    assert_array_equal(P_k, P_ref)
+    assert (tr, dmin) == (tr_ref, dmin_ref)
+
+
+def test_downdate_reports_a_lost_diagonal(rng):
+    # a downdate that makes P_00 negative must show in dmin (the guard resets on it)
+    P, g, r = _problem(rng, 8, 6)
+    g[0] = 10.0 * np.sqrt(P[0, 0])
+    P_k = P.copy()
+    tr, dmin = _call_downdate(P_k, g.copy(), 6, 1.0, 1.0)
+    assert dmin == P_k[0, 0] < 0.0
+    assert tr == pytest.approx(np.trace(P_k))
+
+
+CASES = [
+    ((2, 1, 1, 1), 1.0, 1e6, None),
+    ((4, 2, 2, 1), 0.995, 1e3, None),
+    ((3, 2, 0, 0), 0.98, 1e2, 50.0),  # trace bound active
+    ((6, 6, 4, 1), 1.0, 1e6, None),
+    ((6, 6, 4, 1), 1.0, 1e6, 2e3),  # trace bound at λ = 1: fused pass undone
+    ((20, 10, 4, 1), 1.0, 1e4, None),  # n = 35 > SIMD_MAX: plain loops
+    ((20, 10, 4, 1), 0.99, 1e4, None),
+]
+
+
+@pytest.mark.parametrize(("orders", "lam", "alpha", "trace_bound"), CASES)
+def test_rels_batch_equals_streaming_bit_for_bit(rng, orders, lam, alpha, trace_bound):
+    na, nb, nc, d = orders
+    n = na + nb + 1 + nc
+    a, b, c = system(4)
+    u, y, _ = armax_data(rng, a, b, c, 1500, snr_db=20.0)
+    u, y = u / np.std(u), y / np.std(y)
+    y[700:760] = 0.0  # a dead stretch, then excitation returns
+    tb = n * alpha if trace_bound is None else trace_bound
+
+    def fresh():
+        return _new_state(na, nb, nc, d, lam, alpha, tb, 0.99, np.zeros(n))
+
+    batch = fresh()
+    err_b, xi_b = np.empty(u.size), np.empty(u.size)
+    hist = np.empty((u.size // 7, n))
+    K.rels_run(batch, u, y, err_b, xi_b, hist, 7)
+    stream = fresh()
+    err_s = np.empty(u.size)
+    hist_s = []
+    for k in range(u.size):
+        err_s[k] = K.rels_step(stream, u[k], y[k])
+        if (k + 1) % 7 == 0:
+            hist_s.append(K.state_views(stream)[0].copy())
+    assert_array_equal(err_b, err_s)
+    assert_array_equal(hist, np.array(hist_s)[: hist.shape[0]])
+    views_b, views_s = K.state_views(batch), K.state_views(stream)
+    for name, i in (("theta", 0), ("P", 1), ("psi", 2), ("u line", 4)):
+        assert_array_equal(views_b[i], views_s[i], err_msg=name)
+    g_index = K.HEADER + K.padded(n) * (K.padded(n) + 2)
+    header = np.r_[0:K.HEADER]
+    assert_array_equal(batch[header], stream[header])  # counters, ξ̂, noise variance
+    assert_array_equal(np.delete(batch, np.r_[g_index:g_index + K.padded(n)]),
+                       np.delete(stream, np.r_[g_index:g_index + K.padded(n)]))
+    if trace_bound is not None:
+        assert batch[K.H_TRSCALE] > 0
