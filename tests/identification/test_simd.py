@@ -76,6 +76,22 @@ def test_downdate_gain_bit_for_bit(rng, m, n):
     assert_array_equal(P_k, P_k.T)
 
 
+@njit
+def _call_gain(P, r, g, n):
+    K._gain(P, r, g, n)
+
+
+@pytest.mark.parametrize(("m", "n"), SIZES)
+def test_gain_bit_for_bit(rng, m, n):
+    P, _, r = _problem(rng, m, n)
+    g_ref = np.zeros(m)
+    for i in range(n):  # rows of the symmetric P as columns, summed left to right
+        g_ref = g_ref + P[i] * r[i]
+    g = np.full(m, np.nan)  # every entry must be written
+    _call_gain(P, r, g, n)
+    assert_array_equal(g, g_ref)
+
+
 @pytest.mark.parametrize(("m", "n"), SIZES)
 @pytest.mark.parametrize("lam", [1.0, 0.97])
 def test_downdate_bit_for_bit(rng, m, n, lam):

@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ehss.identification._simd import SIMD_MAX, downdate, downdate_gain
+from ehss.identification._simd import SIMD_MAX, downdate, downdate_gain, gain
 
 __all__: list[str] = []  # private module: the public API is in rels.py
 
@@ -292,8 +292,12 @@ def _gain(P, r, g, n):
     the inner loop is element-wise over whole 4-wide vectors (P's rows are padded to a
     multiple of 4) and vectorises. A dot-product inner loop is one serial add chain
     that, without fastmath, cannot. Rows j ≥ n would only add P_ji · 0 and are skipped.
+    For m ≤ SIMD_MAX the 4-wide intrinsic does the same sums with g in registers.
     """
     m = P.shape[1]
+    if m <= SIMD_MAX:
+        gain(P, g, r, n)
+        return
     for i in range(m):
         g[i] = 0.0
     for j in range(n):
@@ -617,7 +621,7 @@ def _rml_batch(state, u, y, err, xi_out, hist, hist_every):
 
 @njit(cache=True)
 def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
-    """The RELS batch loop: :func:`_step`'s RELS sequence with two batch-only changes.
+    """The RELS batch loop: :func:`_step`'s RELS sequence with three batch-only changes.
 
     1. Header values and counters live in locals (written back at the end), so
        nothing in the loop reloads them after every store to θ̂ or P.
@@ -627,6 +631,7 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
        hence the same bits), and P is read once per sample instead of twice. After a
        reset or a trace scaling, or with λ < 1 (the diagonal floor changes P after the
        pass), g is formed at the start of the next sample as in the streaming step.
+    3. ŷ, ψ̂ᵀg and max|g_i| are formed in one loop (same sums, same order).
 
     Same arguments as :func:`rels_run`.
     """
@@ -661,9 +666,20 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
         _push_u(ul, psi, u[0], na, nb, d)
     for k in range(N):
         yk = y[k]
+        if enabled and not ready:
+            _gain(P, psi, g, n)
+        # one loop for ŷ = ψ̂ᵀθ̂ (eq 20), s = ψ̂ᵀPψ̂ = ψ̂ᵀg (eq 21) and max|g_i|, each
+        # summed left to right as in _step (g is unused when e turns out non-finite)
         yhat = 0.0
+        s = 0.0
+        gmax = 0.0
         for i in range(n):
-            yhat += psi[i] * theta[i]
+            pi = psi[i]
+            gi = g[i]
+            yhat += pi * theta[i]
+            s += pi * gi
+            if abs(gi) > gmax:
+                gmax = abs(gi)
         e = yk - yhat
         count += 1.0
         xi = e
@@ -671,26 +687,20 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
         update = False
         den = 1.0
         if enabled and np.isfinite(e):
-            if not ready:
-                _gain(P, psi, g, n)
-            s = 0.0
-            for i in range(n):
-                s += psi[i] * g[i]
             den = lam + s
             if not (s >= 0.0 and np.isfinite(den)):
                 _reset_P(P, n, o, alpha, alpha_c)
                 resets += 1.0
                 s = 0.0
+                gmax = 0.0
                 for i in range(m):
                     g[i] = 0.0
                 for i in range(n):
                     g[i] = P[i, i] * psi[i]
                     s += psi[i] * g[i]
+                    if abs(g[i]) > gmax:
+                        gmax = abs(g[i])
                 den = lam + s
-            gmax = 0.0
-            for i in range(n):
-                if abs(g[i]) > gmax:
-                    gmax = abs(g[i])
             if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
                 inv_den = 1.0 / den
                 update = True

@@ -15,7 +15,8 @@ numpy reference in the tests):
 * P_ij ← P_ij − (g_i · g_j) · inv_den               (rows i < n, all m columns;
   ``downdate_gain``; inv_den = 1/(λ + ψ̂ᵀPψ̂))
 * P_ij ← (P_ij − (g_i · g_j) · inv_den) · inv_lam   (``downdate``)
-* g_j ← Σ_i P_ij r_i, i = 0..n−1 left to right, starting from 0.0 (``downdate_gain``)
+* g_j ← Σ_i P_ij r_i, i = 0..n−1 left to right, starting from 0.0, over the updated P
+  (``downdate_gain``) or over P as it is (``gain``)
 
 g_i g_j = g_j g_i exactly, so the updated P is exactly symmetric. Rows i ≥ n are the
 zero padding and are not touched. (Two variants were measured slower: w = g·√inv_den
@@ -58,18 +59,26 @@ def _i64(k):
     return ir.Constant(_I64, k)
 
 
-def _emit_pass(context, builder, sig, args, fused):
-    """IR of the row pass (void)."""
+#: what a row pass does (``_emit_pass``'s ``mode``)
+DOWNDATE, DOWNDATE_GAIN, GAIN = 0, 1, 2
+
+
+def _emit_pass(context, builder, sig, args, mode):
+    """IR of one pass over the rows i < n of P (void); ``mode`` as documented above."""
     P = context.make_array(sig.args[0])(context, builder, value=args[0])
     g = context.make_array(sig.args[1])(context, builder, value=args[1])
-    if fused:
+    update = mode != GAIN  # P is written
+    accumulate = mode != DOWNDATE  # a new g = P r is summed
+    if mode == DOWNDATE:  # (P, g, n, inv_den, inv_lam)
+        n_arg = 2
+    else:  # (P, g, r, n[, inv_den])
         r = context.make_array(sig.args[2])(context, builder, value=args[2])
-        n_arg, den_arg = 3, 4
-    else:
-        n_arg, den_arg = 2, 3
+        n_arg = 3
     nrow = context.cast(builder, args[n_arg], sig.args[n_arg], types.intp)
-    inv_den = context.cast(builder, args[den_arg], sig.args[den_arg], types.float64)
-    inv_lam = None if fused else context.cast(builder, args[4], sig.args[4], types.float64)
+    if update:
+        inv_den = context.cast(builder, args[n_arg + 1], sig.args[n_arg + 1], types.float64)
+    if mode == DOWNDATE:
+        inv_lam = context.cast(builder, args[4], sig.args[4], types.float64)
     m = builder.extract_value(P.shape, 1)
 
     fn = builder.function
@@ -80,11 +89,13 @@ def _emit_pass(context, builder, sig, args, fused):
         entry = fn.append_basic_block(f"pass.k{k}")
         switch.add_case(_i64(k), entry)
         builder.position_at_end(entry)
-        den_v = _splat(builder, inv_den)
-        lam_v = None if fused else _splat(builder, inv_lam)
-        # g as vectors, loaded once: g is not written until the pass is over
-        g_v = [builder.load(_vec_ptr(builder, g.data, _i64(4 * c)), align=8)
-               for c in range(k)]
+        if update:
+            den_v = _splat(builder, inv_den)
+            # g as vectors, loaded once: g is not written until the pass is over
+            g_v = [builder.load(_vec_ptr(builder, g.data, _i64(4 * c)), align=8)
+                   for c in range(k)]
+        if mode == DOWNDATE:
+            lam_v = _splat(builder, inv_lam)
         head = fn.append_basic_block(f"pass.k{k}.head")
         body = fn.append_basic_block(f"pass.k{k}.body")
         tail = fn.append_basic_block(f"pass.k{k}.tail")
@@ -92,26 +103,29 @@ def _emit_pass(context, builder, sig, args, fused):
 
         builder.position_at_end(head)
         i = builder.phi(_I64)
-        acc = [builder.phi(_V4) for _ in range(k)] if fused else []
+        acc = [builder.phi(_V4) for _ in range(k)] if accumulate else []
         i.add_incoming(_i64(0), entry)
         for a in acc:
             a.add_incoming(_ZERO_V4, entry)
         builder.cbranch(builder.icmp_signed("<", i, nrow), body, tail)
 
         builder.position_at_end(body)
-        gi_v = _splat(builder, builder.load(builder.gep(g.data, [i])))
         row = builder.mul(i, m)
-        if fused:
+        if update:
+            gi_v = _splat(builder, builder.load(builder.gep(g.data, [i])))
+        if accumulate:
             ri_v = _splat(builder, builder.load(builder.gep(r.data, [i])))
         acc_next = []
         for c in range(k):
             ptr = _vec_ptr(builder, P.data, builder.add(row, _i64(4 * c)))
-            t = builder.fmul(builder.fmul(gi_v, g_v[c]), den_v)
-            v = builder.fsub(builder.load(ptr, align=8), t)
-            if not fused:
-                v = builder.fmul(v, lam_v)
-            builder.store(v, ptr, align=8)
-            if fused:
+            v = builder.load(ptr, align=8)
+            if update:
+                t = builder.fmul(builder.fmul(gi_v, g_v[c]), den_v)
+                v = builder.fsub(v, t)
+                if mode == DOWNDATE:
+                    v = builder.fmul(v, lam_v)
+                builder.store(v, ptr, align=8)
+            if accumulate:
                 acc_next.append(builder.fadd(acc[c], builder.fmul(v, ri_v)))
         latch = builder.block
         i.add_incoming(builder.add(i, _i64(1)), latch)
@@ -141,7 +155,7 @@ def downdate_gain(typingctx, P, g, r, n, inv_den):
     sig = types.void(P, g, r, n, inv_den)
 
     def codegen(context, builder, sig, args):
-        return _emit_pass(context, builder, sig, args, fused=True)
+        return _emit_pass(context, builder, sig, args, DOWNDATE_GAIN)
 
     return sig, codegen
 
@@ -155,6 +169,21 @@ def downdate(typingctx, P, g, n, inv_den, inv_lam):
     sig = types.void(P, g, n, inv_den, inv_lam)
 
     def codegen(context, builder, sig, args):
-        return _emit_pass(context, builder, sig, args, fused=False)
+        return _emit_pass(context, builder, sig, args, DOWNDATE)
+
+    return sig, codegen
+
+
+@intrinsic
+def gain(typingctx, P, g, r, n):
+    """g ← P r for symmetric P: g_j = Σ_i P_ij r_i, i = 0..n−1 left to right (row axpys).
+
+    ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g`` and ``r``
+    length m (``r`` zero beyond n, not aliasing ``g``).
+    """
+    sig = types.void(P, g, r, n)
+
+    def codegen(context, builder, sig, args):
+        return _emit_pass(context, builder, sig, args, GAIN)
 
     return sig, codegen
