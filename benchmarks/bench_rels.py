@@ -44,17 +44,17 @@ def data(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return u / np.std(u), y / np.std(y)
 
 
-def kernel_rate(u, y, na, nb, nc, repeats=3, method="rels") -> tuple[float, float]:
+def kernel_rate(u, y, na, nb, nc, repeats=5, method="rels", lam=1.0) -> tuple[float, float]:
     n = na + nb + 1 + nc
     err, xi = np.empty(u.size), np.empty(u.size)
     hist = np.empty((0, n))
     t0 = time.perf_counter()
-    st = _new_state(na, nb, nc, 1, 1.0, 1e6, n * 1e6, 0.99, np.zeros(n), None, method)
+    st = _new_state(na, nb, nc, 1, lam, 1e6, n * 1e6, 0.99, np.zeros(n), None, method)
     K.rels_run(st, u[:10], y[:10], err, xi, hist, 1)
     compile_s = time.perf_counter() - t0
     best = np.inf
     for _ in range(repeats):
-        st = _new_state(na, nb, nc, 1, 1.0, 1e6, n * 1e6, 0.99, np.zeros(n), None, method)
+        st = _new_state(na, nb, nc, 1, lam, 1e6, n * 1e6, 0.99, np.zeros(n), None, method)
         t0 = time.perf_counter()
         K.rels_run(st, u, y, err, xi, hist, 1)
         best = min(best, time.perf_counter() - t0)
@@ -131,8 +131,8 @@ def sippy_rate(u, y, na, nb, nc) -> float:
     return timed(run, y.size)
 
 
-def streaming_median_ns(na, nb, nc, calls=100_000, method="rels") -> float:
-    est = RelsEstimator(na=na, nb=nb, nc=nc, delay=1, method=method)
+def streaming_median_ns(na, nb, nc, calls=100_000, method="rels", lam=1.0) -> float:
+    est = RelsEstimator(na=na, nb=nb, nc=nc, delay=1, method=method, forgetting=lam)
     rng = np.random.default_rng(1)
     u = rng.standard_normal(calls).tolist()
     y = rng.standard_normal(calls).tolist()
@@ -162,24 +162,27 @@ def main() -> None:
     print()
     print(f"cold compile of the batch kernel (empty cache): {cold_compile_s():.2f} s")
     print()
-    print("| method | orders (na,nb,nc) | ehss kernel | cache load | numpy loop | "
+    print("| method | λ | orders (na,nb,nc) | ehss kernel | cache load | numpy loop | "
           "padasip RLS | SIPPY RLLS | × numpy | × SIPPY | streaming update median |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for method, na, nb, nc in (("rels", 4, 4, 2), ("rels", 6, 6, 4), ("rml", 6, 6, 4)):
-        rate, comp = kernel_rate(u, y, na, nb, nc, method=method)
-        r_np = timed(lambda na=na, nb=nb, nc=nc, method=method: naive_rels(
-            u[:n_naive], y[:n_naive], na=na, nb=nb, nc=nc, delay=1, method=method), n_naive)
-        med = streaming_median_ns(na, nb, nc, method=method)
-        if method == "rels":
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    runs = (("rels", 1.0, 4, 4, 2), ("rels", 1.0, 6, 6, 4), ("rels", 0.99, 6, 6, 4),
+            ("rml", 1.0, 6, 6, 4))
+    for method, lam, na, nb, nc in runs:
+        rate, comp = kernel_rate(u, y, na, nb, nc, method=method, lam=lam)
+        r_np = timed(lambda na=na, nb=nb, nc=nc, method=method, lam=lam: naive_rels(
+            u[:n_naive], y[:n_naive], na=na, nb=nb, nc=nc, delay=1, lam=lam, method=method),
+            n_naive)
+        med = streaming_median_ns(na, nb, nc, method=method, lam=lam)
+        if method == "rels" and lam == 1.0:
             r_pa = padasip_rate(u[:n_peer], y[:n_peer], na, nb, nc)
             r_si = sippy_rate(u[:n_sippy], y[:n_sippy], na, nb, nc)
             peers = f"{r_pa / 1e3:.1f} k/s | {r_si / 1e3:.2f} k/s"
             x_si = f"{rate / r_si:.0f}×"
-        else:  # no RML in padasip or SIPPY
+        else:  # no RML in padasip or SIPPY; SIPPY's RLLS has no forgetting factor
             peers, x_si = "— | —", "—"
-        print(f"| {method} | ({na},{nb},{nc}) | {rate / 1e6:.2f} M/s ({1e9 / rate:.0f} ns) | "
-              f"{comp:.2f} s | {r_np / 1e3:.1f} k/s | {peers} | {rate / r_np:.0f}× | "
-              f"{x_si} | {med:.0f} ns |")
+        print(f"| {method} | {lam:g} | ({na},{nb},{nc}) | {rate / 1e6:.2f} M/s "
+              f"({1e9 / rate:.0f} ns) | {comp:.2f} s | {r_np / 1e3:.1f} k/s | {peers} | "
+              f"{rate / r_np:.0f}× | {x_si} | {med:.0f} ns |")
     print()
     print(f"samples: kernel {n_big}, numpy loop {n_naive}, padasip {n_peer}, SIPPY {n_sippy}")
 
