@@ -23,6 +23,11 @@ zero padding and are not touched. (Two variants were measured slower: w = g·√
 with P − w wᵀ, one multiply less per entry but a square root on the critical path; and
 the trace and smallest diagonal entry summed inside the pass, which delays the row
 stores. The callers sum those after the pass.)
+
+On CPUs without AVX, LLVM splits each ``<4 x double>`` operation into SSE2 halves: the
+same operations on the same elements, so the same results. numba's on-disk cache is
+keyed on the source file of the jitted function: after editing this module, clear the
+``__pycache__`` entries of ``_kernels.py`` (or touch it) so that its kernels recompile.
 """
 
 from __future__ import annotations
