@@ -161,3 +161,27 @@ def test_rels_batch_equals_streaming_bit_for_bit(rng, orders, lam, alpha, trace_
                        np.delete(stream, np.r_[g_index:g_index + K.padded(n)]))
     if trace_bound is not None:
         assert batch[K.H_TRSCALE] > 0
+
+
+def test_rels_batch_restart_equals_streaming(rng):
+    # an indefinite P (as rounding could leave it) must restart both paths identically
+    na, nb, nc, d = 2, 1, 2, 1
+    n = na + nb + 1 + nc
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 900, snr_db=20.0)
+    u, y = u / np.std(u), y / np.std(y)
+    states = []
+    for path in ("batch", "stream"):
+        st = _new_state(na, nb, nc, d, 1.0, 1e4, n * 1e4, 0.99, np.zeros(n))
+        K.rels_run(st, u[:400], y[:400], np.empty(400), np.empty(400), np.empty((0, n)), 1)
+        K.state_views(st)[1][:] = -np.eye(n)  # ψ̂ᵀPψ̂ < 0 on the next sample
+        if path == "batch":
+            K.rels_run(st, u[400:], y[400:], np.empty(500), np.empty(500),
+                       np.empty((0, n)), 1)
+        else:
+            for k in range(400, 900):
+                K.rels_step(st, u[k], y[k])
+        states.append(st)
+    assert states[0][K.H_RESETS] == states[1][K.H_RESETS] == 1
+    for i in (0, 1, 2):  # θ̂, P, ψ̂
+        assert_array_equal(K.state_views(states[0])[i], K.state_views(states[1])[i])

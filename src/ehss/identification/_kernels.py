@@ -427,6 +427,37 @@ def _innovation_variance(nv, xi, count, lam):
 
 
 @njit(cache=True, inline="always")
+def _restart(P, r, g, n, nab, alpha, alpha_c):
+    """P = P(0) and g = P(0) r (zero beyond n); returns s = rᵀg, summed left to right.
+
+    Run when ψ̂ᵀPψ̂ < 0 proves that P lost definiteness, or on overflow (eq 22 restarts).
+    """
+    _reset_P(P, n, nab, alpha, alpha_c)
+    for i in range(g.shape[0]):
+        g[i] = 0.0
+    s = 0.0
+    for i in range(n):
+        g[i] = P[i, i] * r[i]
+        s += r[i] * g[i]
+    return s
+
+
+@njit(cache=True, inline="always")
+def _residual(xi, direct, psi, theta, n, y):
+    """ξ̂(k) of (19), 0 if not finite.
+
+    ``xi`` is the cheap form (e λ/den for RELS, e otherwise); after a projection of C
+    changed θ̂ (``direct``) it is formed directly as y(k) − ψ̂ᵀ(k) θ̂(k).
+    """
+    if direct:
+        acc = 0.0
+        for i in range(n):
+            acc += psi[i] * theta[i]
+        xi = y - acc
+    return xi if np.isfinite(xi) else 0.0
+
+
+@njit(cache=True, inline="always")
 def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
     """One RELS or RML sample with the safeguards (streaming, and the RML batch loop).
 
@@ -495,19 +526,13 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
         # den would then give a huge gain); that, or overflow, resets P = P(0).
         den = lam + s
         if not (s >= 0.0 and np.isfinite(den)):
-            _reset_P(P, n, nab, alpha, alpha_c)
             state[H_RESETS] += 1.0
             if rml:
                 # RML: the filter 1/Ĉ restarts from rest too, so ψ_f(k) = ψ̂(k)
                 _clear_rows(hf)
                 for i in range(m):
                     r[i] = psi[i]
-            s = 0.0
-            for i in range(m):
-                g[i] = 0.0
-            for i in range(n):
-                g[i] = P[i, i] * r[i]
-                s += r[i] * g[i]
+            s = _restart(P, r, g, n, nab, alpha, alpha_c)
             den = lam + s
         # the step K e must be finite (a huge e with a small den could overflow θ̂)
         gmax = 0.0
@@ -543,15 +568,7 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
     elif state[H_ENABLED] != 0.0:
         state[H_SKIPPED] += 1.0
 
-    # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k)   (a-posteriori residual), directly when the
-    # projection of C changed θ̂ after the update
-    if xi_direct:
-        acc = 0.0
-        for i in range(n):
-            acc += psi[i] * theta[i]
-        xi = y - acc
-    if not np.isfinite(xi):
-        xi = 0.0
+    xi = _residual(xi, xi_direct, psi, theta, n, y)
     state[H_XI] = xi
     state[H_NV] = _innovation_variance(state[H_NV], xi, state[H_COUNT], lam)
 
@@ -689,18 +706,13 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
         if enabled and np.isfinite(e):
             den = lam + s
             if not (s >= 0.0 and np.isfinite(den)):
-                _reset_P(P, n, o, alpha, alpha_c)
                 resets += 1.0
-                s = 0.0
+                s = _restart(P, psi, g, n, o, alpha, alpha_c)
+                den = lam + s
                 gmax = 0.0
-                for i in range(m):
-                    g[i] = 0.0
                 for i in range(n):
-                    g[i] = P[i, i] * psi[i]
-                    s += psi[i] * g[i]
                     if abs(g[i]) > gmax:
                         gmax = abs(g[i])
-                den = lam + s
             if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
                 inv_den = 1.0 / den
                 update = True
@@ -714,13 +726,7 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
                 skipped += 1.0
         elif enabled:
             skipped += 1.0
-        if xi_direct:
-            acc = 0.0
-            for i in range(n):
-                acc += psi[i] * theta[i]
-            xi = yk - acc
-        if not np.isfinite(xi):
-            xi = 0.0
+        xi = _residual(xi, xi_direct, psi, theta, n, yk)
         nv = _innovation_variance(nv, xi, count, lam)
         _shift_regressor(psi, na, nc, o, yk, xi)
         fuse = k + 1 < N
