@@ -337,31 +337,6 @@ def _downdate(P, g, n, inv_den, inv_lam):
 
 
 @njit(cache=True, inline="always")
-def _downdate_gain(P, g, r, n, inv_den, work):
-    """(22) at λ = 1 fused with the next gain: P ← P − g gᵀ·inv_den, then g ← P r.
-
-    Returns (tr P, min P_ii). Intrinsic for m ≤ SIMD_MAX, else plain loops with the
-    same arithmetic (``work``, length m, holds the next gain while it is summed).
-    """
-    m = P.shape[0]
-    if m <= SIMD_MAX:
-        downdate_gain(P, g, r, n, inv_den)
-    else:
-        for j in range(m):
-            work[j] = 0.0
-        for i in range(n):
-            gi = g[i]
-            ri = r[i]
-            for j in range(m):
-                v = P[i, j] - (gi * g[j]) * inv_den
-                P[i, j] = v
-                work[j] += v * ri
-        for j in range(m):
-            g[j] = work[j]
-    return _trace_min(P, n)
-
-
-@njit(cache=True, inline="always")
 def _floor_and_bound(P, n, lam, tr, dmin, trmax):
     """After (22): diagonal floor (λ < 1), definiteness guard, trace bound.
 
@@ -619,15 +594,16 @@ def _save_history(hist, theta, row, n):
 
 
 @njit(cache=True)
-def _rml_batch(state, u, y, err, xi_out, hist, hist_every):
-    """The RML batch loop: :func:`_step` per sample."""
+def _step_batch(state, u, y, err, xi_out, hist, hist_every):
+    """:func:`_step` per sample: the RML batch, and RELS for n > SIMD_MAX."""
     theta, P, psi, g, ul, cw = _views(state)
     hf = _hf_view(state)
+    rml = _is_rml(state)
     n = hist.shape[1]
     c = 0
     row = 0
     for k in range(u.shape[0]):
-        err[k] = _step(state, theta, P, psi, g, ul, cw, hf, u[k], y[k], True)
+        err[k] = _step(state, theta, P, psi, g, ul, cw, hf, u[k], y[k], rml)
         xi_out[k] = state[H_XI]
         c += 1
         if c == hist_every:
@@ -638,17 +614,26 @@ def _rml_batch(state, u, y, err, xi_out, hist, hist_every):
 
 @njit(cache=True)
 def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
-    """The RELS batch loop: :func:`_step`'s RELS sequence with three batch-only changes.
+    """The RELS batch loop for n ≤ SIMD_MAX: :func:`_step`'s RELS sequence, made fast.
+
+    The same operations in the same order as :func:`_step` (a test holds the two to the
+    same bits), with four batch-only changes:
 
     1. Header values and counters live in locals (written back at the end), so
        nothing in the loop reloads them after every store to θ̂ or P.
     2. The batch knows u(k+1), so ψ̂(k+1) is complete before P(k) is formed: at λ = 1
        the pass that writes P(k) also forms the next sample's g = P(k) ψ̂(k+1)
-       (:func:`_downdate_gain`, the same sums in the same order as :func:`_gain`,
+       (:func:`._simd.downdate_gain`, the same sums in the same order as :func:`_gain`,
        hence the same bits), and P is read once per sample instead of twice. After a
        reset or a trace scaling, or with λ < 1 (the diagonal floor changes P after the
        pass), g is formed at the start of the next sample as in the streaming step.
     3. ŷ, ψ̂ᵀg and max|g_i| are formed in one loop (same sums, same order).
+    4. The loop body is written out instead of calling the small helpers that
+       :func:`_step` shares: numba brackets every array an inlined helper receives
+       with atomic reference-count updates that its pruning pass cannot remove around
+       a loop, and those cost ≈ 15 % of a (6,6,4) sample. The Rouché bound of
+       :func:`_c_within` is written out too, so the full Schur–Cohn call (with its
+       arrays) only runs when the bound fails.
 
     Same arguments as :func:`rels_run`.
     """
@@ -660,12 +645,14 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
     n = na + nb + 1 + nc
     o = na + nb + 1
     m = P.shape[0]
+    nu = d + nb + 1
     lam = state[H_LAM]
     inv_lam = 1.0 / lam
     alpha = state[H_ALPHA]
     alpha_c = state[H_ALPHA_C]
     trmax = state[H_TRMAX]
     radius = state[H_CRADIUS]
+    inv_r = 1.0 / radius
     enabled = state[H_ENABLED] != 0.0
     count = state[H_COUNT]
     resets = state[H_RESETS]
@@ -674,7 +661,6 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
     skipped = state[H_SKIPPED]
     nv = state[H_NV]
     xi = state[H_XI]
-    work = np.empty(m)
     N = u.shape[0]
     c = 0
     row = 0
@@ -684,9 +670,9 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
     for k in range(N):
         yk = y[k]
         if enabled and not ready:
-            _gain(P, psi, g, n)
-        # one loop for ŷ = ψ̂ᵀθ̂ (eq 20), s = ψ̂ᵀPψ̂ = ψ̂ᵀg (eq 21) and max|g_i|, each
-        # summed left to right as in _step (g is unused when e turns out non-finite)
+            gain(P, g, psi, n)  # (21) g = P(k−1) ψ̂(k), as _gain
+        # ŷ = ψ̂ᵀθ̂ (eq 20), s = ψ̂ᵀPψ̂ = ψ̂ᵀg (eq 21) and max|g_i|, each summed left
+        # to right as in _step (g is unused when e turns out non-finite)
         yhat = 0.0
         s = 0.0
         gmax = 0.0
@@ -716,36 +702,79 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
             if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
                 inv_den = 1.0 / den
                 update = True
-                for i in range(n):
+                for i in range(n):  # (20), (21)
                     theta[i] += (g[i] * inv_den) * e
-                xi = e * (lam * inv_den)
-                if nc > 0 and _keep_c_stable(theta, o, nc, radius, cw):
-                    cproj += 1.0
-                    xi_direct = True
+                xi = e * (lam * inv_den)  # (19) as e λ/den
+                if nc > 0:
+                    # C kept inside the radius: Rouché's bound, then _c_within
+                    bound = 0.0
+                    rp = 1.0
+                    for i in range(nc):
+                        rp *= inv_r
+                        bound += abs(theta[o + i] * rp)
+                    if not bound < 1.0 and not _c_within(theta, o, nc, radius, cw):
+                        _project_c(theta[o:n], nc, radius)
+                        cproj += 1.0
+                        xi_direct = True
             else:
                 skipped += 1.0
         elif enabled:
             skipped += 1.0
-        xi = _residual(xi, xi_direct, psi, theta, n, yk)
+        # (19) directly after a projection of C; 0 if not finite (as _residual)
+        if xi_direct:
+            acc = 0.0
+            for i in range(n):
+                acc += psi[i] * theta[i]
+            xi = yk - acc
+        if not np.isfinite(xi):
+            xi = 0.0
         nv = _innovation_variance(nv, xi, count, lam)
-        _shift_regressor(psi, na, nc, o, yk, xi)
+        # ψ̂(k+1): y-part, c-part (as _shift_regressor), u-part (as _push_u)
+        for i in range(na - 1, 0, -1):
+            psi[i] = psi[i - 1]
+        psi[0] = -yk
+        for i in range(nc - 1, 0, -1):
+            psi[o + i] = psi[o + i - 1]
+        if nc > 0:
+            psi[o] = xi
         fuse = k + 1 < N
         if fuse:
-            _push_u(ul, psi, u[k + 1], na, nb, d)
+            for j in range(nu - 1, 0, -1):
+                ul[j] = ul[j - 1]
+            ul[0] = u[k + 1]
+            for j in range(nb + 1):
+                psi[na + j] = ul[d + j]
         ready = False
         if update:
+            # (22) in the symmetric form, as _downdate (+ the next gain at λ = 1)
             inv_den = 1.0 / den
             if fuse and lam == 1.0:
-                tr, dmin = _downdate_gain(P, g, psi, n, inv_den, work)
+                downdate_gain(P, g, psi, n, inv_den)
                 ready = True
             else:
-                tr, dmin = _downdate(P, g, n, inv_den, inv_lam)
-            verdict = _floor_and_bound(P, n, lam, tr, dmin, trmax)
-            if verdict == 1:
+                downdate(P, g, n, inv_den, inv_lam)
+            # as _trace_min and _floor_and_bound
+            tr = 0.0
+            dmin = np.inf
+            for i in range(n):
+                pii = P[i, i]
+                tr += pii
+                if pii < dmin:
+                    dmin = pii
+            if lam < 1.0:
+                delta = EPS_FLOOR * n * tr
+                for i in range(n):
+                    P[i, i] += delta
+                tr += n * delta
+            if not (dmin > 0.0 and np.isfinite(tr)):
                 _reset_P(P, n, o, alpha, alpha_c)
                 resets += 1.0
                 ready = False
-            elif verdict == 2:
+            elif tr > trmax:
+                f = trmax / tr
+                for i in range(n):
+                    for j in range(m):
+                        P[i, j] *= f
                 trscale += 1.0
                 ready = False
         if not np.isfinite(e):
@@ -755,7 +784,9 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
         c += 1
         if c == hist_every:
             c = 0
-            _save_history(hist, theta, row, n)
+            if row < hist.shape[0]:
+                for i in range(n):
+                    hist[row, i] = theta[i]
             row += 1
     state[H_COUNT] = count
     state[H_RESETS] = resets
@@ -780,8 +811,9 @@ def rels_run(state, u, y, err, xi_out, hist, hist_every):
         (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
     hist_every : int ≥ 1
     """
-    if _is_rml(state):
-        _rml_batch(state, u, y, err, xi_out, hist, hist_every)
+    n = int(state[H_NA]) + int(state[H_NB]) + 1 + int(state[H_NC])
+    if _is_rml(state) or (n + 3) // 4 * 4 > SIMD_MAX:
+        _step_batch(state, u, y, err, xi_out, hist, hist_every)
     else:
         _rels_batch(state, u, y, err, xi_out, hist, hist_every)
 

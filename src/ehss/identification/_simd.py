@@ -64,29 +64,40 @@ def _i64(k):
     return ir.Constant(_I64, k)
 
 
-#: what a row pass does (``_emit_pass``'s ``mode``)
+#: what a row pass does (``_pass_function``'s ``mode``)
 DOWNDATE, DOWNDATE_GAIN, GAIN = 0, 1, 2
+_PASS_NAMES = {DOWNDATE: "ehss_simd_downdate", DOWNDATE_GAIN: "ehss_simd_downdate_gain",
+               GAIN: "ehss_simd_gain"}
+#: (P data, m, g data, r data, n, inv_den, inv_lam); unused arguments are passed anyway
+_PASS_TYPE = ir.FunctionType(ir.VoidType(), [_F64.as_pointer(), _I64, _F64.as_pointer(),
+                                             _F64.as_pointer(), _I64, _F64, _F64])
 
 
-def _emit_pass(context, builder, sig, args, mode):
-    """IR of one pass over the rows i < n of P (void); ``mode`` as documented above."""
-    P = context.make_array(sig.args[0])(context, builder, value=args[0])
-    g = context.make_array(sig.args[1])(context, builder, value=args[1])
+def _pass_function(module, mode):
+    """The pass as an out-of-line LLVM function of ``module`` (defined once per module).
+
+    Out of line on purpose: numba brackets the arrays an inlined helper receives with
+    reference-count increments and decrements, and its pruning pass removes such a pair
+    only when nothing between them branches. A single call keeps the pair in one basic
+    block (pruned); the pass's own switch and loops inline would leave two atomic
+    operations per array and call in the per-sample loop.
+    """
+    name = _PASS_NAMES[mode]
+    try:
+        return module.get_global(name)
+    except KeyError:
+        pass
+    fn = ir.Function(module, _PASS_TYPE, name=name)
+    fn.linkage = "linkonce_odr"
+    fn.attributes.add("noinline")
+    fn.attributes.add("nounwind")
+    P_data, m, g_data, r_data, nrow, inv_den, inv_lam = fn.args
+    for arg in (P_data, g_data, r_data):
+        arg.add_attribute("noalias")  # P, g and r are distinct buffers (callers' contract)
+    builder = ir.IRBuilder(fn.append_basic_block("entry"))
     update = mode != GAIN  # P is written
     accumulate = mode != DOWNDATE  # a new g = P r is summed
-    if mode == DOWNDATE:  # (P, g, n, inv_den, inv_lam)
-        n_arg = 2
-    else:  # (P, g, r, n[, inv_den])
-        r = context.make_array(sig.args[2])(context, builder, value=args[2])
-        n_arg = 3
-    nrow = context.cast(builder, args[n_arg], sig.args[n_arg], types.intp)
-    if update:
-        inv_den = context.cast(builder, args[n_arg + 1], sig.args[n_arg + 1], types.float64)
-    if mode == DOWNDATE:
-        inv_lam = context.cast(builder, args[4], sig.args[4], types.float64)
-    m = builder.extract_value(P.shape, 1)
 
-    fn = builder.function
     done = fn.append_basic_block("pass.done")
     other = fn.append_basic_block("pass.unsupported")
     switch = builder.switch(builder.lshr(m, _i64(2)), other)
@@ -97,7 +108,7 @@ def _emit_pass(context, builder, sig, args, mode):
         if update:
             den_v = _splat(builder, inv_den)
             # g as vectors, loaded once: g is not written until the pass is over
-            g_v = [builder.load(_vec_ptr(builder, g.data, _i64(4 * c)), align=8)
+            g_v = [builder.load(_vec_ptr(builder, g_data, _i64(4 * c)), align=8)
                    for c in range(k)]
         if mode == DOWNDATE:
             lam_v = _splat(builder, inv_lam)
@@ -117,12 +128,12 @@ def _emit_pass(context, builder, sig, args, mode):
         builder.position_at_end(body)
         row = builder.mul(i, m)
         if update:
-            gi_v = _splat(builder, builder.load(builder.gep(g.data, [i])))
+            gi_v = _splat(builder, builder.load(builder.gep(g_data, [i])))
         if accumulate:
-            ri_v = _splat(builder, builder.load(builder.gep(r.data, [i])))
+            ri_v = _splat(builder, builder.load(builder.gep(r_data, [i])))
         acc_next = []
         for c in range(k):
-            ptr = _vec_ptr(builder, P.data, builder.add(row, _i64(4 * c)))
+            ptr = _vec_ptr(builder, P_data, builder.add(row, _i64(4 * c)))
             v = builder.load(ptr, align=8)
             if update:
                 t = builder.fmul(builder.fmul(gi_v, g_v[c]), den_v)
@@ -140,13 +151,37 @@ def _emit_pass(context, builder, sig, args, mode):
 
         builder.position_at_end(tail)
         for c, a in enumerate(acc):
-            builder.store(a, _vec_ptr(builder, g.data, _i64(4 * c)), align=8)
+            builder.store(a, _vec_ptr(builder, g_data, _i64(4 * c)), align=8)
         builder.branch(done)
 
     # m > 4·KMAX: the callers never get here (they check SIMD_MAX first)
     builder.position_at_end(other)
     builder.branch(done)
     builder.position_at_end(done)
+    builder.ret_void()
+    return fn
+
+
+def _emit_call(context, builder, sig, args, mode):
+    """Lower one intrinsic call: extract the data pointers and call the pass function."""
+    P = context.make_array(sig.args[0])(context, builder, value=args[0])
+    g = context.make_array(sig.args[1])(context, builder, value=args[1])
+    zero = ir.Constant(_F64, 0.0)
+    one = ir.Constant(_F64, 1.0)
+    if mode == DOWNDATE:  # (P, g, n, inv_den, inv_lam)
+        r_data = g.data
+        n_arg = 2
+    else:  # (P, g, r, n[, inv_den])
+        r_data = context.make_array(sig.args[2])(context, builder, value=args[2]).data
+        n_arg = 3
+    nrow = context.cast(builder, args[n_arg], sig.args[n_arg], types.intp)
+    inv_den = (context.cast(builder, args[n_arg + 1], sig.args[n_arg + 1], types.float64)
+               if mode != GAIN else zero)
+    inv_lam = (context.cast(builder, args[4], sig.args[4], types.float64)
+               if mode == DOWNDATE else one)
+    m = builder.extract_value(P.shape, 1)
+    fn = _pass_function(builder.module, mode)
+    builder.call(fn, [P.data, m, g.data, r_data, nrow, inv_den, inv_lam])
     return context.get_dummy_value()
 
 
@@ -160,7 +195,7 @@ def downdate_gain(typingctx, P, g, r, n, inv_den):
     sig = types.void(P, g, r, n, inv_den)
 
     def codegen(context, builder, sig, args):
-        return _emit_pass(context, builder, sig, args, DOWNDATE_GAIN)
+        return _emit_call(context, builder, sig, args, DOWNDATE_GAIN)
 
     return sig, codegen
 
@@ -174,7 +209,7 @@ def downdate(typingctx, P, g, n, inv_den, inv_lam):
     sig = types.void(P, g, n, inv_den, inv_lam)
 
     def codegen(context, builder, sig, args):
-        return _emit_pass(context, builder, sig, args, DOWNDATE)
+        return _emit_call(context, builder, sig, args, DOWNDATE)
 
     return sig, codegen
 
@@ -189,6 +224,6 @@ def gain(typingctx, P, g, r, n):
     sig = types.void(P, g, r, n)
 
     def codegen(context, builder, sig, args):
-        return _emit_pass(context, builder, sig, args, GAIN)
+        return _emit_call(context, builder, sig, args, GAIN)
 
     return sig, codegen
