@@ -32,6 +32,9 @@ keyed on the source file of the jitted function: after editing this module, clea
 
 from __future__ import annotations
 
+import hashlib
+from pathlib import Path
+
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
@@ -66,8 +69,14 @@ def _i64(k):
 
 #: what a row pass does (``_pass_function``'s ``mode``)
 DOWNDATE, DOWNDATE_GAIN, GAIN = 0, 1, 2
-_PASS_NAMES = {DOWNDATE: "ehss_simd_downdate", DOWNDATE_GAIN: "ehss_simd_downdate_gain",
-               GAIN: "ehss_simd_gain"}
+# The pass functions are linkonce_odr symbols shared by every kernel that calls them,
+# so their names carry a digest of this file: a process that loads kernels compiled
+# from two versions of it (a stale numba cache, an experiment) cannot link one
+# version's calls to the other's code.
+_TAG = hashlib.sha1(Path(__file__).read_bytes()).hexdigest()[:12]
+_PASS_NAMES = {DOWNDATE: f"ehss_simd_downdate_{_TAG}",
+               DOWNDATE_GAIN: f"ehss_simd_downdate_gain_{_TAG}",
+               GAIN: f"ehss_simd_gain_{_TAG}"}
 #: (P data, m, g data, r data, n, inv_den, inv_lam); unused arguments are passed anyway
 _PASS_TYPE = ir.FunctionType(ir.VoidType(), [_F64.as_pointer(), _I64, _F64.as_pointer(),
                                              _F64.as_pointer(), _I64, _F64, _F64])
