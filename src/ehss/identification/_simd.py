@@ -19,10 +19,9 @@ numpy reference in the tests):
   (``downdate_gain``) or over P as it is (``gain``)
 
 g_i g_j = g_j g_i exactly, so the updated P is exactly symmetric. Rows i ≥ n are the
-zero padding and are not touched. (Two variants were measured slower: w = g·√inv_den
-with P − w wᵀ, one multiply less per entry but a square root on the critical path; and
-the trace and smallest diagonal entry summed inside the pass, which delays the row
-stores. The callers sum those after the pass.)
+zero padding and are not touched. (Measured and not kept, see BENCHMARKS.md:
+w = g·√inv_den with P − w wᵀ, one multiply less per entry, no faster; the trace and
+smallest diagonal entry summed inside the pass, slower. The callers sum those after.)
 
 On CPUs without AVX, LLVM splits each ``<4 x double>`` operation into SSE2 halves: the
 same operations on the same elements, so the same results. numba's on-disk cache is
