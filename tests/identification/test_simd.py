@@ -14,7 +14,7 @@ from numba import njit
 from numpy.testing import assert_array_equal
 
 from ehss.identification import _kernels as K
-from ehss.identification._simd import SIMD_MAX, downdate_gain
+from ehss.identification._simd import SIMD_MAX, downdate_gain, gain_sums
 from ehss.identification.rels import _new_state
 
 from .systems import armax_data, system
@@ -44,9 +44,25 @@ def _call_downdate(P, g, n, inv_den, inv_lam):
 
 
 @njit
-def _call_downdate_gain(P, g, r, n, inv_den):
-    downdate_gain(P, g, r, n, inv_den)
+def _call_downdate_gain(P, g, r, n, inv_den, theta, out):
+    downdate_gain(P, g, r, n, inv_den, theta, out)
     return K._trace_min(P, n)
+
+
+@njit
+def _call_gain_sums(P, g, r, n, theta, out):
+    gain_sums(P, g, r, n, theta, out)
+
+
+def _sums(r, theta, g, n):
+    """(rᵀθ, rᵀg, max(0, max|g_j|)) over j < n, the sums left to right as the scalar loops."""
+    yhat = s = gmax = 0.0
+    for j in range(n):
+        yhat += r[j] * theta[j]
+        s += r[j] * g[j]
+        if abs(g[j]) > gmax:
+            gmax = abs(g[j])
+    return yhat, s, gmax
 
 
 def _problem(rng, m, n):
@@ -56,6 +72,12 @@ def _problem(rng, m, n):
     r = np.zeros(m)
     r[:n] = rng.standard_normal(n)
     return P, P @ r, r  # g = P r as in (21)
+
+
+def _theta(rng, m, n):
+    theta = np.zeros(m)
+    theta[:n] = rng.standard_normal(n)
+    return theta
 
 
 # every vector count of the intrinsic (m = 4..32), n = m and n < m (zero padding), and
@@ -70,11 +92,27 @@ def test_downdate_gain_bit_for_bit(rng, m, n):
     inv_den = 1.0 / (1.0 + r @ g)
     P_ref, gn_ref, tr_ref, dmin_ref = _reference(P, g, r, n, inv_den, 1.0, fused=True)
     P_k, g_k = P.copy(), g.copy()
-    tr, dmin = _call_downdate_gain(P_k, g_k, r, n, inv_den)
+    theta, out = _theta(rng, m, n), np.full(3, np.nan)
+    tr, dmin = _call_downdate_gain(P_k, g_k, r, n, inv_den, theta, out)
     assert_array_equal(P_k, P_ref)
     assert_array_equal(g_k, gn_ref)
     assert (tr, dmin) == (tr_ref, dmin_ref)
     assert_array_equal(P_k, P_k.T)
+    assert tuple(out) == _sums(r, theta, gn_ref, n)  # ŷ, s and max|g| of the next sample
+
+
+@pytest.mark.parametrize(("m", "n"), [(m, n) for m, n in SIZES if m <= SIMD_MAX])
+def test_gain_sums_bit_for_bit(rng, m, n):
+    P, _, r = _problem(rng, m, n)
+    r[:n] *= np.where(np.arange(n) % 2 == 0, 1.0, -1.0)  # mixed signs in g
+    g_ref = np.zeros(m)
+    for i in range(n):  # rows of the symmetric P as columns, summed left to right
+        g_ref = g_ref + P[i] * r[i]
+    theta, out, g = _theta(rng, m, n), np.full(3, np.nan), np.full(m, np.nan)
+    _call_gain_sums(P, g, r, n, theta, out)
+    assert_array_equal(g, g_ref)
+    assert tuple(out) == _sums(r, theta, g_ref, n)
+    assert out[2] == np.max(np.abs(g_ref[:n])) > 0.0
 
 
 @njit

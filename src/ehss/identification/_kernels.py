@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ehss.identification._simd import SIMD_MAX, downdate, downdate_gain, gain
+from ehss.identification._simd import SIMD_MAX, downdate, downdate_gain, gain, gain_sums
 
 __all__: list[str] = []  # private module: the public API is in rels.py
 
@@ -627,7 +627,8 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
        hence the same bits), and P is read once per sample instead of twice. After a
        reset or a trace scaling, or with λ < 1 (the diagonal floor changes P after the
        pass), g is formed at the start of the next sample as in the streaming step.
-    3. ŷ, ψ̂ᵀg and max|g_i| are formed in one loop (same sums, same order).
+    3. ŷ, ψ̂ᵀg and max|g_i| come from the vector kernel that formed g (same sums,
+       same order), straight from its registers.
     4. The loop body is written out instead of calling the small helpers that
        :func:`_step` shares: numba brackets every array an inlined helper receives
        with atomic reference-count updates that its pruning pass cannot remove around
@@ -664,25 +665,26 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
     N = u.shape[0]
     c = 0
     row = 0
-    ready = False  # g holds P(k−1) ψ̂(k)
+    # sums[:3] = (ŷ, s, max|g_i|) of the coming sample, from the vector kernels
+    sums = np.zeros(3)
+    ready = False  # g holds P(k−1) ψ̂(k) and sums hold its sums
     if N > 0:
         _push_u(ul, psi, u[0], na, nb, d)
     for k in range(N):
         yk = y[k]
-        if enabled and not ready:
-            gain(P, g, psi, n)  # (21) g = P(k−1) ψ̂(k), as _gain
-        # ŷ = ψ̂ᵀθ̂ (eq 20), s = ψ̂ᵀPψ̂ = ψ̂ᵀg (eq 21) and max|g_i|, each summed left
-        # to right as in _step (g is unused when e turns out non-finite)
-        yhat = 0.0
-        s = 0.0
-        gmax = 0.0
-        for i in range(n):
-            pi = psi[i]
-            gi = g[i]
-            yhat += pi * theta[i]
-            s += pi * gi
-            if abs(gi) > gmax:
-                gmax = abs(gi)
+        if not ready:
+            if enabled:
+                # (21) g = P(k−1) ψ̂(k) as _gain, with ŷ = ψ̂ᵀθ̂ (eq 20), s = ψ̂ᵀg and
+                # max|g_i|, each summed left to right as in _step
+                gain_sums(P, g, psi, n, theta, sums)
+            else:
+                yhat = 0.0
+                for i in range(n):
+                    yhat += psi[i] * theta[i]
+                sums[0] = yhat
+        yhat = sums[0]
+        s = sums[1]
+        gmax = sums[2]
         e = yk - yhat
         count += 1.0
         xi = e
@@ -749,7 +751,8 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
             # (22) in the symmetric form, as _downdate (+ the next gain at λ = 1)
             inv_den = 1.0 / den
             if fuse and lam == 1.0:
-                downdate_gain(P, g, psi, n, inv_den)
+                # also the next sample's g and sums: θ̂(k) and ψ̂(k+1) are complete
+                downdate_gain(P, g, psi, n, inv_den, theta, sums)
                 ready = True
             else:
                 downdate(P, g, n, inv_den, inv_lam)

@@ -66,19 +66,23 @@ def _i64(k):
     return ir.Constant(_I64, k)
 
 
-#: what a row pass does (``_pass_function``'s ``mode``)
-DOWNDATE, DOWNDATE_GAIN, GAIN = 0, 1, 2
+#: what a row pass does (``_pass_function``'s ``mode``); the *_SUMS modes also write
+#: (ψ̂ᵀθ̂, ψ̂ᵀg, max|g_j|) for the new g and r = ψ̂ (see ``gain_sums``)
+DOWNDATE, DOWNDATE_GAIN_SUMS, GAIN, GAIN_SUMS = 0, 1, 2, 3
 # The pass functions are linkonce_odr symbols shared by every kernel that calls them,
 # so their names carry a digest of this file: a process that loads kernels compiled
 # from two versions of it (a stale numba cache, an experiment) cannot link one
 # version's calls to the other's code.
 _TAG = hashlib.sha1(Path(__file__).read_bytes()).hexdigest()[:12]
 _PASS_NAMES = {DOWNDATE: f"ehss_simd_downdate_{_TAG}",
-               DOWNDATE_GAIN: f"ehss_simd_downdate_gain_{_TAG}",
-               GAIN: f"ehss_simd_gain_{_TAG}"}
-#: (P data, m, g data, r data, n, inv_den, inv_lam); unused arguments are passed anyway
+               DOWNDATE_GAIN_SUMS: f"ehss_simd_downdate_gain_sums_{_TAG}",
+               GAIN: f"ehss_simd_gain_{_TAG}",
+               GAIN_SUMS: f"ehss_simd_gain_sums_{_TAG}"}
+#: (P data, m, g data, r data, n, inv_den, inv_lam, θ data, out data); unused arguments
+#: are passed anyway (the g pointer stands in for unused arrays)
 _PASS_TYPE = ir.FunctionType(ir.VoidType(), [_F64.as_pointer(), _I64, _F64.as_pointer(),
-                                             _F64.as_pointer(), _I64, _F64, _F64])
+                                             _F64.as_pointer(), _I64, _F64, _F64,
+                                             _F64.as_pointer(), _F64.as_pointer()])
 
 
 def _pass_function(module, mode):
@@ -99,12 +103,15 @@ def _pass_function(module, mode):
     fn.linkage = "linkonce_odr"
     fn.attributes.add("noinline")
     fn.attributes.add("nounwind")
-    P_data, m, g_data, r_data, nrow, inv_den, inv_lam = fn.args
-    for arg in (P_data, g_data, r_data):
-        arg.add_attribute("noalias")  # P, g and r are distinct buffers (callers' contract)
+    fn.attributes.add("optsize")  # no unrolling: two rows at once spilled g and acc
+    P_data, m, g_data, r_data, nrow, inv_den, inv_lam, theta_data, out_data = fn.args
     builder = ir.IRBuilder(fn.append_basic_block("entry"))
-    update = mode != GAIN  # P is written
+    update = mode in (DOWNDATE, DOWNDATE_GAIN_SUMS)  # P is written
     accumulate = mode != DOWNDATE  # a new g = P r is summed
+    sums = mode in (DOWNDATE_GAIN_SUMS, GAIN_SUMS)
+    if update and accumulate:
+        for arg in (P_data, g_data, r_data):
+            arg.add_attribute("noalias")  # distinct buffers (the callers' contract)
 
     done = fn.append_basic_block("pass.done")
     other = fn.append_basic_block("pass.unsupported")
@@ -160,6 +167,8 @@ def _pass_function(module, mode):
         builder.position_at_end(tail)
         for c, a in enumerate(acc):
             builder.store(a, _vec_ptr(builder, g_data, _i64(4 * c)), align=8)
+        if sums:
+            _emit_sums(builder, acc, r_data, theta_data, out_data)
         builder.branch(done)
 
     # m > 4·KMAX: the callers never get here (they check SIMD_MAX first)
@@ -170,40 +179,92 @@ def _pass_function(module, mode):
     return fn
 
 
+def _llvm_intrinsic(module, name, fnty):
+    """Declaration of the LLVM intrinsic ``name`` in ``module`` (once)."""
+    try:
+        return module.get_global(name)
+    except KeyError:
+        return ir.Function(module, fnty, name=name)
+
+
+def _emit_sums(builder, acc, r_data, theta_data, out_data):
+    """out = (rᵀθ, rᵀg, max(0, max_j |g_j|)) over all 4K lanes, the sums left to right.
+
+    The lanes beyond n add exact zeros (r, θ and g are zero there; a sum that starts at
+    +0.0 is never −0.0, so adding ±0.0 changes no bit): the same values as the scalar
+    loops over j < n. ``maxnum`` ignores NaN, as the scalar ``if |g_j| > gmax``.
+    """
+    yhat = ir.Constant(_F64, 0.0)
+    s = ir.Constant(_F64, 0.0)
+    fabs = _llvm_intrinsic(builder.module, "llvm.fabs.v4f64", ir.FunctionType(_V4, [_V4]))
+    maxnum = _llvm_intrinsic(builder.module, "llvm.maxnum.v4f64",
+                             ir.FunctionType(_V4, [_V4, _V4]))
+    gmax_v = _ZERO_V4
+    for c, a in enumerate(acc):
+        r_v = builder.load(_vec_ptr(builder, r_data, _i64(4 * c)), align=8)
+        t_v = builder.load(_vec_ptr(builder, theta_data, _i64(4 * c)), align=8)
+        py = builder.fmul(r_v, t_v)
+        ps = builder.fmul(r_v, a)
+        for lane in range(4):
+            yhat = builder.fadd(yhat, builder.extract_element(py, ir.Constant(_I32, lane)))
+            s = builder.fadd(s, builder.extract_element(ps, ir.Constant(_I32, lane)))
+        gmax_v = builder.call(maxnum, [gmax_v, builder.call(fabs, [a])])
+    lanes = [builder.extract_element(gmax_v, ir.Constant(_I32, lane)) for lane in range(4)]
+    maxnum_s = _llvm_intrinsic(builder.module, "llvm.maxnum.f64",
+                               ir.FunctionType(_F64, [_F64, _F64]))
+    gmax = builder.call(maxnum_s, [builder.call(maxnum_s, lanes[:2]),
+                                   builder.call(maxnum_s, lanes[2:])])
+    for k, value in enumerate((yhat, s, gmax)):
+        builder.store(value, builder.gep(out_data, [_i64(k)]))
+
+
 def _emit_call(context, builder, sig, args, mode):
-    """Lower one intrinsic call: extract the data pointers and call the pass function."""
+    """Lower one intrinsic call: extract the data pointers and call the pass function.
+
+    Argument orders: DOWNDATE (P, g, n, inv_den, inv_lam); GAIN (P, g, r, n);
+    GAIN_SUMS (P, g, r, n, theta, out); DOWNDATE_GAIN_SUMS (P, g, r, n, inv_den,
+    theta, out).
+    """
+    def data(k):
+        return context.make_array(sig.args[k])(context, builder, value=args[k]).data
+
+    def real(k):
+        return context.cast(builder, args[k], sig.args[k], types.float64)
+
     P = context.make_array(sig.args[0])(context, builder, value=args[0])
-    g = context.make_array(sig.args[1])(context, builder, value=args[1])
+    g_data = data(1)
     zero = ir.Constant(_F64, 0.0)
     one = ir.Constant(_F64, 1.0)
-    if mode == DOWNDATE:  # (P, g, n, inv_den, inv_lam)
-        r_data = g.data
-        n_arg = 2
-    else:  # (P, g, r, n[, inv_den])
-        r_data = context.make_array(sig.args[2])(context, builder, value=args[2]).data
-        n_arg = 3
+    if mode == DOWNDATE:
+        n_arg, r_data, inv_den, inv_lam = 2, g_data, real(3), real(4)
+        theta_data = out_data = g_data
+    else:
+        n_arg, r_data, inv_lam = 3, data(2), one
+        inv_den = real(4) if mode == DOWNDATE_GAIN_SUMS else zero
+        if mode == GAIN:
+            theta_data = out_data = g_data
+        else:
+            first = 5 if mode == DOWNDATE_GAIN_SUMS else 4
+            theta_data, out_data = data(first), data(first + 1)
     nrow = context.cast(builder, args[n_arg], sig.args[n_arg], types.intp)
-    inv_den = (context.cast(builder, args[n_arg + 1], sig.args[n_arg + 1], types.float64)
-               if mode != GAIN else zero)
-    inv_lam = (context.cast(builder, args[4], sig.args[4], types.float64)
-               if mode == DOWNDATE else one)
     m = builder.extract_value(P.shape, 1)
     fn = _pass_function(builder.module, mode)
-    builder.call(fn, [P.data, m, g.data, r_data, nrow, inv_den, inv_lam])
+    builder.call(fn, [P.data, m, g_data, r_data, nrow, inv_den, inv_lam, theta_data,
+                      out_data])
     return context.get_dummy_value()
 
 
 @intrinsic
-def downdate_gain(typingctx, P, g, r, n, inv_den):
-    """In place: P ← P − g gᵀ·inv_den (rows < n), then g ← P r.
+def downdate_gain(typingctx, P, g, r, n, inv_den, theta, out):
+    """In place: P ← P − g gᵀ·inv_den (rows < n), then g ← P r; ``out`` as ``gain_sums``.
 
-    ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g`` and ``r``
-    length m, zero beyond n (``r`` may not alias ``g``).
+    ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g``, ``r`` and
+    ``theta`` length m, zero beyond n; ``out`` length ≥ 3; all distinct buffers.
     """
-    sig = types.void(P, g, r, n, inv_den)
+    sig = types.void(P, g, r, n, inv_den, theta, out)
 
     def codegen(context, builder, sig, args):
-        return _emit_call(context, builder, sig, args, DOWNDATE_GAIN)
+        return _emit_call(context, builder, sig, args, DOWNDATE_GAIN_SUMS)
 
     return sig, codegen
 
@@ -233,5 +294,21 @@ def gain(typingctx, P, g, r, n):
 
     def codegen(context, builder, sig, args):
         return _emit_call(context, builder, sig, args, GAIN)
+
+    return sig, codegen
+
+
+@intrinsic
+def gain_sums(typingctx, P, g, r, n, theta, out):
+    """``gain``, then out[0] = rᵀθ, out[1] = rᵀg, out[2] = max(0, max_j |g_j|).
+
+    With r = ψ̂(k) and θ = θ̂(k−1) these are ŷ (eq 20), ψ̂ᵀPψ̂ (eq 21) and the size of
+    the gain for the overflow check, summed left to right as the scalar loops do.
+    ``theta`` length m, zero beyond n; ``out`` length ≥ 3; all distinct buffers.
+    """
+    sig = types.void(P, g, r, n, theta, out)
+
+    def codegen(context, builder, sig, args):
+        return _emit_call(context, builder, sig, args, GAIN_SUMS)
 
     return sig, codegen
