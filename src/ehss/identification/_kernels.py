@@ -655,6 +655,17 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
     radius = state[H_CRADIUS]
     inv_r = 1.0 / radius
     enabled = state[H_ENABLED] != 0.0
+    # views taken once, so the loop indexes from 0 (no wrap-around arithmetic)
+    theta_c = theta[o:n]
+    psi_c = psi[o:n]
+    psi_u = psi[na:o]
+    ul_d = ul[d:]
+    # r^−(i+1), i < nc, formed by the same multiplications as in _c_within's bound
+    rpow = np.empty(nc)
+    rp = 1.0
+    for i in range(nc):
+        rp *= inv_r
+        rpow[i] = rp
     count = state[H_COUNT]
     resets = state[H_RESETS]
     cproj = state[H_CPROJ]
@@ -710,10 +721,8 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
                 if nc > 0:
                     # C kept inside the radius: Rouché's bound, then _c_within
                     bound = 0.0
-                    rp = 1.0
                     for i in range(nc):
-                        rp *= inv_r
-                        bound += abs(theta[o + i] * rp)
+                        bound += abs(theta_c[i] * rpow[i])
                     if not bound < 1.0 and not _c_within(theta, o, nc, radius, cw):
                         _project_c(theta[o:n], nc, radius)
                         cproj += 1.0
@@ -736,16 +745,16 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
             psi[i] = psi[i - 1]
         psi[0] = -yk
         for i in range(nc - 1, 0, -1):
-            psi[o + i] = psi[o + i - 1]
+            psi_c[i] = psi_c[i - 1]
         if nc > 0:
-            psi[o] = xi
+            psi_c[0] = xi
         fuse = k + 1 < N
         if fuse:
             for j in range(nu - 1, 0, -1):
                 ul[j] = ul[j - 1]
             ul[0] = u[k + 1]
             for j in range(nb + 1):
-                psi[na + j] = ul[d + j]
+                psi_u[j] = ul_d[j]
         ready = False
         if update:
             # (22) in the symmetric form, as _downdate (+ the next gain at λ = 1)
