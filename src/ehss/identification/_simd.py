@@ -6,7 +6,8 @@ P(k), accumulate the next gain P(k)ψ̂(k+1) in the same pass) keeps the next ga
 memory and is bound by stores. Here the rows of P are processed as ``m/4`` vectors of
 ``<4 x double>`` and the next gain lives in ``m/4`` vector registers for the whole pass
 (``m`` is the padded size, a multiple of 4, see :mod:`._kernels`). The code is generated
-once per vector count K = m/4 = 1..KMAX and selected by a switch on m at run time.
+once per n = 1..SIMD_MAX (K = ⌈n/4⌉ vectors per row) and selected by a switch on n at
+run time, so row counts and lane counts are constants.
 
 Arithmetic, element by element, in this order (plain IEEE operations, no FMA, no
 reassociation, so the results are bit for bit those of the obvious loops, and of the
@@ -115,10 +116,12 @@ def _pass_function(module, mode):
 
     done = fn.append_basic_block("pass.done")
     other = fn.append_basic_block("pass.unsupported")
-    switch = builder.switch(builder.lshr(m, _i64(2)), other)
-    for k in range(1, KMAX + 1):
-        entry = fn.append_basic_block(f"pass.k{k}")
-        switch.add_case(_i64(k), entry)
+    # one case per n: the row count and the lanes summed are constants (m = 4K, K = ⌈n/4⌉)
+    switch = builder.switch(nrow, other)
+    for n in range(1, SIMD_MAX + 1):
+        k = (n + 3) // 4
+        entry = fn.append_basic_block(f"pass.n{n}")
+        switch.add_case(_i64(n), entry)
         builder.position_at_end(entry)
         if update:
             den_v = _splat(builder, inv_den)
@@ -127,9 +130,9 @@ def _pass_function(module, mode):
                    for c in range(k)]
         if mode == DOWNDATE:
             lam_v = _splat(builder, inv_lam)
-        head = fn.append_basic_block(f"pass.k{k}.head")
-        body = fn.append_basic_block(f"pass.k{k}.body")
-        tail = fn.append_basic_block(f"pass.k{k}.tail")
+        head = fn.append_basic_block(f"pass.n{n}.head")
+        body = fn.append_basic_block(f"pass.n{n}.body")
+        tail = fn.append_basic_block(f"pass.n{n}.tail")
         builder.branch(head)
 
         builder.position_at_end(head)
@@ -138,7 +141,7 @@ def _pass_function(module, mode):
         i.add_incoming(_i64(0), entry)
         for a in acc:
             a.add_incoming(_ZERO_V4, entry)
-        builder.cbranch(builder.icmp_signed("<", i, nrow), body, tail)
+        builder.cbranch(builder.icmp_signed("<", i, _i64(n)), body, tail)
 
         builder.position_at_end(body)
         row = builder.mul(i, m)
@@ -168,10 +171,10 @@ def _pass_function(module, mode):
         for c, a in enumerate(acc):
             builder.store(a, _vec_ptr(builder, g_data, _i64(4 * c)), align=8)
         if sums:
-            _emit_sums(builder, acc, r_data, theta_data, out_data)
+            _emit_sums(builder, acc, n, r_data, theta_data, out_data)
         builder.branch(done)
 
-    # m > 4·KMAX: the callers never get here (they check SIMD_MAX first)
+    # n > SIMD_MAX: the callers never get here (they check SIMD_MAX first)
     builder.position_at_end(other)
     builder.branch(done)
     builder.position_at_end(done)
@@ -187,12 +190,12 @@ def _llvm_intrinsic(module, name, fnty):
         return ir.Function(module, fnty, name=name)
 
 
-def _emit_sums(builder, acc, r_data, theta_data, out_data):
-    """out = (rᵀθ, rᵀg, max(0, max_j |g_j|)) over all 4K lanes, the sums left to right.
+def _emit_sums(builder, acc, n, r_data, theta_data, out_data):
+    """out = (rᵀθ, rᵀg, max(0, max_j |g_j|)) over j < n, the sums left to right.
 
-    The lanes beyond n add exact zeros (r, θ and g are zero there; a sum that starts at
-    +0.0 is never −0.0, so adding ±0.0 changes no bit): the same values as the scalar
-    loops over j < n. ``maxnum`` ignores NaN, as the scalar ``if |g_j| > gmax``.
+    The same operations as the scalar loops. The max runs over whole vectors: the lanes
+    beyond n hold exact zeros of g, which change no maximum; ``maxnum`` ignores NaN, as
+    the scalar ``if |g_j| > gmax`` does.
     """
     yhat = ir.Constant(_F64, 0.0)
     s = ir.Constant(_F64, 0.0)
@@ -205,7 +208,7 @@ def _emit_sums(builder, acc, r_data, theta_data, out_data):
         t_v = builder.load(_vec_ptr(builder, theta_data, _i64(4 * c)), align=8)
         py = builder.fmul(r_v, t_v)
         ps = builder.fmul(r_v, a)
-        for lane in range(4):
+        for lane in range(min(4, n - 4 * c)):
             yhat = builder.fadd(yhat, builder.extract_element(py, ir.Constant(_I32, lane)))
             s = builder.fadd(s, builder.extract_element(ps, ir.Constant(_I32, lane)))
         gmax_v = builder.call(maxnum, [gmax_v, builder.call(fabs, [a])])
