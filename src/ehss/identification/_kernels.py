@@ -509,13 +509,14 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
                     r[i] = psi[i]
             s = _restart(P, r, g, n, nab, alpha, alpha_c)
             den = lam + s
-        # the step K e must be finite (a huge e with a small den could overflow θ̂)
+        # the step K e must be finite (a huge e with a small den could overflow θ̂);
+        # checked with 1/den, which the update needs anyway (one division per sample)
         gmax = 0.0
         for i in range(n):
             if abs(g[i]) > gmax:
                 gmax = abs(g[i])
-        if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
-            inv_den = 1.0 / den
+        inv_den = 1.0 / den
+        if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) * inv_den)):
             update = True
             # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
             # (RML: K = P ψ_f / (λ + ψ_fᵀ P ψ_f); θ̂(k) = θ̂(k−1) + K e, e with ψ̂)
@@ -712,8 +713,8 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
                 for i in range(n):
                     if abs(g[i]) > gmax:
                         gmax = abs(g[i])
-            if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) / den)):
-                inv_den = 1.0 / den
+            inv_den = 1.0 / den
+            if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) * inv_den)):
                 update = True
                 for i in range(n):  # (20), (21)
                     theta[i] += (g[i] * inv_den) * e
