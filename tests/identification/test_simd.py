@@ -92,13 +92,14 @@ def test_downdate_gain_bit_for_bit(rng, m, n):
     inv_den = 1.0 / (1.0 + r @ g)
     P_ref, gn_ref, tr_ref, dmin_ref = _reference(P, g, r, n, inv_den, 1.0, fused=True)
     P_k, g_k = P.copy(), g.copy()
-    theta, out = _theta(rng, m, n), np.full(3, np.nan)
+    theta, out = _theta(rng, m, n), np.full(5, np.nan)
     tr, dmin = _call_downdate_gain(P_k, g_k, r, n, inv_den, theta, out)
     assert_array_equal(P_k, P_ref)
     assert_array_equal(g_k, gn_ref)
     assert (tr, dmin) == (tr_ref, dmin_ref)
     assert_array_equal(P_k, P_k.T)
-    assert tuple(out) == _sums(r, theta, gn_ref, n)  # ŷ, s and max|g| of the next sample
+    assert tuple(out[:3]) == _sums(r, theta, gn_ref, n)  # ŷ, s, max|g| of the next sample
+    assert tuple(out[3:]) == (tr_ref, dmin_ref)
 
 
 @pytest.mark.parametrize(("m", "n"), [(m, n) for m, n in SIZES if m <= SIMD_MAX])
@@ -151,6 +152,11 @@ def test_downdate_reports_a_lost_diagonal(rng):
     tr, dmin = _call_downdate(P_k, g.copy(), 6, 1.0, 1.0)
     assert dmin == P_k[0, 0] < 0.0
     assert tr == pytest.approx(np.trace(P_k))
+    # the fused kernel reports the same from its own read-back of the diagonal
+    P_k, out = P.copy(), np.full(5, np.nan)
+    _call_downdate_gain(P_k, g.copy(), r, 6, 1.0, _theta(rng, 8, 6), out)
+    assert out[4] == P_k[0, 0] < 0.0
+    assert out[3] == K._trace_min(P_k, 6)[0]
 
 
 CASES = [

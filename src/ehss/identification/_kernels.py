@@ -677,8 +677,9 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
     N = u.shape[0]
     c = 0
     row = 0
-    # sums[:3] = (ŷ, s, max|g_i|) of the coming sample, from the vector kernels
-    sums = np.zeros(3)
+    # sums[:3] = (ŷ, s, max|g_i|) of the coming sample, from the vector kernels;
+    # sums[3:5] = (tr P, min P_ii) after the fused update
+    sums = np.zeros(5)
     ready = False  # g holds P(k−1) ψ̂(k) and sums hold its sums
     if N > 0:
         _push_u(ul, psi, u[0], na, nb, d)
@@ -761,19 +762,22 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
             # (22) in the symmetric form, as _downdate (+ the next gain at λ = 1)
             inv_den = 1.0 / den
             if fuse and lam == 1.0:
-                # also the next sample's g and sums: θ̂(k) and ψ̂(k+1) are complete
+                # also the next sample's g and sums (θ̂(k) and ψ̂(k+1) are complete),
+                # and tr P, min P_ii as _trace_min
                 downdate_gain(P, g, psi, n, inv_den, theta, sums)
                 ready = True
+                tr = sums[3]
+                dmin = sums[4]
             else:
                 downdate(P, g, n, inv_den, inv_lam)
-            # as _trace_min and _floor_and_bound
-            tr = 0.0
-            dmin = np.inf
-            for i in range(n):
-                pii = P[i, i]
-                tr += pii
-                if pii < dmin:
-                    dmin = pii
+                tr = 0.0  # as _trace_min
+                dmin = np.inf
+                for i in range(n):
+                    pii = P[i, i]
+                    tr += pii
+                    if pii < dmin:
+                        dmin = pii
+            # as _floor_and_bound
             if lam < 1.0:
                 delta = EPS_FLOOR * n * tr
                 for i in range(n):

@@ -172,6 +172,8 @@ def _pass_function(module, mode):
             builder.store(a, _vec_ptr(builder, g_data, _i64(4 * c)), align=8)
         if sums:
             _emit_sums(builder, acc, n, r_data, theta_data, out_data)
+        if update and sums:
+            _emit_trace_min(builder, n, m, P_data, out_data)
         builder.branch(done)
 
     # n > SIMD_MAX: the callers never get here (they check SIMD_MAX first)
@@ -221,6 +223,23 @@ def _emit_sums(builder, acc, n, r_data, theta_data, out_data):
         builder.store(value, builder.gep(out_data, [_i64(k)]))
 
 
+def _emit_trace_min(builder, n, m, P_data, out_data):
+    """out[3:5] = (tr P, min_i P_ii) of the updated P, as ``_trace_min`` (i < n in order).
+
+    The diagonal is read back after the pass; ``fcmp olt`` + select is the scalar
+    ``if P_ii < dmin: dmin = P_ii`` (NaN never wins).
+    """
+    tr = ir.Constant(_F64, 0.0)
+    dmin = ir.Constant(_F64, float("inf"))
+    step = builder.add(m, _i64(1))
+    for i in range(n):
+        d = builder.load(builder.gep(P_data, [builder.mul(step, _i64(i))]))
+        tr = builder.fadd(tr, d)
+        dmin = builder.select(builder.fcmp_ordered("<", d, dmin), d, dmin)
+    builder.store(tr, builder.gep(out_data, [_i64(3)]))
+    builder.store(dmin, builder.gep(out_data, [_i64(4)]))
+
+
 def _emit_call(context, builder, sig, args, mode):
     """Lower one intrinsic call: extract the data pointers and call the pass function.
 
@@ -259,10 +278,12 @@ def _emit_call(context, builder, sig, args, mode):
 
 @intrinsic
 def downdate_gain(typingctx, P, g, r, n, inv_den, theta, out):
-    """In place: P ← P − g gᵀ·inv_den (rows < n), then g ← P r; ``out`` as ``gain_sums``.
+    """In place: P ← P − g gᵀ·inv_den (rows < n), then g ← P r.
 
-    ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g``, ``r`` and
-    ``theta`` length m, zero beyond n; ``out`` length ≥ 3; all distinct buffers.
+    out[0:3] as ``gain_sums`` (for the new g), out[3:5] = (tr P, min_i P_ii) of the
+    updated P, summed as ``_kernels._trace_min``. ``P`` (m, m) C-contiguous with m a
+    multiple of 4 and n ≤ SIMD_MAX; ``g``, ``r`` and ``theta`` length m, zero beyond n;
+    ``out`` length ≥ 5; all distinct buffers.
     """
     sig = types.void(P, g, r, n, inv_den, theta, out)
 
