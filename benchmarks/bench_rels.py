@@ -44,7 +44,7 @@ def data(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return u / np.std(u), y / np.std(y)
 
 
-def kernel_rate(u, y, na, nb, nc, repeats=5, method="rels", lam=1.0) -> tuple[float, float]:
+def kernel_rate(u, y, na, nb, nc, repeats=9, method="rels", lam=1.0) -> tuple[float, float]:
     n = na + nb + 1 + nc
     err, xi = np.empty(u.size), np.empty(u.size)
     hist = np.empty((0, n))
