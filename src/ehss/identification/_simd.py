@@ -17,12 +17,15 @@ numpy reference in the tests):
   ``downdate_gain``; inv_den = 1/(λ + ψ̂ᵀPψ̂))
 * P_ij ← (P_ij − (g_i · g_j) · inv_den) · inv_lam   (``downdate``)
 * g_j ← Σ_i P_ij r_i, i = 0..n−1 left to right, starting from 0.0, over the updated P
-  (``downdate_gain``) or over P as it is (``gain``)
+  (``downdate_gain``) or over P as it is (``gain``, ``gain_sums``)
+* with the new g, from its registers (``gain_sums``, ``downdate_gain``):
+  rᵀθ and rᵀg summed j = 0..n−1 left to right, max(0, max_j |g_j|); and after the
+  update (``downdate_gain``) tr P and min_i P_ii, read back and summed i = 0..n−1
 
 g_i g_j = g_j g_i exactly, so the updated P is exactly symmetric. Rows i ≥ n are the
 zero padding and are not touched. (Measured and not kept, see BENCHMARKS.md:
 w = g·√inv_den with P − w wᵀ, one multiply less per entry, no faster; the trace and
-smallest diagonal entry summed inside the pass, slower. The callers sum those after.)
+smallest diagonal entry summed inside the row loop, slower.)
 
 On CPUs without AVX, LLVM splits each ``<4 x double>`` operation into SSE2 halves: the
 same operations on the same elements, so the same results. numba's on-disk cache is
