@@ -228,3 +228,26 @@ def test_rels_batch_restart_equals_streaming(rng):
     assert states[0][K.H_RESETS] == states[1][K.H_RESETS] == 1
     for i in (0, 1, 2):  # θ̂, P, ψ̂
         assert_array_equal(K.state_views(states[0])[i], K.state_views(states[1])[i])
+
+
+def test_rels_batch_in_chunks_equals_one_batch(rng):
+    # records split anywhere (also shorter than the u line, d + nb + 1 = 6 here) must
+    # continue exactly where the previous part stopped
+    na, nb, nc, d = 4, 3, 2, 2
+    n = na + nb + 1 + nc
+    a, b, c = system(4)
+    u, y, _ = armax_data(rng, a, b, c, 1000, snr_db=20.0)
+    u, y = u / np.std(u), y / np.std(y)
+    whole = _new_state(na, nb, nc, d, 1.0, 1e4, n * 1e4, 0.99, np.zeros(n))
+    err = np.empty(u.size)
+    K.rels_run(whole, u, y, err, np.empty(u.size), np.empty((0, n)), 1)
+    parts = _new_state(na, nb, nc, d, 1.0, 1e4, n * 1e4, 0.99, np.zeros(n))
+    err_p = []
+    edges = [0, 1, 3, 8, 9, 400, 404, 1000]
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        e = np.empty(hi - lo)
+        K.rels_run(parts, u[lo:hi], y[lo:hi], e, np.empty(hi - lo), np.empty((0, n)), 1)
+        err_p.append(e)
+    assert_array_equal(np.concatenate(err_p), err)
+    for i in (0, 1, 2, 4):  # θ̂, P, ψ̂, u line
+        assert_array_equal(K.state_views(parts)[i], K.state_views(whole)[i])

@@ -752,11 +752,16 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
             psi_c[0] = xi
         fuse = k + 1 < N
         if fuse:
-            for j in range(nu - 1, 0, -1):
-                ul[j] = ul[j - 1]
-            ul[0] = u[k + 1]
-            for j in range(nb + 1):
-                psi_u[j] = ul_d[j]
+            if k + 1 >= nu - 1:
+                # u(k+1−d−j) straight from the record; the u line is rebuilt at the end
+                for j in range(nb + 1):
+                    psi_u[j] = u[k + 1 - d - j]
+            else:  # as _push_u (the line still holds samples from before this record)
+                for j in range(nu - 1, 0, -1):
+                    ul[j] = ul[j - 1]
+                ul[0] = u[k + 1]
+                for j in range(nb + 1):
+                    psi_u[j] = ul_d[j]
         ready = False
         if update:
             # (22) in the symmetric form, as _downdate (+ the next gain at λ = 1)
@@ -805,6 +810,9 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
                 for i in range(n):
                     hist[row, i] = theta[i]
             row += 1
+    if N >= nu:  # the u line that the shifts would have left: ul[j] = u(N−1−j)
+        for j in range(nu):
+            ul[j] = u[N - 1 - j]
     state[H_COUNT] = count
     state[H_RESETS] = resets
     state[H_CPROJ] = cproj
