@@ -618,7 +618,7 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
     """The RELS batch loop for n ≤ SIMD_MAX: :func:`_step`'s RELS sequence, made fast.
 
     The same operations in the same order as :func:`_step` (a test holds the two to the
-    same bits), with four batch-only changes:
+    same bits), with five batch-only changes:
 
     1. Header values and counters live in locals (written back at the end), so
        nothing in the loop reloads them after every store to θ̂ or P.
@@ -628,14 +628,16 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
        hence the same bits), and P is read once per sample instead of twice. After a
        reset or a trace scaling, or with λ < 1 (the diagonal floor changes P after the
        pass), g is formed at the start of the next sample as in the streaming step.
-    3. ŷ, ψ̂ᵀg and max|g_i| come from the vector kernel that formed g (same sums,
-       same order), straight from its registers.
+    3. ŷ, ψ̂ᵀg and max|g_i| come from the vector kernel that formed g, and tr P and
+       min P_ii from the one that updated P (same sums, same order).
     4. The loop body is written out instead of calling the small helpers that
        :func:`_step` shares: numba brackets every array an inlined helper receives
        with atomic reference-count updates that its pruning pass cannot remove around
        a loop, and those cost ≈ 15 % of a (6,6,4) sample. The Rouché bound of
        :func:`_c_within` is written out too, so the full Schur–Cohn call (with its
        arrays) only runs when the bound fails.
+    5. Once the record covers the u line, ψ̂'s u-part is read from ``u`` itself
+       instead of shifting the line every sample; the line is rebuilt at the end.
 
     Same arguments as :func:`rels_run`.
     """
