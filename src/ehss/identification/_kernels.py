@@ -418,6 +418,24 @@ def _restart(P, r, g, n, nab, alpha, alpha_c):
 
 
 @njit(cache=True, inline="always")
+def _max_abs(g, n):
+    """max(0, max_i |g_i|) over i < n (NaN never wins)."""
+    gmax = 0.0
+    for i in range(n):
+        if abs(g[i]) > gmax:
+            gmax = abs(g[i])
+    return gmax
+
+
+@njit(cache=True, inline="always")
+def _step_ok(den, inv_den, gmax, e):
+    """True if (20)–(22) may run: den = λ + ψ̂ᵀPψ̂ positive and finite, and the step
+    K e finite (a huge e with a small den could overflow θ̂); checked with 1/den, which
+    the update needs anyway (one division per sample)."""
+    return den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) * inv_den))
+
+
+@njit(cache=True, inline="always")
 def _residual(xi, direct, psi, theta, n, y):
     """ξ̂(k) of (19), 0 if not finite.
 
@@ -509,14 +527,8 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
                     r[i] = psi[i]
             s = _restart(P, r, g, n, nab, alpha, alpha_c)
             den = lam + s
-        # the step K e must be finite (a huge e with a small den could overflow θ̂);
-        # checked with 1/den, which the update needs anyway (one division per sample)
-        gmax = 0.0
-        for i in range(n):
-            if abs(g[i]) > gmax:
-                gmax = abs(g[i])
         inv_den = 1.0 / den
-        if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) * inv_den)):
+        if _step_ok(den, inv_den, _max_abs(g, n), e):
             update = True
             # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
             # (RML: K = P ψ_f / (λ + ψ_fᵀ P ψ_f); θ̂(k) = θ̂(k−1) + K e, e with ψ̂)
@@ -712,12 +724,9 @@ def _rels_batch(state, u, y, err, xi_out, hist, hist_every):
                 resets += 1.0
                 s = _restart(P, psi, g, n, o, alpha, alpha_c)
                 den = lam + s
-                gmax = 0.0
-                for i in range(n):
-                    if abs(g[i]) > gmax:
-                        gmax = abs(g[i])
+                gmax = _max_abs(g, n)  # a helper with an array: fine off the hot path
             inv_den = 1.0 / den
-            if den > 0.0 and np.isfinite(den) and np.isfinite(gmax * (abs(e) * inv_den)):
+            if _step_ok(den, inv_den, gmax, e):
                 update = True
                 for i in range(n):  # (20), (21)
                     theta[i] += (g[i] * inv_den) * e
