@@ -2,6 +2,11 @@
 
 One numpy expression per equation, no state buffer, no vectorisation tricks: the
 compiled kernel in ``ehss.identification._kernels`` must agree with this to 1e-12.
+The expressions round as the kernel does (P − w wᵀ with w = g √(1/den), sums left to
+right, or in the kernel's pairwise tree where its 4-wide path forms them: ŷ, ψᵀPψ
+and tr P for n ≤ 32), so that the agreement tests the algorithm and not the luck of
+two rounding patterns: with P(0) = 10⁶ I, early downdates cancel six digits, and any
+other rounding of them shows up near 1e-10.
 
 RML (recursive maximum likelihood, the recursive prediction-error method for ARMAX,
 Ljung & Söderström 1983): ψ_f(k) = ψ(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc) with
@@ -46,13 +51,35 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
     def matvec(M, v):
         return np.cumsum(M * v[None, :], axis=1)[:, -1]
 
+    vector_path = (n + 3) // 4 * 4 <= 32  # the kernel's 4-wide path (SIMD_MAX)
+
+    def tree(values):
+        # pairwise, level by level: (v0 + v1), (v2 + v3), …; an odd last one moves up
+        while len(values) > 1:
+            values = [values[i] + values[i + 1] if i + 1 < len(values) else values[i]
+                      for i in range(0, len(values), 2)]
+        return values[0]
+
+    def tree_dot(p, q):
+        # 4-wide products added in the pairwise tree, then lanes (l0 + l1) + (l2 + l3)
+        if not vector_path:
+            return dot(p, q)
+        m = (n + 3) // 4 * 4
+        prod = np.zeros(m)
+        prod[:n] = p * q
+        v = tree([prod[i:i + 4] for i in range(0, m, 4)])
+        return (v[0] + v[1]) + (v[2] + v[3])
+
+    def trace(d):
+        return tree(list(d)) if vector_path else np.cumsum(d)[-1]
+
     for k in range(N):
         psi = np.array(
             [-past(y, k - i) for i in range(1, na + 1)]
             + [past(u, k - delay - i) for i in range(nb + 1)]
             + [past(xi, k - i) for i in range(1, nc + 1)]
         )
-        e = y[k] - dot(psi, theta)
+        e = y[k] - (dot(psi, theta) if rml else tree_dot(psi, theta))
         # regressor of the gain and the P update: ψ (RELS) or ψ_f = ψ/Ĉ(k−1) (RML)
         r = psi
         if rml:
@@ -61,7 +88,7 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
             for j in range(nc):
                 r = r - c_prev[j] * hist[j]
         g = matvec(P, r)
-        s = dot(r, g)
+        s = dot(r, g) if rml else tree_dot(r, g)
         den = lam + s
         if not (s >= 0 and np.isfinite(den)):  # ψᵀPψ < 0: P is not definite
             P = P0.copy()
@@ -74,10 +101,11 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
         inv_den = 1.0 / den
         # (21) K = P r / den; (20) theta += K e
         theta = theta + (g * inv_den) * e
-        # (22) in symmetric form (P − g gᵀ/den)/λ
-        P = (P - np.outer(g, g) * inv_den) * (1.0 / lam)
+        # (22) in symmetric form (P − g gᵀ/den)/λ = P/λ − w wᵀ, w = g √(1/(den λ))
+        w = g * np.sqrt(inv_den * (1.0 / lam))
+        P = P * (1.0 / lam) - np.outer(w, w)
         d = np.diag(P).copy()
-        tr = np.cumsum(d)[-1]
+        tr = trace(d)
         if lam < 1.0:
             # diagonal floor δ = 8 n eps tr P (keeps P definite against downdate rounding)
             delta = 8.0 * np.finfo(float).eps * n * tr

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from numba import njit
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 
 from ehss.identification import _kernels as K
 from ehss.identification._simd import SIMD_MAX, downdate_gain, gain_sums
@@ -20,18 +20,35 @@ from ehss.identification.rels import _new_state
 from .systems import armax_data, system
 
 
+def _tree(values, op):
+    """Pairwise, level by level: (v0 ∘ v1), (v2 ∘ v3), …; an odd last value moves up."""
+    while len(values) > 1:
+        values = [op(values[i], values[i + 1]) if i + 1 < len(values) else values[i]
+                  for i in range(0, len(values), 2)]
+    return values[0]
+
+
+def _trace_min(P, n):
+    """(tr P, min P_ii) as documented: the pairwise tree up to SIMD_MAX, else in order."""
+    d = [P[i, i] for i in range(n)]
+    if P.shape[0] <= SIMD_MAX:
+        return _tree(d, lambda a, b: a + b), _tree(d, lambda a, b: a if a < b else b)
+    tr = 0.0
+    for x in d:
+        tr += x
+    return tr, min(d)
+
+
 def _reference(P, g, r, n, inv_den, inv_lam, fused):
-    """Row i < n: P_i ← (P_i − (g_i g)·inv_den)·inv_lam; then Σ_i P_i r_i left to right."""
+    """Row i < n: P_i ← P_i·inv_lam − w_i w, w = g √(inv_den·inv_lam) (fused: no
+    inv_lam); then g = Σ_i P_i r_i in order, and tr P, min P_ii."""
     P = P.copy()
+    w = g * np.sqrt(inv_den if fused else inv_den * inv_lam)
     for i in range(n):
-        P[i] = P[i] - (g[i] * g) * inv_den
         if not fused:
             P[i] = P[i] * inv_lam
-    tr = 0.0
-    dmin = np.inf
-    for i in range(n):
-        tr += P[i, i]
-        dmin = min(dmin, P[i, i])
+        P[i] = P[i] - w[i] * w
+    tr, dmin = _trace_min(P, n)
     gn = np.zeros(P.shape[0])
     for i in range(n):
         gn = gn + P[i] * r[i]
@@ -44,25 +61,24 @@ def _call_downdate(P, g, n, inv_den, inv_lam):
 
 
 @njit
-def _call_downdate_gain(P, g, r, n, inv_den, theta, out):
-    downdate_gain(P, g, r, n, inv_den, theta, out)
-    return K._trace_min(P, n)
+def _call_downdate_gain(P, g, r, n, inv_den, theta):
+    return downdate_gain(P, g, r, n, inv_den, theta)
 
 
 @njit
-def _call_gain_sums(P, g, r, n, theta, out):
-    gain_sums(P, g, r, n, theta, out)
+def _call_gain_sums(P, g, r, n, theta):
+    return gain_sums(P, g, r, n, theta)
+
+
+def _vector_dot(p, q):
+    """Σ p_j q_j as documented: 4-wide products in the pairwise tree, then the lanes."""
+    v = _tree([p[c:c + 4] * q[c:c + 4] for c in range(0, p.size, 4)], lambda a, b: a + b)
+    return (v[0] + v[1]) + (v[2] + v[3])
 
 
 def _sums(r, theta, g, n):
-    """(rᵀθ, rᵀg, max(0, max|g_j|)) over j < n, the sums left to right as the scalar loops."""
-    yhat = s = gmax = 0.0
-    for j in range(n):
-        yhat += r[j] * theta[j]
-        s += r[j] * g[j]
-        if abs(g[j]) > gmax:
-            gmax = abs(g[j])
-    return yhat, s, gmax
+    """(rᵀθ, rᵀg, max(0, max|g_j|)) as the vector kernels form them."""
+    return _vector_dot(r, theta), _vector_dot(r, g), max(0.0, np.max(np.abs(g[:n])))
 
 
 def _problem(rng, m, n):
@@ -92,14 +108,17 @@ def test_downdate_gain_bit_for_bit(rng, m, n):
     inv_den = 1.0 / (1.0 + r @ g)
     P_ref, gn_ref, tr_ref, dmin_ref = _reference(P, g, r, n, inv_den, 1.0, fused=True)
     P_k, g_k = P.copy(), g.copy()
-    theta, out = _theta(rng, m, n), np.full(5, np.nan)
-    tr, dmin = _call_downdate_gain(P_k, g_k, r, n, inv_den, theta, out)
+    theta = _theta(rng, m, n)
+    out = _call_downdate_gain(P_k, g_k, r, n, inv_den, theta)
     assert_array_equal(P_k, P_ref)
     assert_array_equal(g_k, gn_ref)
-    assert (tr, dmin) == (tr_ref, dmin_ref)
     assert_array_equal(P_k, P_k.T)
-    assert tuple(out[:3]) == _sums(r, theta, gn_ref, n)  # ŷ, s, max|g| of the next sample
-    assert tuple(out[3:]) == (tr_ref, dmin_ref)
+    assert out[:3] == _sums(r, theta, gn_ref, n)  # ŷ, s, max|g| of the next sample
+    assert out[3:] == (tr_ref, dmin_ref)
+    # the mathematics: P − g gᵀ/den and the next gain P r
+    P_math = P - np.outer(g, g) * inv_den
+    assert_allclose(P_k, P_math, rtol=0, atol=1e-13 * np.abs(P).max())
+    assert_allclose(g_k, P_math @ r, rtol=0, atol=1e-12 * (np.abs(P_math) @ np.abs(r)).max())
 
 
 @pytest.mark.parametrize(("m", "n"), [(m, n) for m, n in SIZES if m <= SIMD_MAX])
@@ -109,10 +128,12 @@ def test_gain_sums_bit_for_bit(rng, m, n):
     g_ref = np.zeros(m)
     for i in range(n):  # rows of the symmetric P as columns, summed left to right
         g_ref = g_ref + P[i] * r[i]
-    theta, out, g = _theta(rng, m, n), np.full(3, np.nan), np.full(m, np.nan)
-    _call_gain_sums(P, g, r, n, theta, out)
+    theta, g = _theta(rng, m, n), np.full(m, np.nan)
+    out = _call_gain_sums(P, g, r, n, theta)
     assert_array_equal(g, g_ref)
-    assert tuple(out) == _sums(r, theta, g_ref, n)
+    assert out == _sums(r, theta, g_ref, n)
+    assert out[0] == pytest.approx(r @ theta, rel=1e-13, abs=1e-13)
+    assert out[1] == pytest.approx(r @ g_ref, rel=1e-13)
     assert out[2] == np.max(np.abs(g_ref[:n])) > 0.0
 
 
@@ -142,6 +163,10 @@ def test_downdate_bit_for_bit(rng, m, n, lam):
     tr, dmin = _call_downdate(P_k, g.copy(), n, inv_den, 1.0 / lam)
     assert_array_equal(P_k, P_ref)
     assert (tr, dmin) == (tr_ref, dmin_ref)
+    assert_array_equal(P_k, P_k.T)
+    P_math = (P - np.outer(g, g) * inv_den) / lam  # eq (22)
+    assert_allclose(P_k, P_math, rtol=0, atol=1e-13 * np.abs(P_math).max())
+    assert tr == pytest.approx(np.trace(P_k), rel=1e-14)
 
 
 def test_downdate_reports_a_lost_diagonal(rng):
@@ -153,10 +178,10 @@ def test_downdate_reports_a_lost_diagonal(rng):
     assert dmin == P_k[0, 0] < 0.0
     assert tr == pytest.approx(np.trace(P_k))
     # the fused kernel reports the same from its own read-back of the diagonal
-    P_k, out = P.copy(), np.full(5, np.nan)
-    _call_downdate_gain(P_k, g.copy(), r, 6, 1.0, _theta(rng, 8, 6), out)
+    P_k = P.copy()
+    out = _call_downdate_gain(P_k, g.copy(), r, 6, 1.0, _theta(rng, 8, 6))
     assert out[4] == P_k[0, 0] < 0.0
-    assert out[3] == K._trace_min(P_k, 6)[0]
+    assert out[3] == _trace_min(P_k, 6)[0]
 
 
 CASES = [

@@ -10,25 +10,35 @@ once per n = 1..SIMD_MAX (K = ⌈n/4⌉ vectors per row) and selected by a switc
 run time, so row counts and lane counts are constants.
 
 Arithmetic, element by element, in this order (plain IEEE operations, no FMA, no
-reassociation, so the results are bit for bit those of the obvious loops, and of the
-numpy reference in the tests):
+reassociation beyond what is listed; the tests hold the kernels to these exact bits,
+and the numpy reference of the estimator does the same operations):
 
-* P_ij ← P_ij − (g_i · g_j) · inv_den               (rows i < n, all m columns;
-  ``downdate_gain``; inv_den = 1/(λ + ψ̂ᵀPψ̂))
-* P_ij ← (P_ij − (g_i · g_j) · inv_den) · inv_lam   (``downdate``)
-* g_j ← Σ_i P_ij r_i, i = 0..n−1 left to right, starting from 0.0, over the updated P
-  (``downdate_gain``) or over P as it is (``gain``, ``gain_sums``)
-* with the new g, from its registers (``gain_sums``, ``downdate_gain``):
-  rᵀθ and rᵀg summed j = 0..n−1 left to right, max(0, max_j |g_j|); and after the
-  update (``downdate_gain``) tr P and min_i P_ii, read back and summed i = 0..n−1
+* w_j = g_j · √(inv_den · inv_lam), j < m  (inv_den = 1/(λ + ψ̂ᵀPψ̂), inv_lam = 1/λ)
+* P_ij ← P_ij · inv_lam − w_i · w_j, rows i < n, all m columns (``downdate``; with
+  inv_lam = 1 the product P_ij · 1 is P_ij, so at λ = 1 it is ``downdate_gain``'s
+  update bit for bit). w_i w_j = w_j w_i exactly, so the updated P is exactly
+  symmetric. This is (P − g gᵀ·inv_den)·inv_lam, eq (22), with one multiply per
+  entry fewer than forming (g_i g_j)·inv_den.
+* g_j ← g_j + P_ij · r_i, i = 0..n−1 in order, from 0, over the updated P
+  (``downdate_gain``) or over P as it is (``gain``, ``gain_sums``). (A fused
+  multiply-add here was measured slower: its longer latency lengthens the add chain
+  through the rows.)
+* sums over the new g (``gain_sums``, ``downdate_gain``): the K = m/4 vectors
+  r_c ⊙ θ_c (for ŷ = rᵀθ) and r_c ⊙ g_c (for s = rᵀg) are added pairwise, level by
+  level ((v0 + v1), (v2 + v3), …; an odd last vector moves up unchanged), and the
+  four lanes of the result as (l0 + l1) + (l2 + l3) — a short tree instead of one
+  serial chain of n adds, which sat on the critical path of every sample;
+  max(0, max_j |g_j|) over whole vectors
+* tr P and min_i P_ii after an update (``downdate``, ``downdate_gain``): the n
+  diagonal entries in the same pairwise tree (adjacent pairs, odd last entry moves
+  up), the minimum as ``a if a < b else b`` (a NaN on the diagonal makes tr P NaN,
+  and the guard resets P whatever the minimum says)
 
-g_i g_j = g_j g_i exactly, so the updated P is exactly symmetric. Rows i ≥ n are the
-zero padding and are not touched. (Measured and not kept, see BENCHMARKS.md:
-w = g·√inv_den with P − w wᵀ, one multiply less per entry, no faster; the trace and
-smallest diagonal entry summed inside the row loop, slower.)
+The padding (rows and entries ≥ n) is zero; the vector sums add its zero products.
 
 On CPUs without AVX, LLVM splits each ``<4 x double>`` operation into SSE2 halves: the
-same operations on the same elements, so the same results. numba's on-disk cache is
+same operations on the same elements, so the same results. The plain loops that
+:mod:`._kernels` runs beyond SIMD_MAX do the same updates with serial sums. numba's on-disk cache is
 keyed on the source file of the jitted function: after editing this module, clear the
 ``__pycache__`` entries of ``_kernels.py`` (or touch it) so that its kernels recompile.
 """
@@ -40,12 +50,13 @@ from pathlib import Path
 
 from llvmlite import ir
 from numba import types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 __all__: list[str] = []  # private: used by _kernels
 
 #: largest number of 4-wide vectors per row handled here (m ≤ 4 · KMAX); larger
-#: problems take the plain loops in _kernels (same arithmetic, same bits)
+#: problems take the plain loops in _kernels
 KMAX = 8
 SIMD_MAX = 4 * KMAX
 
@@ -70,9 +81,33 @@ def _i64(k):
     return ir.Constant(_I64, k)
 
 
-#: what a row pass does (``_pass_function``'s ``mode``); the *_SUMS modes also write
-#: (ψ̂ᵀθ̂, ψ̂ᵀg, max|g_j|) for the new g and r = ψ̂ (see ``gain_sums``)
+def _llvm_intrinsic(module, name, fnty):
+    """Declaration of the LLVM intrinsic ``name`` in ``module`` (once)."""
+    try:
+        return module.get_global(name)
+    except KeyError:
+        return ir.Function(module, fnty, name=name)
+
+
+def _mul_add(builder, a, b, c):
+    """c + a·b: a multiply, then an add (two roundings)."""
+    return builder.fadd(c, builder.fmul(a, b))
+
+
+def _tree(values, op):
+    """Pairwise reduction, level by level: (v0 ∘ v1), (v2 ∘ v3), …; an odd last value
+    moves up unchanged."""
+    while len(values) > 1:
+        values = [op(values[i], values[i + 1]) if i + 1 < len(values) else values[i]
+                  for i in range(0, len(values), 2)]
+    return values[0]
+
+
+#: what a row pass does (``_pass_function``'s ``mode``) and how many values it hands
+#: back through ``out``: DOWNDATE (tr P, min P_ii); DOWNDATE_GAIN_SUMS (ŷ, s, max|g|,
+#: tr P, min P_ii); GAIN none; GAIN_SUMS (ŷ, s, max|g|)
 DOWNDATE, DOWNDATE_GAIN_SUMS, GAIN, GAIN_SUMS = 0, 1, 2, 3
+_N_OUT = {DOWNDATE: 2, DOWNDATE_GAIN_SUMS: 5, GAIN: 0, GAIN_SUMS: 3}
 # The pass functions are linkonce_odr symbols shared by every kernel that calls them,
 # so their names carry a digest of this file: a process that loads kernels compiled
 # from two versions of it (a stale numba cache, an experiment) cannot link one
@@ -116,6 +151,10 @@ def _pass_function(module, mode):
     if update and accumulate:
         for arg in (P_data, g_data, r_data):
             arg.add_attribute("noalias")  # distinct buffers (the callers' contract)
+    if update:
+        sqrt = _llvm_intrinsic(module, "llvm.sqrt.f64", ir.FunctionType(_F64, [_F64]))
+        scale = inv_den if mode == DOWNDATE_GAIN_SUMS else builder.fmul(inv_den, inv_lam)
+        root = builder.call(sqrt, [scale])  # w = g √(inv_den · inv_lam)
 
     done = fn.append_basic_block("pass.done")
     other = fn.append_basic_block("pass.unsupported")
@@ -127,10 +166,10 @@ def _pass_function(module, mode):
         switch.add_case(_i64(n), entry)
         builder.position_at_end(entry)
         if update:
-            den_v = _splat(builder, inv_den)
-            # g as vectors, loaded once: g is not written until the pass is over
-            g_v = [builder.load(_vec_ptr(builder, g_data, _i64(4 * c)), align=8)
-                   for c in range(k)]
+            root_v = _splat(builder, root)
+            # w as vectors, formed once: g is not written until the pass is over
+            w_v = [builder.fmul(builder.load(_vec_ptr(builder, g_data, _i64(4 * c)), align=8),
+                                root_v) for c in range(k)]
         if mode == DOWNDATE:
             lam_v = _splat(builder, inv_lam)
         head = fn.append_basic_block(f"pass.n{n}.head")
@@ -149,7 +188,8 @@ def _pass_function(module, mode):
         builder.position_at_end(body)
         row = builder.mul(i, m)
         if update:
-            gi_v = _splat(builder, builder.load(builder.gep(g_data, [i])))
+            # w_i, the same product as lane i of w_v
+            wi_v = _splat(builder, builder.fmul(builder.load(builder.gep(g_data, [i])), root))
         if accumulate:
             ri_v = _splat(builder, builder.load(builder.gep(r_data, [i])))
         acc_next = []
@@ -157,13 +197,12 @@ def _pass_function(module, mode):
             ptr = _vec_ptr(builder, P_data, builder.add(row, _i64(4 * c)))
             v = builder.load(ptr, align=8)
             if update:
-                t = builder.fmul(builder.fmul(gi_v, g_v[c]), den_v)
-                v = builder.fsub(v, t)
                 if mode == DOWNDATE:
                     v = builder.fmul(v, lam_v)
+                v = builder.fsub(v, builder.fmul(wi_v, w_v[c]))
                 builder.store(v, ptr, align=8)
             if accumulate:
-                acc_next.append(builder.fadd(acc[c], builder.fmul(v, ri_v)))
+                acc_next.append(_mul_add(builder, v, ri_v, acc[c]))
         latch = builder.block
         i.add_incoming(builder.add(i, _i64(1)), latch)
         for a, a_next in zip(acc, acc_next, strict=True):
@@ -173,10 +212,12 @@ def _pass_function(module, mode):
         builder.position_at_end(tail)
         for c, a in enumerate(acc):
             builder.store(a, _vec_ptr(builder, g_data, _i64(4 * c)), align=8)
+        slot = 0
         if sums:
-            _emit_sums(builder, acc, n, r_data, theta_data, out_data)
-        if update and sums:
-            _emit_trace_min(builder, n, m, P_data, out_data)
+            _emit_sums(builder, acc, r_data, theta_data, out_data)
+            slot = 3
+        if update:
+            _emit_trace_min(builder, n, m, P_data, out_data, slot)
         builder.branch(done)
 
     # n > SIMD_MAX: the callers never get here (they check SIMD_MAX first)
@@ -187,36 +228,32 @@ def _pass_function(module, mode):
     return fn
 
 
-def _llvm_intrinsic(module, name, fnty):
-    """Declaration of the LLVM intrinsic ``name`` in ``module`` (once)."""
-    try:
-        return module.get_global(name)
-    except KeyError:
-        return ir.Function(module, fnty, name=name)
+def _lanes_sum(builder, v):
+    """(l0 + l1) + (l2 + l3) of a <4 x double>."""
+    lane = [builder.extract_element(v, ir.Constant(_I32, j)) for j in range(4)]
+    return builder.fadd(builder.fadd(lane[0], lane[1]), builder.fadd(lane[2], lane[3]))
 
 
-def _emit_sums(builder, acc, n, r_data, theta_data, out_data):
-    """out = (rᵀθ, rᵀg, max(0, max_j |g_j|)) over j < n, the sums left to right.
+def _emit_sums(builder, acc, r_data, theta_data, out_data):
+    """out[0:3] = (rᵀθ, rᵀg, max(0, max_j |g_j|)): the product vectors summed in the
+    pairwise tree, then their lanes (see the module notes).
 
-    The same operations as the scalar loops. The max runs over whole vectors: the lanes
-    beyond n hold exact zeros of g, which change no maximum; ``maxnum`` ignores NaN, as
-    the scalar ``if |g_j| > gmax`` does.
+    The lanes beyond n hold exact zeros of r, θ and g, which change no sum and no
+    maximum; ``maxnum`` ignores NaN, as the scalar ``if |g_j| > gmax`` does.
     """
-    yhat = ir.Constant(_F64, 0.0)
-    s = ir.Constant(_F64, 0.0)
     fabs = _llvm_intrinsic(builder.module, "llvm.fabs.v4f64", ir.FunctionType(_V4, [_V4]))
     maxnum = _llvm_intrinsic(builder.module, "llvm.maxnum.v4f64",
                              ir.FunctionType(_V4, [_V4, _V4]))
     gmax_v = _ZERO_V4
+    py, ps = [], []
     for c, a in enumerate(acc):
         r_v = builder.load(_vec_ptr(builder, r_data, _i64(4 * c)), align=8)
         t_v = builder.load(_vec_ptr(builder, theta_data, _i64(4 * c)), align=8)
-        py = builder.fmul(r_v, t_v)
-        ps = builder.fmul(r_v, a)
-        for lane in range(min(4, n - 4 * c)):
-            yhat = builder.fadd(yhat, builder.extract_element(py, ir.Constant(_I32, lane)))
-            s = builder.fadd(s, builder.extract_element(ps, ir.Constant(_I32, lane)))
+        py.append(builder.fmul(r_v, t_v))
+        ps.append(builder.fmul(r_v, a))
         gmax_v = builder.call(maxnum, [gmax_v, builder.call(fabs, [a])])
+    yhat = _lanes_sum(builder, _tree(py, builder.fadd))
+    s = _lanes_sum(builder, _tree(ps, builder.fadd))
     lanes = [builder.extract_element(gmax_v, ir.Constant(_I32, lane)) for lane in range(4)]
     maxnum_s = _llvm_intrinsic(builder.module, "llvm.maxnum.f64",
                                ir.FunctionType(_F64, [_F64, _F64]))
@@ -226,29 +263,24 @@ def _emit_sums(builder, acc, n, r_data, theta_data, out_data):
         builder.store(value, builder.gep(out_data, [_i64(k)]))
 
 
-def _emit_trace_min(builder, n, m, P_data, out_data):
-    """out[3:5] = (tr P, min_i P_ii) of the updated P, as ``_trace_min`` (i < n in order).
-
-    The diagonal is read back after the pass; ``fcmp olt`` + select is the scalar
-    ``if P_ii < dmin: dmin = P_ii`` (NaN never wins).
-    """
-    tr = ir.Constant(_F64, 0.0)
-    dmin = ir.Constant(_F64, float("inf"))
+def _emit_trace_min(builder, n, m, P_data, out_data, slot):
+    """out[slot], out[slot + 1] = (tr P, min_i P_ii) of the updated P, i < n, each in
+    the pairwise tree; the diagonal is read back after the pass."""
     step = builder.add(m, _i64(1))
-    for i in range(n):
-        d = builder.load(builder.gep(P_data, [builder.mul(step, _i64(i))]))
-        tr = builder.fadd(tr, d)
-        dmin = builder.select(builder.fcmp_ordered("<", d, dmin), d, dmin)
-    builder.store(tr, builder.gep(out_data, [_i64(3)]))
-    builder.store(dmin, builder.gep(out_data, [_i64(4)]))
+    diag = [builder.load(builder.gep(P_data, [builder.mul(step, _i64(i))]))
+            for i in range(n)]
+    tr = _tree(diag, builder.fadd)
+    dmin = _tree(diag, lambda a, b: builder.select(builder.fcmp_ordered("<", a, b), a, b))
+    builder.store(tr, builder.gep(out_data, [_i64(slot)]))
+    builder.store(dmin, builder.gep(out_data, [_i64(slot + 1)]))
 
 
 def _emit_call(context, builder, sig, args, mode):
-    """Lower one intrinsic call: extract the data pointers and call the pass function.
+    """Lower one intrinsic call: extract the data pointers, call the pass function and
+    hand its results back as a tuple (through a stack buffer of the caller).
 
     Argument orders: DOWNDATE (P, g, n, inv_den, inv_lam); GAIN (P, g, r, n);
-    GAIN_SUMS (P, g, r, n, theta, out); DOWNDATE_GAIN_SUMS (P, g, r, n, inv_den,
-    theta, out).
+    GAIN_SUMS (P, g, r, n, theta); DOWNDATE_GAIN_SUMS (P, g, r, n, inv_den, theta).
     """
     def data(k):
         return context.make_array(sig.args[k])(context, builder, value=args[k]).data
@@ -260,35 +292,40 @@ def _emit_call(context, builder, sig, args, mode):
     g_data = data(1)
     zero = ir.Constant(_F64, 0.0)
     one = ir.Constant(_F64, 1.0)
+    theta_data = g_data
     if mode == DOWNDATE:
         n_arg, r_data, inv_den, inv_lam = 2, g_data, real(3), real(4)
-        theta_data = out_data = g_data
     else:
         n_arg, r_data, inv_lam = 3, data(2), one
         inv_den = real(4) if mode == DOWNDATE_GAIN_SUMS else zero
-        if mode == GAIN:
-            theta_data = out_data = g_data
-        else:
-            first = 5 if mode == DOWNDATE_GAIN_SUMS else 4
-            theta_data, out_data = data(first), data(first + 1)
+        if mode == GAIN_SUMS:
+            theta_data = data(4)
+        elif mode == DOWNDATE_GAIN_SUMS:
+            theta_data = data(5)
+    count = _N_OUT[mode]
+    out = cgutils.alloca_once(builder, ir.ArrayType(_F64, max(count, 1)))
+    out_data = builder.bitcast(out, _F64.as_pointer())
     nrow = context.cast(builder, args[n_arg], sig.args[n_arg], types.intp)
     m = builder.extract_value(P.shape, 1)
     fn = _pass_function(builder.module, mode)
     builder.call(fn, [P.data, m, g_data, r_data, nrow, inv_den, inv_lam, theta_data,
                       out_data])
-    return context.get_dummy_value()
+    if count == 0:
+        return context.get_dummy_value()
+    values = [builder.load(builder.gep(out_data, [_i64(k)])) for k in range(count)]
+    return context.make_tuple(builder, sig.return_type, values)
 
 
 @intrinsic
-def downdate_gain(typingctx, P, g, r, n, inv_den, theta, out):
-    """In place: P ← P − g gᵀ·inv_den (rows < n), then g ← P r.
+def downdate_gain(typingctx, P, g, r, n, inv_den, theta):
+    """In place: P ← P − w wᵀ (rows < n, w = g √inv_den), then g ← P r.
 
-    out[0:3] as ``gain_sums`` (for the new g), out[3:5] = (tr P, min_i P_ii) of the
-    updated P, summed as ``_kernels._trace_min``. ``P`` (m, m) C-contiguous with m a
-    multiple of 4 and n ≤ SIMD_MAX; ``g``, ``r`` and ``theta`` length m, zero beyond n;
-    ``out`` length ≥ 5; all distinct buffers.
+    Returns (ŷ, s, max|g_j|, tr P, min P_ii): rᵀθ and rᵀg for the new g, and the
+    trace and smallest diagonal entry of the updated P (see the module notes for the
+    order of every sum). ``P`` (m, m) C-contiguous with m a multiple of 4 and
+    n ≤ SIMD_MAX; ``g``, ``r`` and ``theta`` length m, zero beyond n; distinct buffers.
     """
-    sig = types.void(P, g, r, n, inv_den, theta, out)
+    sig = types.UniTuple(types.float64, 5)(P, g, r, n, inv_den, theta)
 
     def codegen(context, builder, sig, args):
         return _emit_call(context, builder, sig, args, DOWNDATE_GAIN_SUMS)
@@ -298,11 +335,12 @@ def downdate_gain(typingctx, P, g, r, n, inv_den, theta, out):
 
 @intrinsic
 def downdate(typingctx, P, g, n, inv_den, inv_lam):
-    """In place: P ← (P − g gᵀ·inv_den)·inv_lam (rows < n).
+    """In place: P ← P·inv_lam − w wᵀ (rows < n, w = g √(inv_den·inv_lam)), eq (22).
 
-    ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g`` length m.
+    Returns (tr P, min P_ii) of the updated P. ``P`` (m, m) C-contiguous with m a
+    multiple of 4 and m ≤ SIMD_MAX; ``g`` length m.
     """
-    sig = types.void(P, g, n, inv_den, inv_lam)
+    sig = types.UniTuple(types.float64, 2)(P, g, n, inv_den, inv_lam)
 
     def codegen(context, builder, sig, args):
         return _emit_call(context, builder, sig, args, DOWNDATE)
@@ -312,7 +350,7 @@ def downdate(typingctx, P, g, n, inv_den, inv_lam):
 
 @intrinsic
 def gain(typingctx, P, g, r, n):
-    """g ← P r for symmetric P: g_j = Σ_i P_ij r_i, i = 0..n−1 left to right (row axpys).
+    """g ← P r for symmetric P: g_j = Σ_i P_ij r_i, i = 0..n−1 in order (row axpys).
 
     ``P`` (m, m) C-contiguous with m a multiple of 4 and m ≤ SIMD_MAX; ``g`` and ``r``
     length m (``r`` zero beyond n, not aliasing ``g``).
@@ -326,14 +364,14 @@ def gain(typingctx, P, g, r, n):
 
 
 @intrinsic
-def gain_sums(typingctx, P, g, r, n, theta, out):
-    """``gain``, then out[0] = rᵀθ, out[1] = rᵀg, out[2] = max(0, max_j |g_j|).
+def gain_sums(typingctx, P, g, r, n, theta):
+    """``gain``, then returns (rᵀθ, rᵀg, max(0, max_j |g_j|)).
 
     With r = ψ̂(k) and θ = θ̂(k−1) these are ŷ (eq 20), ψ̂ᵀPψ̂ (eq 21) and the size of
-    the gain for the overflow check, summed left to right as the scalar loops do.
-    ``theta`` length m, zero beyond n; ``out`` length ≥ 3; all distinct buffers.
+    the gain for the overflow check, summed in the pairwise tree of the module notes.
+    ``theta`` length m, zero beyond n; all distinct buffers.
     """
-    sig = types.void(P, g, r, n, theta, out)
+    sig = types.UniTuple(types.float64, 3)(P, g, r, n, theta)
 
     def codegen(context, builder, sig, args):
         return _emit_call(context, builder, sig, args, GAIN_SUMS)

@@ -144,7 +144,7 @@ def _new_state(
     c_radius: float, theta0_scaled: np.ndarray, alpha_c: float | None = None,
     method: str = "rels",
 ) -> np.ndarray:
-    state = np.zeros(_k.state_size(na, nb, nc, delay))
+    state = _k.new_state_buffer(na, nb, nc, delay)
     state[_k.H_NA] = na
     state[_k.H_NB] = nb
     state[_k.H_NC] = nc
