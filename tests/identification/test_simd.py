@@ -276,3 +276,18 @@ def test_rels_batch_in_chunks_equals_one_batch(rng):
     assert_array_equal(np.concatenate(err_p), err)
     for i in (0, 1, 2, 4):  # θ̂, P, ψ̂, u line
         assert_array_equal(K.state_views(parts)[i], K.state_views(whole)[i])
+
+
+@pytest.mark.parametrize("orders", [(1, 0, 0, 0), (2, 1, 1, 1), (4, 4, 2, 1), (6, 6, 4, 1),
+                                    (7, 7, 3, 0), (20, 10, 4, 1)])
+def test_state_buffer_aligns_P(orders):
+    # P's rows are whole 32-byte vectors on 64-byte boundaries whatever the allocator
+    # returned, and the buffer behaves as a plain zeroed state of the right size
+    n = sum(orders[:3]) + 1
+    for _ in range(5):
+        st = _new_state(*orders, 1.0, 1e3, 1e6, 0.99, np.zeros(n))
+        P_full = K._views.py_func(st)[1]
+        assert P_full.ctypes.data % 64 == 0
+        assert P_full.shape[1] % 4 == 0
+        assert st.size == K.state_size(*orders)
+        assert np.array_equal(np.diag(K.state_views(st)[1]), np.full(n, 1e3))

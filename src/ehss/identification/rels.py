@@ -15,7 +15,8 @@ with θ = [a1..a_na, b0..b_nb, c1..c_nc] and
 Departures from the textbook, all for numerical soundness (PAPER.md §3):
 
 * P is updated in the symmetric rank-1 form (P − g gᵀ/den)/λ with g = Pψ̂ shared,
-  which keeps P bit-exactly symmetric (the textbook form drifts and diverges at λ < 1);
+  computed as P/λ − w wᵀ with w = g √(1/(den λ)), which keeps P bit-exactly symmetric
+  (the textbook form drifts and diverges at λ < 1);
 * tr P is bounded (default tr P(0)) against wind-up under poor excitation;
 * if P loses positive definiteness or anything becomes non-finite, P is reset to P(0)
   (θ̂ is kept) and the reset is counted;
