@@ -15,9 +15,9 @@ from ehss.io import read_columns, write_csv
 DT = 1e-3
 
 
-def _write_model(path, *, a=(1.0, -1.5, 0.7), b=(0.1, 0.05), delay=2, dt=DT):
+def _write_model(path, *, a=(1.0, -1.5, 0.7), b=(0.1, 0.05), delay=2, dt=DT, **extra):
     path.write_text(json.dumps({"a": list(a), "b": list(b), "c": [1.0], "delay": delay,
-                                "dt": dt}))
+                                "dt": dt, **extra}))
     return path
 
 
@@ -44,6 +44,48 @@ def test_compensate_writes_drive_that_inverts_the_model(tmp_path, reference):
     y = scipy.signal.lfilter([0.0, 0.0, 0.1, 0.05], [1.0, -1.5, 0.7], table["drive"])
     # Minimum-phase model (zero at -0.5): exact inverse up to rounding.
     assert_allclose(y, reference, rtol=0, atol=1e-10)
+
+
+def test_compensate_uses_the_operating_point_of_the_model(tmp_path, reference):
+    # identified about (u0, y0) = (2, 1.5): y − y0 = G (u − u0), G(1) = 0.15/0.2 = 0.75
+    model = _write_model(tmp_path / "m.json", offsets={"input": 2.0, "output": 1.5})
+    r = 1.5 + 0.4 * (np.arange(reference.size) > 100) + reference  # static part and a step
+    ref = _write_reference(tmp_path / "r.csv", r)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 0
+    drive = read_columns(out, ["drive"])["drive"]
+    y = 1.5 + scipy.signal.lfilter([0.0, 0.0, 0.1, 0.05], [1.0, -1.5, 0.7], drive - 2.0)
+    assert_allclose(y, r, rtol=0, atol=1e-10)
+    assert_allclose(drive[:10], 2.0, rtol=0, atol=1e-12)  # at the operating point: u0
+    sidecar = json.loads(out.with_suffix(".json").read_text())
+    assert sidecar["offsets_applied"] == {"input": 2.0, "output": 1.5}
+    # --ignore-offsets: the inverse of the reference as it is (the earlier behaviour)
+    out2 = tmp_path / "plain.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out2),
+                 "--ignore-offsets"]) == 0
+    plain = read_columns(out2, ["drive"])["drive"]
+    from ehss.compensation import compensate
+    from ehss.identification.model import ArmaxModel
+
+    assert_allclose(plain, compensate(ArmaxModel.load_json(model), r), rtol=0, atol=1e-12)
+    assert np.max(np.abs(plain - drive)) > 0.1  # r's static part starts it off rest
+    assert json.loads(out2.with_suffix(".json").read_text())["offsets_applied"] is None
+
+
+@pytest.mark.parametrize("offsets", [{"input": 1.0}, {"input": "x", "output": 0.0}, [1, 2],
+                                     {"input": float("inf"), "output": 0.0}])
+def test_bad_offsets_exit_2(tmp_path, reference, capsys, offsets):
+    model = tmp_path / "m.json"
+    _write_model(model)
+    doc = json.loads(model.read_text())
+    doc["offsets"] = offsets
+    model.write_text(json.dumps(doc))
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "offsets" in err and "\n" not in err
+    assert not out.exists()
 
 
 def test_compensate_options(tmp_path, reference):

@@ -32,6 +32,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "for models identified behind known factors, e.g. the acceleration loop)")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate if the file has no time column t")
+    p.add_argument("--ignore-offsets", action="store_true",
+                   help="apply the inverse to the reference as it is, even if the model file "
+                   "holds the operating point it was identified about (`offsets`, written by "
+                   "`ehss identify`); by default drive = u0 + F (r - y0)")
     it = p.add_argument_group(
         "drive-file iteration",
         "Correct the drive of a previous run from what the rig did: "
@@ -78,14 +82,18 @@ def run(args: argparse.Namespace) -> int:
 
     check_writable(args.out)
     model = ArmaxModel.load_json(args.model)
+    offsets = None if args.ignore_offsets else _offsets(args.model)
     table = read_columns(args.reference, [args.column])
     fs = sample_rate(table, args.fs)
     r = table[args.column]
     band = None if args.band is None else tuple(args.band)
     extra = {}
     if args.update is None:
-        drive = compensate(model, r, method=args.method, band_hz=band, fs=fs)
-    else:
+        # the model maps deviations from the operating point (u0, y0) it was identified
+        # about: y − y0 = G (u − u0), so the drive for r is u0 + G⁻¹ (r − y0)
+        u0, y0 = offsets if offsets is not None else (0.0, 0.0)
+        drive = u0 + compensate(model, r - y0, method=args.method, band_hz=band, fs=fs)
+    else:  # corrections of the error r − y: the operating point cancels
         from ehss.compensation import update_drive
 
         run_table = read_columns(args.update, [args.drive_column, args.output_column])
@@ -112,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         "column": args.column,
         "fs_hz": fs,
         "band_hz": None if args.band is None else list(args.band),
+        "offsets_applied": (None if offsets is None or args.update is not None
+                            else {"input": offsets[0], "output": offsets[1]}),
         "units": "drive and reference in the units of the model's input",
         "versions": versions(),
         **extra,
@@ -135,3 +145,23 @@ def run_demo(args: argparse.Namespace) -> int:
     for p in paths:
         print(f"wrote {p}")
     return 0
+
+
+def _offsets(path: str) -> tuple[float, float] | None:
+    """(u0, y0) of the model file's ``offsets``, or None if it has none (already read as
+    a valid model by :meth:`ArmaxModel.load_json`)."""
+    import json
+    import math
+
+    doc = json.loads(Path(path).read_text())
+    off = doc.get("offsets")
+    if off is None:
+        return None
+    try:
+        u0, y0 = float(off["input"]), float(off["output"])
+    except (TypeError, KeyError, ValueError):
+        raise DataError(f"model file {path!r}: offsets must be an object with numbers "
+                        "'input' and 'output'") from None
+    if not (math.isfinite(u0) and math.isfinite(y0)):
+        raise DataError(f"model file {path!r}: offsets must be finite")
+    return u0, y0
