@@ -57,11 +57,10 @@ The P update (22) is the symmetric rank-1 form P ← (P − g gᵀ/den)/λ with 
 den = λ + ψ̂ᵀPψ̂, formed as P·(1/λ) − w wᵀ with w = g·√(1/(den·λ)) (one multiply per
 entry fewer, exactly symmetric), run by 4-wide kernels in :mod:`._simd` with the sums
 ŷ = ψ̂ᵀθ̂, ψ̂ᵀg and tr P in short pairwise trees; beyond SIMD_MAX by plain loops with
-the same updates and serial sums. Batch
-fusion: the batch loop knows u(k+1), so for RELS at
-λ = 1 the pass that writes P(k) also forms the next sample's g = P(k) ψ̂(k+1) in
-vector registers (same sums, same order, same bits as forming it at the start of the
-next sample); P is then read once per sample instead of twice. The streaming step,
+the same updates and serial sums. Batch fusion: the batch loop knows u(k+1), so for
+RELS at λ = 1 the pass that writes P(k) also forms the next sample's g = P(k) ψ̂(k+1)
+in vector registers (same sums, same order, same bits as forming it at the start of
+the next sample); P is then read once per sample instead of twice. The streaming step,
 RML and λ < 1 (whose diagonal floor changes P after the pass) form g at the start of
 each sample.
 """

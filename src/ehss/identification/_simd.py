@@ -38,9 +38,10 @@ The padding (rows and entries ≥ n) is zero; the vector sums add its zero produ
 
 On CPUs without AVX, LLVM splits each ``<4 x double>`` operation into SSE2 halves: the
 same operations on the same elements, so the same results. The plain loops that
-:mod:`._kernels` runs beyond SIMD_MAX do the same updates with serial sums. numba's on-disk cache is
-keyed on the source file of the jitted function: after editing this module, clear the
-``__pycache__`` entries of ``_kernels.py`` (or touch it) so that its kernels recompile.
+:mod:`._kernels` runs beyond SIMD_MAX do the same updates with serial sums. numba's
+on-disk cache is keyed on the source file of the jitted function: after editing this
+module, clear the ``__pycache__`` entries of ``_kernels.py`` (or touch it) so that its
+kernels recompile.
 """
 
 from __future__ import annotations
