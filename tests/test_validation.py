@@ -73,6 +73,10 @@ def test_frf_error_exact_offsets(true_model):
     err = frf_error(true_model, frf, band_hz=(10.0, 100.0))
     n_band = np.sum((f >= 10) & (f <= 100))
     assert err.n_points == n_band - np.sum((f >= 10) & (f <= 100) & (coh < 0.9))
+    assert err.compared_hz == (10.0, 100.0)
+    # the span of the points really compared: 9 Hz is an unreliable point, so it starts at 10
+    assert frf_error(true_model, frf, band_hz=(9.0, 100.0)).compared_hz == (10.0, 100.0)
+    assert coh[f == 9.0] < 0.9
     # float64 rounding of the offsets only
     assert err.max_magnitude_db == pytest.approx(1.0, abs=1e-9)
     assert err.rms_magnitude_db == pytest.approx(1.0, abs=1e-9)
@@ -96,6 +100,7 @@ def test_frf_error_no_points(true_model):
                             coherence=np.array([0.1, 0.2]), n_averages=1, nperseg=8, fs=FS)
     err = frf_error(true_model, frf, band_hz=(0, 10))
     assert err.n_points == 0 and math.isnan(err.max_magnitude_db)
+    assert all(math.isnan(x) for x in err.compared_hz)
     with pytest.raises(ParameterError, match="min_coherence"):
         frf_error(true_model, frf, band_hz=(0, 10), min_coherence=2)
     with pytest.raises(ParameterError, match="lo <= hi"):

@@ -70,6 +70,9 @@ class FrfError:
         Points with a lower coherence were left out.
     n_points : int
         Number of frequency points used (0: nothing to compare, all errors NaN).
+    compared_hz : tuple of float
+        Lowest and highest frequency among those points, Hz (NaN when there are none):
+        where the comparison really took place inside ``band_hz``.
     max_magnitude_db, rms_magnitude_db : float
         Largest and RMS of ``|20 log10 |G| - 20 log10 |H1||`` in dB.
     weighted_rms_magnitude_db : float
@@ -81,6 +84,7 @@ class FrfError:
     band_hz: tuple[float, float]
     min_coherence: float
     n_points: int
+    compared_hz: tuple[float, float]
     max_magnitude_db: float
     rms_magnitude_db: float
     weighted_rms_magnitude_db: float
@@ -93,6 +97,7 @@ class FrfError:
             "band_hz": [float(self.band_hz[0]), float(self.band_hz[1])],
             "min_coherence": float(self.min_coherence),
             "n_points": int(self.n_points),
+            "compared_hz": [float(self.compared_hz[0]), float(self.compared_hz[1])],
             "max_magnitude_db": float(self.max_magnitude_db),
             "rms_magnitude_db": float(self.rms_magnitude_db),
             "weighted_rms_magnitude_db": float(self.weighted_rms_magnitude_db),
@@ -145,7 +150,7 @@ def frf_error(
     if n == 0:
         nan = float("nan")
         return FrfError(band_hz=(lo, hi), min_coherence=float(min_coherence), n_points=0,
-                        max_magnitude_db=nan, rms_magnitude_db=nan,
+                        compared_hz=(nan, nan), max_magnitude_db=nan, rms_magnitude_db=nan,
                         weighted_rms_magnitude_db=nan, max_phase_deg=nan, rms_phase_deg=nan)
     f = frf.freq_hz[mask]
     h = frf.response[mask]
@@ -163,6 +168,7 @@ def frf_error(
         band_hz=(lo, hi),
         min_coherence=float(min_coherence),
         n_points=n,
+        compared_hz=(float(np.min(f)), float(np.max(f))),
         max_magnitude_db=float(np.max(np.abs(e_db))),
         rms_magnitude_db=float(np.sqrt(np.mean(e_db**2))),
         weighted_rms_magnitude_db=float(np.sqrt(np.sum(w * e_db**2) / np.sum(w))),
@@ -494,9 +500,11 @@ class ValidationReport:
         if e is not None:
             lo, hi = e.band_hz
             if e.n_points:
+                f0, f1 = e.compared_hz
                 lines.append(
                     f"  frequency response {lo:g}-{hi:g} Hz ({e.n_points} points with "
-                    f"coherence >= {e.min_coherence:g}): magnitude error max "
+                    f"coherence >= {e.min_coherence:g}, {f0:.4g}-{f1:.4g} Hz): magnitude "
+                    "error max "
                     f"{e.max_magnitude_db:.3f} dB, rms {e.rms_magnitude_db:.3f} dB; "
                     f"phase error max {e.max_phase_deg:.2f} deg, rms {e.rms_phase_deg:.2f} deg"
                 )
