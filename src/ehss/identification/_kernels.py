@@ -342,16 +342,19 @@ def _downdate(P, g, n, inv_den, inv_lam):
 
     Formed as P·inv_lam − w wᵀ, w = g·√(inv_den·inv_lam) (see :mod:`._simd`): by
     the 4-wide intrinsic for m ≤ SIMD_MAX (trace in its pairwise tree), else by plain
-    loops and :func:`_trace_min`.
+    loops and :func:`_trace_min`. ``g`` is work space afterwards (the plain loops
+    scale it to w in place; the callers form the next g from scratch).
     """
     m = P.shape[0]
     if m <= SIMD_MAX:
         return downdate(P, g, n, inv_den, inv_lam)
     root = np.sqrt(inv_den * inv_lam)
+    for j in range(m):
+        g[j] *= root  # w_j, formed once
     for i in range(n):
-        wi = g[i] * root
+        wi = g[i]
         for j in range(m):
-            P[i, j] = P[i, j] * inv_lam - wi * (g[j] * root)
+            P[i, j] = P[i, j] * inv_lam - wi * g[j]
     return _trace_min(P, n)
 
 
@@ -604,9 +607,10 @@ def _step(state, theta, P, psi, g, ul, cw, hf, u, y, rml):
         # for symmetric P, we use the symmetric rank-1 form
         #     P(k) = (P(k−1) − g gᵀ / den) / λ
         # (RML: the same with g = P ψ_f, i.e. P(k) = [I − K ψ_fᵀ] P(k−1) / λ),
-        # each entry as (P_ij − (g_i g_j) · inv_den) · inv_lam. IEEE products commute,
-        # so entries (i, j) and (j, i) get bit-identical values: P stays exactly
-        # symmetric by construction. Rows i ≥ n are zero (g_i = 0) and stay so.
+        # each entry as P_ij · inv_lam − w_i w_j with w = g √(inv_den · inv_lam). IEEE
+        # products commute, so entries (i, j) and (j, i) get bit-identical values: P
+        # stays exactly symmetric by construction. Rows i ≥ n are zero (w_i = 0) and
+        # stay so.
         tr, dmin = _downdate(P, g, n, 1.0 / den, 1.0 / lam)
         verdict = _floor_and_bound(P, n, lam, tr, dmin, state[H_TRMAX])
         if verdict == 1:
