@@ -112,9 +112,11 @@ def run(args: argparse.Namespace) -> int:
         report = validate(model, u, y, fs=fs, band_hz=band_hz, holdout=holdout,
                           min_coherence=args.min_coherence)
 
+    import dataclasses
+
+    model = dataclasses.replace(model, offsets=(u_mean, y_mean))
     _print_model(model, report, rec, args)
     doc = model.to_dict()
-    doc["offsets"] = {"input": u_mean, "output": y_mean}
     doc["validation"] = report.summary()
     doc["provenance"] = _provenance(rec, args, holdout, n_est)
 

@@ -42,6 +42,22 @@ def _coeffs(name: str, value: Any, *, monic: bool) -> np.ndarray:
     return arr
 
 
+def _pair(name: str, value: Any) -> tuple[float, float]:
+    """``value`` as a pair of finite floats."""
+    try:
+        lo, hi = value
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name}={value!r} must be a pair of numbers") from None
+    out = []
+    for x in (lo, hi):
+        if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+            raise ParameterError(f"{name}={value!r} must be a pair of numbers")
+        if not math.isfinite(float(x)):
+            raise ParameterError(f"{name}={value!r} must be finite")
+        out.append(float(x))
+    return out[0], out[1]
+
+
 def _jsonable(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
@@ -111,6 +127,13 @@ class ArmaxModel:
         Covariance of θ = [a1..a_na, b0..b_nb, c1..c_nc].
     meta : dict
         Free-form extra information (n_samples, forgetting, resets, ...).
+    offsets : tuple of float or None
+        Operating point ``(u0, y0)`` the model was identified about: the model relates
+        ``u - u0`` to ``y - y0``. None when the record was used as it is.
+    band_hz : tuple of float or None
+        ``(f_lo, f_hi)``, the band over which the model was validated (e.g. where the
+        validation record's coherence was high). Compensation limits its inverse to this
+        band by default. None when unknown.
 
     Examples
     --------
@@ -127,6 +150,8 @@ class ArmaxModel:
     noise_variance: float = math.nan
     covariance: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    offsets: tuple[float, float] | None = None
+    band_hz: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "a", _coeffs("a", self.a, monic=True))
@@ -152,6 +177,16 @@ class ArmaxModel:
             cov.setflags(write=False)
             object.__setattr__(self, "covariance", cov)
         object.__setattr__(self, "meta", dict(self.meta))
+        if self.offsets is not None:
+            object.__setattr__(self, "offsets", _pair("offsets", self.offsets))
+        if self.band_hz is not None:
+            lo, hi = _pair("band_hz", self.band_hz)
+            if not 0.0 <= lo < hi <= 0.5 / self.dt * (1 + 1e-12):
+                raise ParameterError(
+                    f"band_hz={self.band_hz!r} must satisfy 0 <= lo < hi <= fs/2 = "
+                    f"{0.5 / self.dt:g} Hz"
+                )
+            object.__setattr__(self, "band_hz", (lo, hi))
 
     # ------------------------------------------------------------------ orders
     @property
@@ -421,6 +456,9 @@ class ArmaxModel:
             "noise_variance": None if math.isnan(nv) else nv,
             "covariance": None if self.covariance is None else self.covariance.tolist(),
             "meta": _jsonable(self.meta),
+            "offsets": (None if self.offsets is None
+                        else {"input": self.offsets[0], "output": self.offsets[1]}),
+            "band_hz": None if self.band_hz is None else list(self.band_hz),
         }
 
     @classmethod
@@ -430,10 +468,17 @@ class ArmaxModel:
         if missing:
             raise DataError(f"model dict lacks {', '.join(missing)}")
         nv = d.get("noise_variance")
+        off = d.get("offsets")
+        if off is not None:
+            if not isinstance(off, dict) or set(off) - {"input", "output"} or len(off) != 2:
+                raise DataError("model offsets must be an object with numbers 'input' and "
+                                f"'output', got {off!r}")
+            off = (off["input"], off["output"])
         return cls(
             a=d["a"], b=d["b"], c=d.get("c", [1.0]), delay=int(d["delay"]), dt=float(d["dt"]),
             noise_variance=math.nan if nv is None else float(nv),
             covariance=d.get("covariance"), meta=dict(d.get("meta") or {}),
+            offsets=off, band_hz=d.get("band_hz"),
         )
 
     def save_json(self, path: str | Path) -> None:
