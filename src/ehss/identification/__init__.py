@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ehss.identification.batch import armax_els, arx_ls
+from ehss.identification.estimators import METHODS, estimate
 from ehss.identification.model import ArmaxModel, RoundingSensitivity
 from ehss.identification.order import OrderRow, OrderSelection, select_order
 from ehss.identification.rels import RelsEstimator, rels
@@ -14,6 +15,8 @@ __all__ = [
     "rels",
     "arx_ls",
     "armax_els",
+    "estimate",
+    "METHODS",
     "OrderRow",
     "OrderSelection",
     "select_order",
