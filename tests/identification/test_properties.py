@@ -7,14 +7,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ehss.identification import _kernels as K
-from ehss.identification.rels import RelsEstimator, _new_state
+from ehss.identification.rels import RelsEstimator, _new_state, _settings
 
 from .systems import armax_data, system
 
 
 def _block(state, u, y, n):
+    settings, storage, counters = state
     err, xi = np.empty(u.size), np.empty(u.size)
-    K.rels_run(state, u, y, err, xi, np.empty((0, n)), 1)
+    K.rels_run(settings, storage, counters, u, y, err, xi, np.empty((0, n)), 1)
     return err, xi
 
 
@@ -24,24 +25,26 @@ def test_p_spd_and_bounded_through_a_million_samples_of_constant_input(level, se
     rng = np.random.default_rng(seed)
     na, nb, nc, n = 2, 1, 1, 5
     alpha = 1e3
-    state = _new_state(na, nb, nc, 1, 0.99, alpha, n * alpha, 0.99, np.zeros(n))
+    settings = _settings(na, nb, nc, 1, 0.99, alpha, alpha, n * alpha, 0.99, "rels")
+    storage, counters, views = _new_state(settings, np.zeros(n))
+    state = (settings, storage, counters)
     a, b, c = system(2)
     u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=40.0)
     _block(state, u, y, n)
-    theta_good = state[K.HEADER : K.HEADER + n].copy()
+    theta_good = views.theta.copy()
     # 10^6 samples of constant input/output, checked every 10^5 samples
     cu = np.full(100_000, level)
     for _ in range(10):
         err, xi = _block(state, cu, cu * 0.5, n)
         assert np.all(np.isfinite(err)) and np.all(np.isfinite(xi))
-        P = K.state_views(state)[1]
+        P = views.P
         assert np.array_equal(P, P.T)
         assert np.trace(P) <= n * alpha * (1 + 1e-12)
         assert np.linalg.eigvalsh(P).min() > 0
     # excitation returns: the estimate recovers
     u2, y2, _ = armax_data(rng, a, b, c, 6000, snr_db=40.0)
     _block(state, u2, y2, n)
-    theta = state[K.HEADER : K.HEADER + n]
+    theta = views.theta
     assert np.max(np.abs(theta[:2] - theta_good[:2])) < 5e-2
 
 

@@ -301,3 +301,65 @@ def test_bad_method(rng, method):
         rels(u, u, **GOOD, method=method)
     with pytest.raises(ParameterError, match=r"method=.* must be 'rels' or 'rml'"):
         RelsEstimator(**GOOD, method=method)
+
+
+# ------------------------------------------------------------------ streaming input types
+@pytest.mark.parametrize(
+    ("u_k", "message"),
+    [
+        (np.array([1.0, 2.0]), r"u_k=.* must be a real number .* not ndarray \(use update_many"),
+        (np.array(1.0), r"u_k=.* must be a real number .* not ndarray"),
+        ([1.0], r"u_k=\[1.0\] must be a real number .* not list"),
+        (1 + 2j, r"u_k=\(1\+2j\) must be a real number .* not complex"),
+        ("1.0", r"u_k='1.0' must be a real number .* not str"),
+        (None, r"u_k=None must be a real number .* not NoneType"),
+        (True, r"u_k=True must be a real number .* not bool"),
+    ],
+)
+def test_streaming_rejects_non_real_samples(u_k, message):
+    est = RelsEstimator(na=1, nb=0, nc=0)
+    est.update(1.0, 2.0)
+    with pytest.raises(TypeError, match=message):
+        est.update(u_k, 1.0)
+    with pytest.raises(TypeError, match=message.replace("u_k", "y_k")):
+        est.update(1.0, u_k)
+    assert est.counters["n_samples"] == 1  # the state is untouched
+
+
+def test_streaming_accepts_numpy_and_int_scalars():
+    # the same numbers as Python ints, numpy floats and numpy ints give the same errors
+    a, b = RelsEstimator(na=1, nb=0, nc=0), RelsEstimator(na=1, nb=0, nc=0)
+    for uk, yk in ((1, 2), (3, -1), (0, 5)):
+        assert a.update(float(uk), float(yk)) == b.update(np.int32(uk), np.float32(yk))
+    with pytest.raises(DataError, match="must be finite"):
+        a.update(10**400, 1.0)
+
+
+# ------------------------------------------------------------------ data magnitudes
+@pytest.mark.parametrize("scale", [1e-200, 1e200, 1e-300, 1e300])
+def test_rels_works_at_any_common_magnitude(rng, scale):
+    # u and y scaled together: the estimator runs on RMS-normalised data (the RMS formed
+    # without overflow or underflow), so a, b and c are those of the unscaled record.
+    # The normalised records differ from the unscaled run's by a rounding of the scale
+    # (a few eps), which the first downdates from P(0) = 1e6 I amplify by up to α|ψ|²
+    # (test_kernel.py measures up to 3e-10 relative at α = 1e6): rtol 1e-9
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 3000, snr_db=30.0)
+    ref = rels(u, y, na=2, nb=1, nc=1)
+    m = rels(u * scale, y * scale, na=2, nb=1, nc=1)
+    assert_allclose(m.a, ref.a, rtol=1e-9)
+    assert_allclose(m.b, ref.b, rtol=1e-9)
+    assert_allclose(m.c, ref.c, rtol=1e-9)
+    # noise variance scales with y²: only where that fits float64
+    if 1e-150 < scale < 1e150:
+        assert_allclose(m.noise_variance, ref.noise_variance * scale**2, rtol=1e-9)
+
+
+@pytest.mark.parametrize(("su", "sy"), [(1e200, 1e-200), (1e-200, 1e200)])
+def test_rels_refuses_magnitudes_beyond_float64(rng, su, sy):
+    # b = b_scaled · RMS(y)/RMS(u) = 1e∓400 does not exist in float64: an error, not an
+    # all-zero (or infinite) model
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 1000, snr_db=30.0)
+    with pytest.raises(DataError, match="too far apart in magnitude"):
+        rels(u * su, y * sy, na=2, nb=1, nc=1)

@@ -57,7 +57,7 @@ from ehss.identification.model import ArmaxModel
 
 __all__ = ["rels", "RelsEstimator"]
 
-_METHODS = {"rels": _k.METHOD_RELS, "rml": _k.METHOD_RML}
+_METHODS = ("rels", "rml")
 
 
 # ---------------------------------------------------------------- validation helpers
@@ -129,68 +129,75 @@ def check_record(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _rms_scale(x: np.ndarray) -> float:
-    s = float(np.sqrt(np.mean(np.square(x)))) if x.size else 0.0
-    return s if (s > 0.0 and math.isfinite(s)) else 1.0
+    """RMS of x, formed as max|x| · RMS(x / max|x|) so that it neither overflows nor
+    underflows for data of any float64 magnitude (1 for an all-zero record)."""
+    peak = float(np.max(np.abs(x))) if x.size else 0.0
+    if not (peak > 0.0 and math.isfinite(peak)):
+        return 1.0
+    return peak * float(np.sqrt(np.mean(np.square(x / peak))))
 
 
 def _theta_scale(na: int, nb: int, nc: int, u_scale: float, y_scale: float) -> np.ndarray:
     """Factor D with θ_physical = D θ_scaled (only the b-part changes: b = b_s s_y/s_u)."""
     dvec = np.ones(na + nb + 1 + nc)
-    dvec[na : na + nb + 1] = y_scale / u_scale
+    with np.errstate(over="ignore", under="ignore"):  # checked by _model_from_state
+        dvec[na : na + nb + 1] = y_scale / u_scale
     return dvec
 
 
+def _settings(
+    na: int, nb: int, nc: int, delay: int, lam: float, alpha: float, alpha_c: float,
+    trace_bound: float, c_radius: float, method: str, enabled: bool = True,
+) -> _k.RelsSettings:
+    """The kernel's settings, as plain Python scalars (one compiled signature)."""
+    return _k.RelsSettings(
+        na=int(na), nb=int(nb), nc=int(nc), delay=int(delay), lam=float(lam),
+        alpha=float(alpha), alpha_c=float(alpha_c), trace_max=float(trace_bound),
+        c_radius=float(c_radius), rml=bool(method == "rml" and nc > 0),
+        enabled=bool(enabled),
+    )
+
+
 def _new_state(
-    na: int, nb: int, nc: int, delay: int, lam: float, alpha: float, trace_bound: float,
-    c_radius: float, theta0_scaled: np.ndarray, alpha_c: float | None = None,
-    method: str = "rels",
-) -> np.ndarray:
-    state = _k.new_state_buffer(na, nb, nc, delay)
-    state[_k.H_NA] = na
-    state[_k.H_NB] = nb
-    state[_k.H_NC] = nc
-    state[_k.H_DELAY] = delay
-    state[_k.H_LAM] = lam
-    alpha_c = alpha if alpha_c is None else alpha_c
-    state[_k.H_ALPHA] = alpha
-    state[_k.H_ALPHA_C] = alpha_c
-    state[_k.H_TRMAX] = trace_bound
-    state[_k.H_CRADIUS] = c_radius
-    state[_k.H_ENABLED] = 1.0
-    state[_k.H_METHOD] = _METHODS[method]
-    theta, P, *_ = _k.state_views(state)
-    theta[:] = theta0_scaled
-    P[:] = np.diag(np.r_[np.full(na + nb + 1, alpha), np.full(nc, alpha_c)])
-    return state
+    settings: _k.RelsSettings, theta0_scaled: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, _k.RelsState]:
+    """(storage, counters, views): θ̂ = θ0, P = P(0), regressors and counters zero."""
+    s = settings
+    storage = np.zeros(_k.storage_size(s.na, s.nb, s.nc, s.delay))
+    counters = np.zeros(_k.N_COUNTERS, dtype=np.int64)
+    views = _k.state_views(storage, s.na, s.nb, s.nc, s.delay)
+    views.theta[:] = theta0_scaled
+    nab = s.na + s.nb + 1
+    views.P[:] = np.diag(np.r_[np.full(nab, s.alpha), np.full(s.nc, s.alpha_c)])
+    return storage, counters, views
 
 
-def _counters(state: np.ndarray) -> dict[str, int]:
-    return {
-        "n_samples": int(state[_k.H_COUNT]),
-        "resets": int(state[_k.H_RESETS]),
-        "c_projections": int(state[_k.H_CPROJ]),
-        "trace_scalings": int(state[_k.H_TRSCALE]),
-        "skipped": int(state[_k.H_SKIPPED]),
-    }
+def _counters(counters: np.ndarray) -> dict[str, int]:
+    return {name: int(v) for name, v in zip(_k.COUNTER_NAMES, counters, strict=True)}
 
 
 def _model_from_state(
-    state: np.ndarray, na: int, nb: int, nc: int, delay: int, dt: float, u_scale: float,
+    views: _k.RelsState, na: int, nb: int, nc: int, delay: int, dt: float, u_scale: float,
     y_scale: float, noise_variance_scaled: float, meta: dict,
 ) -> ArmaxModel:
-    theta_s, P, *_ = _k.state_views(state)
     dvec = _theta_scale(na, nb, nc, u_scale, y_scale)
-    with np.errstate(over="ignore", invalid="ignore"):  # adversarial data: checked below
+    theta_s = views.theta
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # checked below
         theta = theta_s * dvec
-        nv = noise_variance_scaled * y_scale**2
+        nv = float(np.float64(noise_variance_scaled) * np.float64(y_scale) ** 2)
         # cov(θ̂) ≈ σ² P for λ = 1 (P ≈ (Σψψᵀ)⁻¹); de-scaled with D: D P D σ²
-        cov = noise_variance_scaled * (P * dvec[:, None] * dvec[None, :])
+        cov = noise_variance_scaled * (views.P * dvec[:, None] * dvec[None, :])
     if not np.all(np.isfinite(cov)):
         cov = None
-    if not np.all(np.isfinite(theta)):
+    # a coefficient that overflowed, or a non-zero one that underflowed to zero or
+    # lost its precision (subnormal), cannot be written in physical units
+    tiny = np.finfo(float).tiny
+    lost = (np.abs(theta_s) >= tiny) & ~(np.abs(theta) >= tiny)
+    if not np.all(np.isfinite(theta)) or np.any(lost):
         raise IdentificationError(
-            "the estimate does not fit float64 in physical units (u_scale/y_scale too "
-            "far apart); choose scales closer to the data"
+            f"the estimate does not fit float64 in physical units (u scale {u_scale:.3g}, "
+            f"y scale {y_scale:.3g}: b = b_scaled·{y_scale:.3g}/{u_scale:.3g}); rescale "
+            "u and y to closer magnitudes"
         )
     return ArmaxModel(
         a=np.concatenate([[1.0], theta[:na]]),
@@ -200,6 +207,23 @@ def _model_from_state(
         noise_variance=nv if math.isfinite(nv) else math.nan,
         covariance=cov, meta=meta,
     )
+
+
+def _sample(name: str, value: Any) -> float:
+    """One streaming sample as a Python float (TypeError for anything but a real number)."""
+    if isinstance(value, bool) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        hint = " (use update_many for arrays)" if isinstance(value, (np.ndarray, list,
+                                                                     tuple)) else ""
+        raise TypeError(
+            f"{name}={value!r} must be a real number (int or float), not "
+            f"{type(value).__name__}{hint}"
+        )
+    try:
+        return float(value)
+    except OverflowError:  # an int beyond float64
+        raise DataError(f"{name}={value!r} is beyond float64: samples must be finite") from None
 
 
 # ---------------------------------------------------------------- batch
@@ -271,9 +295,13 @@ def rels(
     Raises
     ------
     DataError
-        Non-1-D, unequal-length, non-finite or too short records.
+        Non-1-D, unequal-length, non-finite or too short records, or u and y so far
+        apart in magnitude that b = b_scaled·RMS(y)/RMS(u) leaves float64 (any common
+        magnitude works: the record is scaled by its RMS, formed without overflow).
     ParameterError
         Impossible orders or settings.
+    IdentificationError
+        If the estimate cannot be expressed in physical units.
 
     Warns
     -----
@@ -312,19 +340,25 @@ def rels(
         )
     su, sy = _rms_scale(u), _rms_scale(y)
     us, ys = u / su, y / sy
-    theta_s = theta0 / _theta_scale(na, nb, nc, su, sy)
+    dvec = _theta_scale(na, nb, nc, su, sy)
+    if not np.all((dvec >= np.finfo(float).tiny) & np.isfinite(dvec)):
+        raise DataError(
+            f"u and y are too far apart in magnitude for float64 (RMS of u {su:.3g}, of y "
+            f"{sy:.3g}: b would be scaled by {sy:.3g}/{su:.3g}); rescale them"
+        )
+    theta_s = theta0 / dvec
+    settings = _settings(na, nb, nc, delay, lam, alpha, alpha_c, tb, c_radius, method)
     err = np.empty(u.size)
     xi = np.empty(u.size)
     hist = np.empty((0, n))
-    totals = dict.fromkeys(("resets", "c_projections", "trace_scalings", "skipped"), 0)
+    totals = np.zeros(_k.N_COUNTERS, dtype=np.int64)
     for _ in range(passes):
-        state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, theta_s, alpha_c,
-                           method)
-        _k.rels_run(state, us, ys, err, xi, hist, 1)
-        for key, v in _counters(state).items():
-            if key in totals:
-                totals[key] += v
-        theta_s = state[_k.HEADER : _k.HEADER + n].copy()
+        storage, counters, views = _new_state(settings, theta_s)
+        _k.rels_run(settings, storage, counters, us, ys, err, xi, hist, 1)
+        totals += counters
+        theta_s = views.theta.copy()
+    totals_d = _counters(totals)
+    totals_d.pop("n_samples")
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
     meta = {
         "method": method,
@@ -337,9 +371,9 @@ def rels(
         "c_radius": c_radius,
         "u_scale": su,
         "y_scale": sy,
-        **totals,
+        **totals_d,
     }
-    model = _model_from_state(state, na, nb, nc, delay, dt, su, sy, nv_s, meta)
+    model = _model_from_state(views, na, nb, nc, delay, dt, su, sy, nv_s, meta)
     model.check(warn=True)
     return model
 
@@ -372,8 +406,9 @@ class RelsEstimator:
 
     Notes
     -----
-    The state is one float64 buffer handled by a small compiled step kernel, so one
-    :meth:`update` costs about one numba dispatch. :attr:`P` is in scaled units.
+    :meth:`update` and :meth:`update_many` run the same compiled step as :func:`rels`
+    (one sample per call, or a loop over the block); one :meth:`update` costs about
+    one numba dispatch. :attr:`P` is in scaled units.
 
     Examples
     --------
@@ -428,16 +463,19 @@ class RelsEstimator:
         if history_every is not None:
             history_every = _order("history_every", history_every, 1)
         self._every = history_every
-        self._step = _k.rels_step
+        self._kernel = _k.rels_update
         self.reset()
 
     # ---------------------------------------------------------------- state
     def reset(self) -> None:
         """Back to θ̂(0), P(0), empty regressor, counters and history cleared."""
         na, nb, nc, delay = self._orders
-        self._state = _new_state(
-            na, nb, nc, delay, self._lam, self._alpha, self._trace_bound, self._c_radius,
-            self._theta0 / self._dvec, self._alpha_c, self._method,
+        self._settings = _settings(
+            na, nb, nc, delay, self._lam, self._alpha, self._alpha_c, self._trace_bound,
+            self._c_radius, self._method,
+        )
+        self._storage, self._counters, self._views = _new_state(
+            self._settings, self._theta0 / self._dvec
         )
         self._hist: list[np.ndarray] = []
         self._since = 0
@@ -446,20 +484,20 @@ class RelsEstimator:
 
     def freeze(self) -> None:
         """Stop adapting: θ̂ and P are held, regressors and residuals still run."""
-        self._state[_k.H_ENABLED] = 0.0
+        self.enabled = False
 
     def unfreeze(self) -> None:
         """Resume adapting."""
-        self._state[_k.H_ENABLED] = 1.0
+        self.enabled = True
 
     @property
     def enabled(self) -> bool:
         """True while the estimator adapts (see :meth:`freeze`)."""
-        return bool(self._state[_k.H_ENABLED])
+        return self._settings.enabled
 
     @enabled.setter
     def enabled(self, value: bool) -> None:
-        self._state[_k.H_ENABLED] = 1.0 if value else 0.0
+        self._settings = self._settings._replace(enabled=bool(value))
 
     # ---------------------------------------------------------------- updates
     def update(self, u_k: float, y_k: float) -> float:
@@ -470,23 +508,27 @@ class RelsEstimator:
 
         Raises
         ------
+        TypeError
+            If ``u_k`` or ``y_k`` is not a real number (arrays, complex, strings, None,
+            bool); use :meth:`update_many` for blocks.
         DataError
             If ``u_k`` or ``y_k`` is not finite (the state is then left unchanged).
         """
-        e = self._step(self._state, u_k * self._inv_us, y_k * self._inv_ys)
+        if type(u_k) is not float or type(y_k) is not float:
+            u_k, y_k = _sample("u_k", u_k), _sample("y_k", y_k)
+        e = self._kernel(self._storage, self._counters, u_k * self._inv_us,
+                         y_k * self._inv_ys, *self._settings)
         if e != e:
             raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
         return e * self._ys
 
     def _update_with_history(self, u_k: float, y_k: float) -> float:
-        e = self._step(self._state, u_k * self._inv_us, y_k * self._inv_ys)
-        if e != e:
-            raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
+        e = RelsEstimator.update(self, u_k, y_k)
         self._since += 1
         if self._since == self._every:
             self._since = 0
             self._hist.append(self.theta)
-        return e * self._ys
+        return e
 
     def update_many(self, u: Any, y: Any) -> np.ndarray:
         """Process a block of samples; return their a-priori prediction errors."""
@@ -494,8 +536,8 @@ class RelsEstimator:
         err = np.empty(u.size)
         xi = np.empty(u.size)
         if self._every is None:
-            _k.rels_run(self._state, u * self._inv_us, y * self._inv_ys, err, xi,
-                        np.empty((0, self._n)), 1)
+            _k.rels_run(self._settings, self._storage, self._counters, u * self._inv_us,
+                        y * self._inv_ys, err, xi, np.empty((0, self._n)), 1)
         else:
             # the kernel records every `every` samples from its own start: run the
             # first (every − since) samples separately to keep the phase
@@ -505,7 +547,8 @@ class RelsEstimator:
             rest = u.size - first
             hist = np.empty((rest // self._every, self._n))
             if rest:
-                _k.rels_run(self._state, u[first:] * self._inv_us, y[first:] * self._inv_ys,
+                _k.rels_run(self._settings, self._storage, self._counters,
+                            u[first:] * self._inv_us, y[first:] * self._inv_ys,
                             err[first:], xi[first:], hist, self._every)
             self._hist.extend(list(hist * self._dvec))
             self._since = rest % self._every
@@ -516,12 +559,12 @@ class RelsEstimator:
     @property
     def theta(self) -> np.ndarray:
         """Current θ̂ = [a1..a_na, b0..b_nb, c1..c_nc] in physical units (a copy)."""
-        return self._state[_k.HEADER : _k.HEADER + self._n] * self._dvec
+        return self._views.theta * self._dvec
 
     @property
     def P(self) -> np.ndarray:  # noqa: N802 - the paper's symbol
         """Current P(k) (a copy, in the scaled units the estimator works in)."""
-        return _k.state_views(self._state)[1].copy()
+        return self._views.P.copy()
 
     @property
     def history(self) -> np.ndarray:
@@ -533,7 +576,7 @@ class RelsEstimator:
     @property
     def counters(self) -> dict[str, int]:
         """n_samples, resets, c_projections, trace_scalings, skipped."""
-        return _counters(self._state)
+        return _counters(self._counters)
 
     @property
     def model(self) -> ArmaxModel:
@@ -548,9 +591,9 @@ class RelsEstimator:
             "c_radius": self._c_radius,
             "u_scale": self._us,
             "y_scale": self._ys,
-            **_counters(self._state),
+            **_counters(self._counters),
         }
         return _model_from_state(
-            self._state, na, nb, nc, delay, self._dt, self._us, self._ys,
-            float(self._state[_k.H_NV]), meta,
+            self._views, na, nb, nc, delay, self._dt, self._us, self._ys,
+            float(self._views.noise_var[0]), meta,
         )
