@@ -41,9 +41,8 @@ from ehss.identification import (
 )
 from ehss.io import Table, read_columns, sample_rate, write_csv, write_json
 from ehss.params import RigParams, load_params, preset, save_params
-from ehss.plant import simulate_open_loop
 from ehss.signals import Signal, check_feasible
-from ehss.simulation import SimulationResult, simulate
+from ehss.simulation import SimulationResult, simulate, simulate_open_loop
 from ehss.validation import (
     FrfError,
     ResidualTests,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ehss.params import preset
-from ehss.plant.open_loop import simulate_open_loop
+from ehss.simulation import simulate_open_loop
 
 FS = 20_000.0  # drive rate = integration rate: the ZOH is corrected for exactly below
 FREQS_HZ = (1.0, 3.0, 10.0, 30.0, 100.0)

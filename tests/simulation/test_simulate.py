@@ -164,6 +164,23 @@ def test_seed_is_recorded_when_drawn():
         ("position", np.zeros(3), {"fs": 3000.0}, ParameterError, "10000"),
         ("position", np.zeros(3), {"seed": -1}, ParameterError, "seed"),
         ("position", np.zeros(3), {"initial_state": {"nope": 1.0}}, ParameterError, "nope"),
+        # a wrong initial state: wrong container, wrong value types, non-finite values
+        ("position", np.zeros(3), {"initial_state": np.zeros(12)}, TypeError,
+         "initial_state must be a mapping of state names to values"),
+        ("position", np.zeros(3), {"initial_state": [("displacement_m", 0.01)]}, TypeError,
+         "got list"),
+        ("position", np.zeros(3), {"initial_state": {"displacement_m": "0.01"}}, TypeError,
+         "initial_state['displacement_m']='0.01' must be a real number, not str"),
+        ("position", np.zeros(3), {"initial_state": {"displacement_m": None}}, TypeError,
+         "must be a real number, not NoneType"),
+        ("position", np.zeros(3), {"initial_state": {"displacement_m": np.zeros(2)}},
+         TypeError, "not ndarray"),
+        ("position", np.zeros(3), {"initial_state": {"displacement_m": 1j}}, TypeError,
+         "not complex"),
+        ("position", np.zeros(3), {"initial_state": {3: 0.01}}, TypeError,
+         "key 3 must be a state name"),
+        ("position", np.zeros(3), {"initial_state": {"displacement_m": math.inf}},
+         ParameterError, "must be finite"),
     ],
 )
 def test_bad_input(loop, ref, kwargs, error, text):

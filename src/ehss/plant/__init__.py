@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 from ehss.plant.model import STATE_NAMES, plant_parameter_vector, rest_state, static_force_state
-from ehss.plant.open_loop import simulate_open_loop
 
 __all__ = [
-    "simulate_open_loop",
     "STATE_NAMES",
     "plant_parameter_vector",
     "rest_state",

@@ -1,7 +1,9 @@
-"""Closed-loop simulation of the rig: :func:`simulate` and :class:`SimulationResult`."""
+"""Simulation of the rig: closed loops (:func:`simulate`), the open loop
+(:func:`simulate_open_loop`) and their :class:`SimulationResult`."""
 
 from __future__ import annotations
 
 from ehss.simulation.core import LOOPS, SimulationResult, simulate
+from ehss.simulation.open_loop import simulate_open_loop
 
-__all__ = ["LOOPS", "SimulationResult", "simulate"]
+__all__ = ["LOOPS", "SimulationResult", "simulate", "simulate_open_loop"]

@@ -206,6 +206,40 @@ def _new_seed(seed: int | None) -> int:
     return int(seed)
 
 
+def _check_initial_state(initial_state: Any) -> Mapping[str, float] | None:
+    """``initial_state`` as a mapping of state names to finite floats (or None).
+
+    Raises
+    ------
+    TypeError
+        If it is not a mapping, a name is not a string or a value is not a real number.
+    ParameterError
+        For a non-finite value (unknown names: :func:`apply_initial_state`).
+    """
+    if initial_state is None:
+        return None
+    if not isinstance(initial_state, Mapping):
+        raise TypeError(
+            f"initial_state must be a mapping of state names to values (e.g. "
+            f"{{'displacement_m': 0.01}}), got {type(initial_state).__name__}"
+        )
+    checked: dict[str, float] = {}
+    for name, value in initial_state.items():
+        if not isinstance(name, str):
+            raise TypeError(f"initial_state key {name!r} must be a state name (str)")
+        if isinstance(value, bool) or not isinstance(
+            value, (int, float, np.integer, np.floating)
+        ):
+            raise TypeError(
+                f"initial_state[{name!r}]={value!r} must be a real number, not "
+                f"{type(value).__name__}"
+            )
+        if not math.isfinite(float(value)):
+            raise ParameterError(f"initial_state[{name!r}]={value!r} must be finite")
+        checked[name] = float(value)
+    return checked
+
+
 def _run(
     loop: str,
     reference: Any,
@@ -217,11 +251,12 @@ def _run(
     spool_direct: bool = False,
     stiffness_n_m: float | None = None,
 ) -> SimulationResult:
-    """Shared machinery of :func:`simulate` and :func:`ehss.plant.simulate_open_loop`."""
+    """Shared machinery of :func:`simulate` and :func:`simulate_open_loop`."""
     if params is None:
         params = preset("default")
     if not isinstance(params, RigParams):
         raise TypeError(f"params must be a RigParams, got {type(params).__name__}")
+    initial_state = _check_initial_state(initial_state)
     values, fs = _reference_values(reference, fs)
     params = _with_rate(params, fs)
     seed = _new_seed(seed)
@@ -368,7 +403,10 @@ def simulate(
     Raises
     ------
     ParameterError
-        Unknown loop, ``fs`` not dividing the internal rate, bad seed or initial state.
+        Unknown loop, ``fs`` not dividing the internal rate, bad seed, unknown or
+        non-finite initial state.
+    TypeError
+        ``initial_state`` not a mapping of state names to real numbers.
     DataError
         Reference not 1-D, empty or not finite (the first bad index is named).
 

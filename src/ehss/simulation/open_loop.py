@@ -1,4 +1,8 @@
-"""Open-loop runs of the nonlinear plant: a given valve command or spool, no controller."""
+"""Open-loop runs of the nonlinear plant: a given valve command or spool, no controller.
+
+The same simulator as the closed loops (:mod:`ehss.simulation.core`) with the
+controller left out, so that the plant can be checked against eqs (7) and (8).
+"""
 
 from __future__ import annotations
 
@@ -7,6 +11,7 @@ from typing import Any
 
 from ehss.errors import ParameterError
 from ehss.params import RigParams
+from ehss.simulation.core import SimulationResult, _run
 
 __all__ = ["simulate_open_loop"]
 
@@ -20,7 +25,7 @@ def simulate_open_loop(
     stiffness_n_m: float | None = None,
     seed: int | None = None,
     initial_state: Mapping[str, float] | None = None,
-):
+) -> SimulationResult:
     """Drive the nonlinear plant with a given valve command, without a controller.
 
     Parameters
@@ -54,8 +59,6 @@ def simulate_open_loop(
     Use it to check the plant against eq (7) (spool → displacement, K = 0) and eq (8)
     (spool → force Ap·PL with the specimen stiffness).
     """
-    from ehss.simulation.core import _run
-
     if drive_kind not in ("spool", "command_v"):
         raise ParameterError(f"drive_kind={drive_kind!r}; choose 'spool' or 'command_v'")
     if stiffness_n_m is not None and not (float(stiffness_n_m) >= 0.0):
