@@ -165,7 +165,7 @@ def test_rml_reset_clears_filtered_history(rng):
     K.rels_run(settings, storage, counters, u[:300], y[:300], err, xi, np.empty((0, n)), 1)
     assert np.any(views.psi_f[1:] != 0.0)  # the filter carries history
     views.P[:] = -np.eye(n)  # indefinite: ψ_fᵀPψ_f < 0 on the next sample
-    K.rels_update(storage, counters, u[300], y[300], *settings)
+    K.rels_update(storage, counters, K.settings_array(settings), u[300], y[300])
     assert counters[K.RESETS] == 1
     # after the reset ψ_f(300) = ψ̂(300) (zero history), now shifted into row 1
     psi_300 = np.r_[-y[299], -y[298], u[299], u[298], xi[299], xi[298]]
@@ -199,6 +199,11 @@ def test_schur_cohn_matches_roots(c):
         # the coefficients sit at an offset inside θ̂ (here after two other entries)
         theta = np.r_[7.0, -7.0, c]
         assert K._c_within(theta, 2, c.size, radius, np.zeros(c.size + 1)) == expect
+
+
+def test_settings_round_trip_through_their_array():
+    s = _settings(3, 2, 1, 2, 0.99, 1e6, 1e2, 5e6, 0.9, "rml", enabled=False)
+    assert K.settings_from_array(K.settings_array(s)) == s
 
 
 def test_state_views_cover_the_storage_once():

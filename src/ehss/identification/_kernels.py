@@ -40,10 +40,11 @@ The settings are a :class:`RelsSettings` (orders and scalars, immutable); the st
 a :class:`RelsState` of named arrays, and the counters an int64 array indexed by
 :data:`COUNT`, :data:`RESETS`, :data:`C_PROJECTIONS`, :data:`TRACE_SCALINGS` and
 :data:`SKIPPED`. The arrays of a :class:`RelsState` are views into one float64
-block (:func:`new_storage`, :func:`state_views`): every array crossing the
-Python → numba boundary costs about 0.1 µs to unbox, so the streaming estimator passes
-one block, the counters and the settings' scalars per sample (a NamedTuple argument
-would cost ≈ 2 µs to type). Inside the kernels only the named views are used.
+block (:func:`storage_size`, :func:`state_views`): every argument crossing the
+Python → numba boundary costs time to type and unbox (≈ 0.1 µs an array, ≈ 2 µs a
+NamedTuple), so the streaming estimator passes three arrays per sample: the block,
+the counters and the settings packed in field order (:func:`settings_array`). Inside
+the kernels only the named views and the settings' fields are used.
 
 Safeguards (all kept from the paper's reading in PAPER.md §3)
 ------------------------------------------------------------
@@ -520,19 +521,34 @@ def rels_run(s, storage, counters, u, y, err, xi_out, hist, hist_every):
 
 
 @njit(cache=True, error_model="numpy")
-def rels_update(storage, counters, u, y, na, nb, nc, delay, lam, alpha, alpha_c,
-                trace_max, c_radius, rml, enabled):
+def settings_from_array(a):
+    """The :class:`RelsSettings` whose fields, in order, are the entries of ``a``.
+
+    The streaming entry point receives its settings as one float64 array (see the
+    module notes); :func:`settings_array` packs them.
+    """
+    return RelsSettings(int(a[0]), int(a[1]), int(a[2]), int(a[3]), a[4], a[5], a[6],
+                        a[7], a[8], a[9] != 0.0, a[10] != 0.0)
+
+
+def settings_array(settings: RelsSettings) -> np.ndarray:
+    """``settings`` as a float64 array, fields in order (read by settings_from_array)."""
+    return np.array([float(v) for v in settings])
+
+
+@njit(cache=True, error_model="numpy")
+def rels_update(storage, counters, settings, u, y):
     """Streaming entry point: one sample (scaled); returns the a-priori error e(k).
 
-    The settings come as the scalars of a :class:`RelsSettings` (see the module notes).
-    Returns NaN only if ``u`` or ``y`` is not finite, in which case the state is left
-    untouched; the Python wrapper turns that into a DataError.
+    ``settings`` is :func:`settings_array` of a :class:`RelsSettings`: one array
+    crosses the Python → numba boundary instead of eleven scalars (see the module
+    notes). Returns NaN only if ``u`` or ``y`` is not finite, in which case the state
+    is left untouched; the Python wrapper turns that into a DataError.
     """
     if not (np.isfinite(u) and np.isfinite(y)):
         return np.nan
-    s = RelsSettings(na, nb, nc, delay, lam, alpha, alpha_c, trace_max, c_radius, rml,
-                     enabled)
+    s = settings_from_array(settings)
     theta, P, psi, g, u_line, c_work, psi_f, noise_var = state_views(
-        storage, na, nb, nc, delay
+        storage, s.na, s.nb, s.nc, s.delay
     )
     return _step(s, counters, theta, P, psi, g, u_line, c_work, psi_f, noise_var, u, y)[0]

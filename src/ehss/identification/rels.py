@@ -477,6 +477,7 @@ class RelsEstimator:
         self._storage, self._counters, self._views = _new_state(
             self._settings, self._theta0 / self._dvec
         )
+        self._settings_array = _k.settings_array(self._settings)
         self._hist: list[np.ndarray] = []
         self._since = 0
         if self._every is not None:
@@ -498,6 +499,7 @@ class RelsEstimator:
     @enabled.setter
     def enabled(self, value: bool) -> None:
         self._settings = self._settings._replace(enabled=bool(value))
+        self._settings_array = _k.settings_array(self._settings)
 
     # ---------------------------------------------------------------- updates
     def update(self, u_k: float, y_k: float) -> float:
@@ -516,8 +518,8 @@ class RelsEstimator:
         """
         if type(u_k) is not float or type(y_k) is not float:
             u_k, y_k = _sample("u_k", u_k), _sample("y_k", y_k)
-        e = self._kernel(self._storage, self._counters, u_k * self._inv_us,
-                         y_k * self._inv_ys, *self._settings)
+        e = self._kernel(self._storage, self._counters, self._settings_array,
+                         u_k * self._inv_us, y_k * self._inv_ys)
         if e != e:
             raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
         return e * self._ys
