@@ -213,3 +213,19 @@ def test_state_views_cover_the_storage_once():
     views = K.state_views(storage, na, nb, nc, d)
     flat = np.concatenate([v.ravel() for v in views])
     assert_allclose(flat, storage, rtol=0, atol=0)
+
+
+def test_poly_roots_match_numpy(rng):
+    # simple roots: the iteration converges quadratically, to a few eps of the roots'
+    # magnitude like np.roots' eigenvalues (1e-12 leaves 4 digits of margin); a double
+    # root is ill-conditioned for any method: ~√eps ≈ 1.5e-8, 1e-7 allowed
+    for nc in range(1, 9):
+        for _ in range(20):
+            c = rng.standard_normal(nc) * rng.choice([0.1, 1.0, 3.0])
+            got = K._poly_roots(c)
+            ref = np.roots(np.r_[1.0, c])
+            scale = max(1.0, np.max(np.abs(ref)))
+            for z in ref:
+                assert np.min(np.abs(got - z)) <= 1e-12 * scale
+    double = K._poly_roots(np.array([-1.8, 0.81]))  # (z − 0.9)²
+    assert_allclose(double, [0.9, 0.9], atol=1e-7)

@@ -286,22 +286,55 @@ def _step_down(cw, m, k):
 
 
 @njit(cache=True, error_model="numpy")
+def _horner(c, z):
+    """z^nc + c1 z^(nc−1) + … + c_nc at the complex point z."""
+    acc = 1.0 + 0.0j
+    for j in range(c.shape[0]):
+        acc = acc * z + c[j]
+    return acc
+
+
+@njit(cache=True, error_model="numpy")
+def _poly_roots(c):
+    """Roots of z^nc + c1 z^(nc−1) + … + c_nc by the Weierstrass (Durand–Kerner)
+    iteration z_i ← z_i − C(z_i) / Π_{j≠i} (z_i − z_j), started on the powers of
+    0.4 + 0.9j scaled to the Cauchy bound 1 + max|c_j|; it converges for any start off
+    the symmetric ones (quadratically to simple roots, linearly to multiple ones, hence
+    up to 1000 sweeps; nc is small and this runs only when Ĉ left the disc).
+    """
+    nc = c.shape[0]
+    bound = 1.0
+    for j in range(nc):
+        bound = max(bound, 1.0 + abs(c[j]))
+    roots = np.empty(nc, dtype=np.complex128)
+    for i in range(nc):
+        roots[i] = bound * (0.4 + 0.9j) ** i
+    for _ in range(1000):
+        change = 0.0
+        for i in range(nc):
+            den = 1.0 + 0.0j
+            for j in range(nc):
+                if j != i:
+                    den *= roots[i] - roots[j]
+            delta = _horner(c, roots[i]) / den
+            roots[i] -= delta
+            change = max(change, abs(delta))
+        if change <= 2.220446049250313e-16 * bound:
+            break
+    return roots
+
+
+@njit(cache=True, error_model="numpy")
 def _project_c(c, radius):
     """Move the roots of C(z) = z^nc + c1 z^(nc−1) + … inside ``radius``, in place.
 
     Roots outside the unit circle are reflected (z → 1/z̄, which keeps |C(e^{jω})| up to
     a constant: the spectral factor of the same noise spectrum), then any root still
     beyond ``radius`` is shrunk radially onto it (as MATLAB's recursive estimators do).
-    The roots are the eigenvalues of the companion matrix; this allocates, and runs
-    only when :func:`_c_within` failed.
+    This allocates, and runs only when :func:`_c_within` failed.
     """
     nc = c.shape[0]
-    comp = np.zeros((nc, nc), dtype=np.complex128)
-    for j in range(nc):
-        comp[0, j] = -c[j]
-    for i in range(1, nc):
-        comp[i, i - 1] = 1.0
-    roots = np.linalg.eigvals(comp)
+    roots = _poly_roots(c)
     for i in range(nc):
         if abs(roots[i]) > 1.0:
             roots[i] = 1.0 / np.conj(roots[i])
@@ -449,7 +482,7 @@ def _update_theta(s, counters, theta, g, psi, c_work, y, e, den):
 
 
 # ---------------------------------------------------------------- one sample
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _step(s, counters, theta, P, psi, g, u_line, c_work, psi_f, noise_var, u, y):
     """One RELS or RML sample with every safeguard; returns (e(k), ξ̂(k)).
 
