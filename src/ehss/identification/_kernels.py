@@ -307,6 +307,9 @@ def _poly_roots(c):
     for j in range(nc):
         bound = max(bound, 1.0 + abs(c[j]))
     roots = np.empty(nc, dtype=np.complex128)
+    if not np.isfinite(bound):
+        roots[:] = np.nan
+        return roots
     for i in range(nc):
         roots[i] = bound * (0.4 + 0.9j) ** i
     for _ in range(1000):
@@ -334,7 +337,15 @@ def _project_c(c, radius):
     This allocates, and runs only when :func:`_c_within` failed.
     """
     nc = c.shape[0]
-    roots = _poly_roots(c)
+    # roots of the polynomial scaled to z = σ w, σ = max_j |c_j|^(1/j) ≥ 1, whose
+    # coefficients c_j / σ^j are at most 1 in size (no overflow in the iteration)
+    sigma = 1.0
+    for j in range(nc):
+        sigma = max(sigma, abs(c[j]) ** (1.0 / (j + 1)))
+    scaled = np.empty(nc)
+    for j in range(nc):
+        scaled[j] = c[j] / sigma ** (j + 1)
+    roots = _poly_roots(scaled) * sigma
     for i in range(nc):
         if abs(roots[i]) > 1.0:
             roots[i] = 1.0 / np.conj(roots[i])
@@ -349,6 +360,8 @@ def _project_c(c, radius):
             poly[j] = poly[j] - roots[i] * poly[j - 1]
     for j in range(nc):
         c[j] = poly[j + 1].real
+    if not np.all(np.isfinite(c)):  # Ĉ beyond float64 (adversarial data): C = 1
+        c[:] = 0.0
 
 
 # ---------------------------------------------------------------- eqs (20)–(22)
