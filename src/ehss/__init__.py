@@ -20,15 +20,10 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 from ehss import signals
-from ehss.compensation import (
-    CompensationDemo,
-    InverseModel,
-    compensate,
-    demonstrate,
-    design_inverse,
-    refine,
-)
+from ehss.compensation import InverseModel, compensate, design_inverse
 from ehss.errors import DataError, EhssError, EhssWarning, IdentificationError, ParameterError
+from ehss.experiments.compensation_demo import CompensationDemo, demonstrate
+from ehss.experiments.refinement import refine
 from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import (
     ArmaxModel,

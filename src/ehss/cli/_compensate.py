@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from ehss.compensation.demo import demonstrate, write_demo_report
+    from ehss.experiments.compensation_demo import demonstrate, write_demo_report
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ehss._provenance import versions
-from ehss.compensation import plot_demo
+from ehss.experiments.compensation_demo import plot_demo
 from ehss.errors import DataError
 from ehss.identification import ArmaxModel
 from ehss.params import params_to_dict
