@@ -5,9 +5,9 @@ identify the closed loop (RELS, eqs (16)–(22)) on a band-limited random test, 
 the loop's working band as its validated band, design its inverse (exact stable
 inversion in that band, :mod:`ehss.compensation.inverse`), refine the drive by a few
 learning iterations on the rig (:mod:`ehss.experiments.refinement`, default gain chosen
-from the run, updates refused when the error grows), then track a band-limited random reference and an
-earthquake-like history (Kanai–Tajimi acceleration; for the position loop its doubly
-integrated, high-passed displacement) without and with compensation.
+from the run, updates refused when the error grows), then track a band-limited random
+reference and an earthquake-like history (Kanai–Tajimi acceleration; for the position
+loop its doubly integrated, high-passed displacement) without and with compensation.
 
 The acceleration loop is identified behind its known factors
 (:mod:`ehss.identification.known`): the controller's acceleration generator, eq (10),
@@ -35,8 +35,8 @@ import numpy as np
 import scipy.signal
 
 from ehss.compensation import InverseModel, design_inverse
-from ehss.experiments.refinement import refine, rms
 from ehss.errors import ParameterError
+from ehss.experiments.refinement import refine, rms
 
 __all__ = ["CompensationDemo", "LOOP_SETTINGS", "demonstrate", "write_demo_report",
            "plot_demo", "earthquake_reference", "random_reference"]

@@ -22,8 +22,8 @@ import numpy as np
 from scipy.signal import butter, lfilter, sosfiltfilt
 
 from ehss import signals
-from ehss.experiments.compensation_demo import CompensationDemo, demonstrate
 from ehss.errors import ParameterError
+from ehss.experiments.compensation_demo import CompensationDemo, demonstrate
 from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import (
     ArmaxModel,

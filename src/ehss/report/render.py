@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from ehss._provenance import versions
-from ehss.experiments.compensation_demo import plot_demo
 from ehss.errors import DataError
+from ehss.experiments.compensation_demo import plot_demo
 from ehss.identification import ArmaxModel
 from ehss.params import params_to_dict
 from ehss.report.figures import convergence_figure, loop_figure, step_figure
