@@ -1,7 +1,8 @@
 """Demonstration of inverse-model compensation on the simulated rig.
 
 :func:`demonstrate` runs the whole chain the paper's identification is meant for:
-identify the closed loop (RELS, eqs (16)–(22)) on a band-limited random test, give it
+identify the closed loop (RML, the recursive estimator of eqs (16)–(22) with filtered
+regressors) on a band-limited random test, give it
 the loop's working band as its validated band, design its inverse (exact stable
 inversion in that band, :mod:`ehss.compensation.inverse`), refine the drive by a few
 learning iterations on the rig (:mod:`ehss.experiments.refinement`, default gain chosen
@@ -256,8 +257,8 @@ def demonstrate(
     -------
     CompensationDemo
     """
+    from ehss.identification.estimators import estimate
     from ehss.identification.known import compose, known_factors
-    from ehss.identification.rels import rels
     from ehss.params import preset
     from ehss.signals import check_feasible
     from ehss.simulation import simulate
@@ -283,7 +284,8 @@ def demonstrate(
     known = None if num.size == 1 and den.size == 1 else (num, den)
     u_f = u_id if known is None else scipy.signal.lfilter(num, den, u_id)
     o = cfg["orders"]
-    rest = rels(u_f, y_id, na=o["na"], nb=o["nb"], nc=o["nc"], delay=o["delay"], dt=1.0 / fs)
+    rest = estimate(u_f, y_id, method="rml", na=o["na"], nb=o["nb"], nc=o["nc"],
+                    delay=o["delay"], dt=1.0 / fs)
 
     # 2. Inverse rest⁻¹ ∘ F⁻¹ (checked here: a bad model fails before the tests run).
     rest = dataclasses.replace(rest, band_hz=band)
