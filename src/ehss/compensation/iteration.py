@@ -19,14 +19,14 @@ acts where the model was validated). Two inverses are offered:
   estimate): exact where the record is coherent, shrunk where it is not, and zero where
   the coherence is below :data:`MIN_COHERENCE`.
 
-**Convergence.** With ``G`` the loop, the error contracts per frequency by
-``|1 - L G F|``. The default gain is the largest of 1, 1/2, 1/4, 1/8 for which the
-contraction measured on the run (``G F`` from the run's own H1 estimate, where coherent
-and inside the band) stays below :data:`MAX_CONTRACTION` — stable for the model error the
-run shows. The error of each run is compared with that of the run the update started
-from: when it grows, the update is refused and taken again from the better drive with
-half the gain; after :data:`MAX_HALVINGS` refusals in a row the iteration stops and
-hands back the best drive.
+**Convergence.** With ``G`` the loop, the error contracts per frequency by ``|1 - L G
+F|``. The default gain is the largest of 1, 1/2, 1/4, 1/8 for which the contraction
+measured on the run (``G F`` from the run's own H1 estimate, inside the band where the
+run is coherent, i.e. where the test has content) stays below :data:`MAX_CONTRACTION` —
+stable for the model error the run shows. The error of each run is compared with that of
+the run the update started from: when it grows, the update is refused and taken again
+from the better drive with half the gain; after :data:`MAX_HALVINGS` refusals in a row
+the iteration stops and hands back the best drive.
 
 Each run is logged (:class:`RunRecord`): RMS and peak error, the normalised RMS error
 ``100 std(y - r)/std(r)``, the lag of the output behind the reference (J1 delay: the peak
@@ -52,6 +52,8 @@ __all__ = [
     "MAX_CONTRACTION",
     "MAX_HALVINGS",
     "MIN_COHERENCE",
+    "JUDGE_COHERENCE",
+    "CONTENT_FRACTION",
     "GAIN_STEPS",
     "RunRecord",
     "IterationState",
@@ -73,8 +75,15 @@ GAIN_STEPS = (1.0, 0.5, 0.25, 0.125)
 #: Refused updates in a row (gain halvings) before the iteration stops.
 MAX_HALVINGS = 3
 
-#: Coherence below which the FRF inverse is zero (and G F is not judged).
+#: Coherence below which the FRF inverse is zero.
 MIN_COHERENCE = 0.5
+
+#: Coherence from which ``G F`` is judged for the default gain: where the run's drive
+#: carries the test's content (elsewhere the H1 estimate says more about the noise).
+JUDGE_COHERENCE = 0.9
+
+#: Fraction of its peak the drive's spectrum must reach where ``G F`` is judged (-30 dB).
+CONTENT_FRACTION = 1e-3
 
 
 # --------------------------------------------------------------------------- records
@@ -270,7 +279,8 @@ def learning_gain(u: Any, y: Any, fs: float, operator: Any, band: tuple[float, f
 
     ``G`` is the run's H1 estimate drive → output, ``F`` the learning operator's
     frequency response (``operator(freq_hz)``, band limit included), judged inside
-    ``band`` where the coherence is at least :data:`MIN_COHERENCE`.
+    ``band`` where the coherence is at least :data:`JUDGE_COHERENCE` and the drive has
+    content (its spectrum within :data:`CONTENT_FRACTION` of its peak).
 
     Raises
     ------
@@ -281,10 +291,15 @@ def learning_gain(u: Any, y: Any, fs: float, operator: Any, band: tuple[float, f
     y = as_signal(y, "output")
     est = _h1(u, y, fs)
     f = est.freq_hz
-    sel = (f >= band[0]) & (f <= band[1]) & (est.coherence >= MIN_COHERENCE)
+    # Where the drive has content: its Welch spectrum within 30 dB of its peak. Beyond the
+    # test's band a coherent H1 can still come from window leakage of in-band content,
+    # and then it is a weighted mean of G near the band edge, not G there.
+    f_w, s_uu = scipy.signal.welch(u, fs, nperseg=est.nperseg)
+    content = np.interp(f, f_w, s_uu) >= CONTENT_FRACTION * float(np.max(s_uu))
+    sel = (f >= band[0]) & (f <= band[1]) & (est.coherence >= JUDGE_COHERENCE) & content
     if not np.any(sel):
         raise ParameterError(
-            f"the run is not coherent (γ² >= {MIN_COHERENCE}) anywhere in the band "
+            f"the run is not coherent (γ² >= {JUDGE_COHERENCE}) anywhere in the band "
             f"{band[0]:g}-{band[1]:g} Hz: no stable learning gain can be chosen")
     loop_gain = est.response[sel] * operator(f[sel])
     worst = math.inf
