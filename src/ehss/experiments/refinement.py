@@ -101,8 +101,9 @@ def refine(
         Loop of the simulated rig (with ``params``), or a function ``drive -> measured
         output`` (same length) that runs the plant.
     reference : ehss.signals.Signal, or array_like with ``fs``
-        Desired output (SI), at rest at both ends; for a loop of the simulated rig the
-        rate defaults to the parameter set's control rate.
+        Desired output (SI), at rest at both ends, at the model's rate.
+    fs : float, optional
+        Sample rate of an array reference; default the model's (``1 / model.dt``).
     model : ArmaxModel
         Closed-loop model (band: ``band_hz`` or its validated band).
     params : RigParams, optional
@@ -138,10 +139,10 @@ def refine(
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
             or iterations < 0:
         raise ParameterError(f"iterations={iterations!r} must be an integer >= 0")
-    if fs is None and not callable(loop):
-        from ehss.params import preset
+    from ehss.signals import Signal
 
-        fs = float((params or preset("default")).timing.control_rate_hz)
+    if fs is None and not isinstance(reference, Signal):
+        fs = 1.0 / model.dt
     r, fs = as_reference(reference, fs)
     band = band_hz if band_hz is not None else model.band_hz
     inverse: InverseModel = design_inverse(model, method=method, band_hz=band, known=known)
