@@ -54,7 +54,9 @@ class RefineResult:
     gains : list of float
         Learning gain of each update.
     accepted : list of bool
-        Whether each update was accepted (False: refused, gain halved).
+        Per updated run: whether run ``k`` improved on the run its drive was built from
+        and so became the base of the next update (run 0 always; False: refused, the
+        next drive backs off with half the gain).
     stopped : bool
         The iteration stopped because the error kept growing.
     models : list

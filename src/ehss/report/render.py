@@ -205,10 +205,11 @@ def _compensation_markdown(result: ProgrammeResult) -> list[str]:
     lines = [
         "## Feed-forward compensation",
         "",
-        "The identified closed loop is inverted (ZPETC: stable well-damped zeros cancelled, "
-        "the others by their zero-phase factor; the delay by preview over the known drive "
-        "file; a zero-phase band limit), the drive file is refined by re-identification "
-        "between runs, and the rig tracks a band-limited random reference and a "
+        "The identified closed loop is inverted exactly inside its validated band (stable "
+        "inversion: zeros inside the unit circle inverted forwards, outside backwards over "
+        "the known drive file, the delay by preview), the drive file is refined by learning "
+        "updates between runs (refused when the error grows), and the rig tracks a "
+        "band-limited random reference and a "
         "Kanai–Tajimi earthquake-like history. Targets: within ±1 dB and ±5° of unity over "
         "the working band (position 0–20 Hz, judged from 1 Hz; acceleration 1–50 Hz) and at "
         "least 10× lower RMS tracking error on the random reference.",
