@@ -111,6 +111,9 @@ def test_model_too_wrong_for_any_gain_stops(model, reference):
     plant = _phase_shifted(model, 1.0, 120.0)
     with pytest.raises(ParameterError, match="too large for a stable update"):
         refine(plant, reference, model=model, iterations=2, max_gain=None)
+    res = refine(plant, reference, model=model, iterations=2, max_gain=None,
+                 stop_without_gain=True)  # as an experiment does: stop, keep the drive
+    assert res.stopped and "too large" in res.message and len(res.drives) == 1
     res = refine(plant, reference, model=model, iterations=10, learning_gain=1.0,
                  max_gain=None)
     assert res.stopped

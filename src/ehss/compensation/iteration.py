@@ -279,8 +279,9 @@ def learning_gain(u: Any, y: Any, fs: float, operator: Any, band: tuple[float, f
 
     ``G`` is the run's H1 estimate drive → output, ``F`` the learning operator's
     frequency response (``operator(freq_hz)``, band limit included), judged inside
-    ``band`` where the coherence is at least :data:`JUDGE_COHERENCE` and the drive has
-    content (its spectrum within :data:`CONTENT_FRACTION` of its peak).
+    ``band`` where the coherence is at least :data:`JUDGE_COHERENCE` (for a noisy run
+    where it never is, :data:`MIN_COHERENCE`) and the drive has content (its spectrum
+    within :data:`CONTENT_FRACTION` of its peak).
 
     Raises
     ------
@@ -296,10 +297,13 @@ def learning_gain(u: Any, y: Any, fs: float, operator: Any, band: tuple[float, f
     # and then it is a weighted mean of G near the band edge, not G there.
     f_w, s_uu = scipy.signal.welch(u, fs, nperseg=est.nperseg)
     content = np.interp(f, f_w, s_uu) >= CONTENT_FRACTION * float(np.max(s_uu))
-    sel = (f >= band[0]) & (f <= band[1]) & (est.coherence >= JUDGE_COHERENCE) & content
+    in_band = (f >= band[0]) & (f <= band[1]) & content
+    sel = in_band & (est.coherence >= JUDGE_COHERENCE)
+    if not np.any(sel):  # a noisy run: judge where it is at least half coherent
+        sel = in_band & (est.coherence >= MIN_COHERENCE)
     if not np.any(sel):
         raise ParameterError(
-            f"the run is not coherent (γ² >= {JUDGE_COHERENCE}) anywhere in the band "
+            f"the run is not coherent (γ² >= {MIN_COHERENCE}) anywhere in the band "
             f"{band[0]:g}-{band[1]:g} Hz: no stable learning gain can be chosen")
     loop_gain = est.response[sel] * operator(f[sel])
     worst = math.inf

@@ -304,7 +304,8 @@ def demonstrate(
         outputs_without[name] = simulate(loop, r, params=params, seed=seed + 300 + i).output
         # Drive-file iteration, as a shaking-table controller does for a known history.
         ref = refine(loop, r, params=params, fs=fs, model=rest, iterations=iterations,
-                     method=method, seed=seed + 200 + 10 * i, known=known)
+                     method=method, seed=seed + 200 + 10 * i, known=known,
+                     stop_without_gain=True)
         best = int(np.argmin(ref.rms_error))
         drives[name] = ref.drive
         outputs_with[name] = ref.outputs[best]

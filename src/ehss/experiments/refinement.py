@@ -58,7 +58,10 @@ class RefineResult:
         and so became the base of the next update (run 0 always; False: refused, the
         next drive backs off with half the gain).
     stopped : bool
-        The iteration stopped because the error kept growing.
+        The iteration stopped: the error kept growing, or (with ``stop_without_gain``) no
+        learning gain was stable for the model error the first run showed.
+    message : str
+        Why it stopped ("" if it did not).
     models : list
         The model used for each update's inverse (the first is the one given).
     inverses : list of InverseModel
@@ -72,6 +75,7 @@ class RefineResult:
     gains: list
     accepted: list
     stopped: bool
+    message: str
     models: list = field(repr=False)
     inverses: list = field(repr=False)
 
@@ -94,6 +98,7 @@ def refine(
     known: tuple[Any, Any] | None = None,
     first_drive: np.ndarray | None = None,
     max_gain: float | None = DEFAULT_MAX_GAIN,
+    stop_without_gain: bool = False,
 ) -> RefineResult:
     """Refine a compensated drive by running the plant and correcting the drive.
 
@@ -131,6 +136,9 @@ def refine(
         itself, as a non-parametric iteration starts).
     max_gain : float or None
         Bound of the one-shot drive's gain (:func:`ehss.compensation.check_drive`).
+    stop_without_gain : bool
+        When the first run shows no stable default learning gain, stop with the one-shot
+        drive (``stopped``, ``message``) instead of raising ParameterError.
 
     Returns
     -------
@@ -165,7 +173,7 @@ def refine(
         drive = np.asarray(first_drive, dtype=float)
     drives, outputs, records, gains, accepted = [], [], [], [], []
     models, inverses = [model], [inverse]
-    state, stopped = None, False
+    state, stopped, message = None, False, ""
     current_model = model
     for k in range(iterations + 1):
         y = run(drive, k)
@@ -174,14 +182,22 @@ def refine(
         if k == iterations:
             records.append(run_record(r, drive, y))
             break
-        step = update_drive(
-            r, drive, y, fs=fs, model=current_model, method=update,
-            inverse=inverses[-1] if update == "model" and not reidentify else None,
-            band_hz=band, gain=learning_gain if state is None else None, state=state,
-            reidentify=reidentify, nc=nc, known=known)
+        try:
+            step = update_drive(
+                r, drive, y, fs=fs, model=current_model, method=update,
+                inverse=inverses[-1] if update == "model" and not reidentify else None,
+                band_hz=band, gain=learning_gain if state is None else None, state=state,
+                reidentify=reidentify, nc=nc, known=known)
+        except ParameterError as exc:
+            if learning_gain is not None or state is not None or not stop_without_gain:
+                raise
+            # No gain the run shows to be stable: keep the drive played, iterate no more.
+            records.append(run_record(r, drive, y))
+            stopped, message = True, str(exc)
+            break
         records.append(step.record)
         if step.stopped:
-            stopped = True
+            stopped, message = True, step.message
             break
         gains.append(step.gain)
         accepted.append(step.accepted)
@@ -196,4 +212,5 @@ def refine(
     best = int(np.argmin(errors))
     return RefineResult(drive=drives[best], drives=drives, outputs=outputs,
                         rms_error=errors, records=records, gains=gains, accepted=accepted,
-                        stopped=stopped, models=models, inverses=inverses)
+                        stopped=stopped, message=message, models=models,
+                        inverses=inverses)
