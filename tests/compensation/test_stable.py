@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.signal
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.polynomial import polynomial as P
 from numpy.testing import assert_allclose
 
@@ -177,3 +179,30 @@ def test_drive_limits_explicit_and_from_the_rig():
         check_drive(u, u, FS, limits={"max_rate": 1.0})
     with pytest.raises(ParameterError, match="max_abs"):
         DriveLimits(max_abs=-1.0)
+
+
+_radius = st.one_of(st.floats(0.05, 0.9), st.floats(1.1, 5.0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(zeros=st.lists(st.tuples(_radius, st.floats(0.0, np.pi)), min_size=1, max_size=3),
+       poles=st.lists(st.tuples(st.floats(0.0, 0.9), st.floats(0.0, np.pi)), min_size=1,
+                      max_size=3),
+       delay=st.integers(0, 3))
+def test_stable_inverse_times_model_is_one_in_the_band(zeros, poles, delay):
+    # Any stable model whose zeros keep 0.1 from the unit circle: F·G = 1 wherever the
+    # band limit is 1. Complex roots come in conjugate pairs so that B and A are real.
+    def roots(pairs):
+        out = []
+        for r, ang in pairs:
+            z = r * np.exp(1j * ang)
+            out += [z, np.conj(z)] if 1e-6 < ang < np.pi - 1e-6 else [z.real]
+        return out
+
+    m = _model(roots(zeros), roots(poles), 0.1, delay, band=(0.0, 200.0))
+    inv = design_inverse(m)
+    f = np.linspace(0.0, 200.0, 101)
+    overall = inv.frequency_response(f) * _response(m, f)
+    # Degree <= 6 polynomials with roots up to radius 5 (coefficients up to ~5^6) evaluated
+    # on the unit circle, divided by each other: relative rounding ~1e-12 at worst.
+    assert_allclose(overall, 1.0, rtol=0, atol=1e-9)
