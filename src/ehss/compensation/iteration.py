@@ -44,7 +44,8 @@ import scipy.fft
 import scipy.signal
 
 from ehss._checks import as_signal
-from ehss.compensation.inverse import InverseModel, band_taper, design_inverse
+from ehss.compensation.inverse import design_inverse
+from ehss.compensation.inverse_model import InverseModel, _fft_band_limit, band_taper
 from ehss.errors import ParameterError
 
 __all__ = [
@@ -239,19 +240,6 @@ def _h1(u: np.ndarray, y: np.ndarray, fs: float) -> Any:
     return h1_estimate(u, y, fs, nperseg=default_nperseg(u.size, fs))
 
 
-def _spectral_apply(x: np.ndarray, dt: float, response: Any, pad: int) -> np.ndarray:
-    """Apply a zero-phase-padded frequency-domain operator ``response(freq_hz)`` to x."""
-    n = scipy.fft.next_fast_len(x.size + 2 * pad, real=True)
-    # constant extension then a smooth return: no wrap-around jump
-    xp = np.concatenate([np.full(pad, x[0]), x, np.full(n - x.size - pad, x[-1])])
-    gap = n - x.size - 2 * pad
-    if gap > 0:
-        k = np.arange(gap)
-        xp[pad + x.size + pad:] = x[-1] + (x[0] - x[-1]) * 0.5 * (1 - np.cos(np.pi * k / gap))
-    spec = scipy.fft.rfft(xp) * response(scipy.fft.rfftfreq(n, dt))
-    return np.ascontiguousarray(scipy.fft.irfft(spec, n)[pad:pad + x.size])
-
-
 def _frf_inverse(u: np.ndarray, y: np.ndarray, fs: float, band: tuple[float, float],
                  cutoff: float | None) -> Any:
     """``f -> W(f) γ²(f) / Ĥ(f)`` from the run's H1 estimate (see the module notes)."""
@@ -427,8 +415,8 @@ def update_drive(
 
         band, cutoff = _check_band(band, None, fs)
         operator = _frf_inverse(u, y, fs, band, cutoff)
-        pad = int(math.ceil(8.0 / ((cutoff - band[1]) / fs))) if cutoff else 16
-        correction = _spectral_apply(r - y, 1.0 / fs, operator, min(pad, 4 * r.size))
+        # Q·γ²/Ĥ applied like the band limit: zero-phase, by FFT over a padded record
+        correction = _fft_band_limit(r - y, 1.0 / fs, band, cutoff, shape=operator)
         used_model, inverse = None, None
     if gain is None:
         gain = state.gain if state is not None else learning_gain(u, y, fs, operator, band)
