@@ -1,7 +1,8 @@
 """Feed-forward inverse-model compensation of identified closed loops.
 
 :mod:`~ehss.compensation.inverse` designs the inverse (exact stable inversion by default,
-ZPETC and ZMETC as options) inside the band the model was validated over;
+ZPETC and ZMETC as options) inside the band the model was validated over, and
+:mod:`~ehss.compensation.inverse_model` holds it and applies it to a reference;
 :mod:`~ehss.compensation.apply` computes a drive file from it; :mod:`~ehss.compensation.checks`
 refuses drives that would exceed a sane gain or the rig's limits; and
 :mod:`~ehss.compensation.iteration` corrects a drive from a measured run (model-based or
