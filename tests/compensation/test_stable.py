@@ -175,6 +175,10 @@ def test_drive_limits_explicit_and_from_the_rig():
     slow = 0.01 * np.sin(2 * np.pi * 0.5 * t)
     assert check_drive(slow, slow, FS, loop="position",
                        params=preset("default")).rig["peak_velocity_m_s"] > 0
+    # value limits apply to the operating point plus the deviation
+    check_drive(u, u, FS, limits=DriveLimits(max_abs=0.06))
+    with pytest.raises(ParameterError, match=r"drive peak 0.07 exceeds the limit 0.06"):
+        check_drive(u, u, FS, limits=DriveLimits(max_abs=0.06), drive_offset=0.02)
     with pytest.raises(TypeError):
         check_drive(u, u, FS, limits={"max_rate": 1.0})
     with pytest.raises(ParameterError, match="max_abs"):

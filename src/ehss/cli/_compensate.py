@@ -203,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
         raise DataError("the compensated drive is not finite (badly conditioned model?)")
     try:
         checked = check_drive(drive_dev, r_dev, fs, max_gain=max_gain, limits=limits,
-                              loop=loop, params=params)
+                              loop=loop, params=params, drive_offset=u0)
     except ParameterError as exc:
         if args.force:
             checked = None

@@ -100,7 +100,7 @@ class DriveCheck:
     max_gain : float or None
         The bound they were held to (None: not checked).
     peak_abs, peak_rate, peak_rate2 : float
-        Peak of ``|u|``, ``|du/dt|`` and ``|d²u/dt²|`` (finite differences).
+        Peak of ``|u0 + u|``, ``|du/dt|`` and ``|d²u/dt²|`` (finite differences).
     rig : dict
         Peaks checked against the rig's limits (empty when no parameter set was given).
     """
@@ -134,6 +134,7 @@ def check_drive(
     limits: DriveLimits | None = None,
     loop: str | None = None,
     params: Any = None,
+    drive_offset: float = 0.0,
 ) -> DriveCheck:
     """Check a drive against the reference it was computed for and the rig's limits.
 
@@ -152,6 +153,9 @@ def check_drive(
         With ``params``: the loop the drive is played into, whose limits it must respect.
     params : RigParams, optional
         Parameter set of the rig.
+    drive_offset : float
+        Operating point ``u0`` of the drive: the value and rig limits apply to
+        ``drive_offset + drive`` (the gains to the deviation).
 
     Returns
     -------
@@ -184,7 +188,11 @@ def check_drive(
     peak_gain = float(np.max(np.abs(u))) / peak_r if peak_r > 0 else math.inf
     rate = np.diff(u) * fs
     rate2 = np.diff(u, 2) * fs * fs
-    peak_abs = float(np.max(np.abs(u)))
+    if not (isinstance(drive_offset, (int, float, np.integer, np.floating))
+            and math.isfinite(drive_offset)):
+        raise ParameterError(f"drive_offset={drive_offset!r} must be a finite number")
+    absolute = u + float(drive_offset)
+    peak_abs = float(np.max(np.abs(absolute)))
     peak_rate = float(np.max(np.abs(rate))) if rate.size else 0.0
     peak_rate2 = float(np.max(np.abs(rate2))) if rate2.size else 0.0
     if max_gain is not None:
@@ -200,7 +208,7 @@ def check_drive(
                                    ("peak second derivative", peak_rate2, limits.max_rate2)):
             if bound is not None and value > bound:
                 raise ParameterError(f"drive {name} {value:.4g} exceeds the limit {bound:.4g}")
-    rig = {} if params is None else _check_rig(u, float(fs), loop, params)
+    rig = {} if params is None else _check_rig(absolute, float(fs), loop, params)
     return DriveCheck(rms_gain=rms_gain, peak_gain=peak_gain, max_gain=max_gain,
                       peak_abs=peak_abs, peak_rate=peak_rate, peak_rate2=peak_rate2, rig=rig)
 
