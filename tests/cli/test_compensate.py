@@ -275,13 +275,15 @@ def test_drive_file_iteration_from_a_run(tmp_path, reference, capsys):
     assert "did not play" in capsys.readouterr().err
 
 
-def test_frf_method_needs_a_run(tmp_path, reference, capsys):
+@pytest.mark.parametrize("extra", [["--method", "frf"], ["--previous", "d0.csv"],
+                                   ["--gain", "0.5"], ["--reidentify"]])
+def test_iteration_options_need_a_run(tmp_path, reference, capsys, extra):
     model = _write_model(tmp_path / "m.json")
     ref = _write_reference(tmp_path / "r.csv", reference)
     out = tmp_path / "d.csv"
-    assert main(["compensate", str(model), str(ref), "--out", str(out), "--method",
-                 "frf"]) == 2
-    assert "--update" in capsys.readouterr().err and not out.exists()
+    assert main(["compensate", str(model), str(ref), "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert "--update" in err and len(err.strip().splitlines()) == 1 and not out.exists()
 
 
 def test_drive_file_iteration_rejects_other_rates(tmp_path, reference, capsys):

@@ -165,6 +165,15 @@ def run(args: argparse.Namespace) -> int:
     from ehss.io import read_columns, sample_rate, write_csv, write_json
 
     check_writable(args.out)
+    if args.update is None:
+        for flag, given in (("--previous", args.previous is not None),
+                            ("--gain", args.gain is not None), ("--reidentify", args.reidentify)):
+            if given:
+                raise ParameterError(f"{flag} belongs to a drive-file iteration: give "
+                                     "--update RUN.csv")
+    if args.reidentify and args.method == "frf":
+        raise ParameterError("--reidentify re-identifies the model of a model-based update; "
+                             "--method frf uses no model")
     model = ArmaxModel.load_json(args.model)
     band = _band(args, model)
     limits = _limits(args)
