@@ -14,9 +14,9 @@ The acceleration loop is identified behind its known factors
 (:mod:`ehss.identification.known`): the controller's acceleration generator, eq (10),
 Kg s²/(s² + ωg s + δg) with ωn = π rad/s, ζn = 0.7, as the controller runs it (ZOH), and
 the accelerometer's 0.5 Hz AC coupling. Both sit near 0.5 Hz, far below the paper's
-2–100 Hz identification test, which a 6th-order RELS model at 1 kHz cannot resolve: fitted
-from reference to output it shows −2° at 1 Hz where the loop leads by ~54°, and its
-inverse left ±3.5 dB / ±13° at 1–2 Hz. RELS therefore sees the reference filtered
+2–100 Hz identification test, which a 6th-order model at 1 kHz cannot resolve: fitted
+from reference to output (RELS) it shows −2° at 1 Hz where the loop leads by ~54°, and
+its inverse left ±3.5 dB / ±13° at 1–2 Hz. The estimator therefore sees the reference filtered
 through the known factors, F·a_r → a_m, and identifies only the rest (the servo-valve,
 actuator and feedback dynamics, which the 2–100 Hz test does excite); the compensator is
 rest⁻¹ ∘ F⁻¹, F⁻¹ applied in the frequency domain inside the 1–50 Hz band limit, which
@@ -276,7 +276,7 @@ def demonstrate(
 
     # 1. Identification on a band-limited random test (the paper's 2-100 Hz random),
     #    behind the loop's known factors (the acceleration loop's generator, eq (10), and
-    #    accelerometer coupling; none for the position loop): RELS sees F·u → y.
+    #    accelerometer coupling; none for the position loop): RML sees F·u → y.
     u_id = random_reference(id_s, fs, cfg["ident_hz"], cfg["ident_rms"], seed)
     check_feasible(u_id, loop, params, fs)  # every test stays inside the rig's limits
     y_id = simulate(loop, u_id, params=params, seed=seed + 100).output
