@@ -272,6 +272,7 @@ def _update(args: argparse.Namespace, model: Any, r_dev: np.ndarray, fs: float,
         state, log = _previous(args.previous, u, u0)
     method = "frf" if args.method == "frf" else "model"
     step = update_drive(r_dev, u - u0, y - y0, fs=fs, model=model, method=method,
+                        inverse_method="stable" if method == "frf" else args.method,
                         band_hz=band, gain=args.gain, state=state,
                         reidentify=args.reidentify)
     entry = {"run": str(args.update), **step.record.to_dict(), "accepted": step.accepted,

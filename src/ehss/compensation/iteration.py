@@ -316,6 +316,7 @@ def update_drive(
     model: Any = None,
     method: str = "model",
     inverse: InverseModel | None = None,
+    inverse_method: str = "stable",
     band_hz: tuple[float, float] | None = None,
     gain: float | None = None,
     state: IterationState | None = None,
@@ -340,6 +341,8 @@ def update_drive(
         Inverse used for the correction (see the module notes).
     inverse : InverseModel, optional
         The inverse of ``model`` if already designed.
+    inverse_method : {"stable", "zpetc", "zmetc"}
+        Design of the model's inverse otherwise (:func:`design_inverse`).
     band_hz : (lo, hi), optional
         Band of the Q-filter and of the inverse; default the model's validated band.
     gain : float, optional
@@ -393,7 +396,7 @@ def update_drive(
             message=(f"RMS error grew from {state.base_rms_error:.4g} to "
                      f"{record.rms_error:.4g}: update refused, gain halved to {new_gain:g}"))
 
-    band = band_hz if band_hz is not None else getattr(model, "band_hz", None)
+    band = band_hz if band_hz is not None or model is None else model.band_hz
     if band is None:
         raise ParameterError("the learning update needs a band (band_hz, or a model that "
                              "carries its validated band)")
@@ -403,9 +406,9 @@ def update_drive(
             raise ParameterError("method='model' needs the model (or its inverse)")
         if reidentify:
             used_model, inverse = _reidentified(model, u, y, band, nc, known, orders,
-                                                inverse)
+                                                inverse, inverse_method)
         if inverse is None:
-            inverse = design_inverse(model, band_hz=band, known=known)
+            inverse = design_inverse(model, method=inverse_method, band_hz=band, known=known)
         correction = inverse.apply(r - y)
 
         def operator(f: np.ndarray) -> np.ndarray:
@@ -431,7 +434,8 @@ def update_drive(
 
 def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, band: tuple[float, float],
                   nc: int | None, known: Any, orders: tuple[int, int] | None,
-                  inverse: InverseModel | None) -> tuple[Any, InverseModel | None]:
+                  inverse: InverseModel | None, method: str
+                  ) -> tuple[Any, InverseModel | None]:
     """Model re-identified from the run (RML, the model's orders) and its inverse; the
     given model and inverse when the re-identification is unusable."""
     from dataclasses import replace
@@ -450,6 +454,6 @@ def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, band: tuple[float, f
         new = estimate(u_id, y, method="rml", na=na, nb=nb,
                        nc=model.nc if nc is None else nc, delay=model.delay, dt=model.dt)
         new = replace(new, band_hz=band)
-        return new, design_inverse(new, band_hz=band, known=known)
+        return new, design_inverse(new, method=method, band_hz=band, known=known)
     except ParameterError:
         return model, inverse  # an unusable re-identification (e.g. unstable)

@@ -186,6 +186,7 @@ def refine(
             step = update_drive(
                 r, drive, y, fs=fs, model=current_model, method=update,
                 inverse=inverses[-1] if update == "model" and not reidentify else None,
+                inverse_method=method,
                 band_hz=band, gain=learning_gain if state is None else None, state=state,
                 reidentify=reidentify, nc=nc, known=known)
         except ParameterError as exc:
