@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
 from ehss.errors import DataError
 
 __all__ = ["register"]
@@ -20,9 +21,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "closed-loop model and apply it to a reference file. Writes columns t, reference, "
         "drive; replay with `ehss simulate --loop L --reference DRIVE.csv --column drive`.",
     )
-    p.add_argument("model", metavar="MODEL.json", help="identified model (ArmaxModel JSON)")
-    p.add_argument("reference", metavar="REFERENCE.csv", help="reference history file")
-    p.add_argument("--out", required=True, metavar="DRIVE.csv", help="output CSV file")
+    p.add_argument("model", metavar="MODEL.json", type=InputFile,
+                   help="identified model (ArmaxModel JSON)")
+    p.add_argument("reference", metavar="REFERENCE.csv", type=InputFile,
+                   help="reference history file")
+    p.add_argument("--out", required=True, metavar="DRIVE.csv", type=OutputTable,
+                   help="drive table: .csv (with a .json sidecar), .parquet, .h5, .npz or "
+                   ".mat")
     p.add_argument("--column", default="reference",
                    help="reference column name (default: %(default)s)")
     p.add_argument("--method", default="zpetc", choices=("zpetc", "zmetc"),
@@ -43,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "with --reidentify). A run file from `ehss simulate --reference DRIVE.csv --column "
         "drive` has the played drive in `reference` and the measurement in `output`.",
     )
-    it.add_argument("--update", metavar="RUN.csv",
+    it.add_argument("--update", metavar="RUN.csv", type=InputFile,
                     help="record of the previous run (played drive and measured output)")
     it.add_argument("--drive-column", default="reference",
                     help="played drive column in RUN.csv (default: %(default)s)")
@@ -63,7 +68,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "references). Writes CSV/JSON figures and PNG plots to --out.",
     )
     d.add_argument("--loop", required=True, choices=("position", "acceleration"))
-    d.add_argument("--out", default="compensation", metavar="DIR",
+    d.add_argument("--out", default=OutputFolder("compensation"), metavar="DIR",
+                   type=OutputFolder,
                    help="output folder (default: %(default)s)")
     d.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     d.add_argument("--duration", type=float, default=None, metavar="S",
@@ -73,14 +79,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ehss._files import check_writable
     from ehss._provenance import versions
     from ehss.cli._dataargs import write_outputs
     from ehss.compensation import compensate
     from ehss.identification.model import ArmaxModel
-    from ehss.io import read_columns, sample_rate, write_csv, write_json
+    from ehss.io import read_columns, sample_rate, table_writers
 
-    check_writable(args.out)
     model = ArmaxModel.load_json(args.model)
     offsets = None if args.ignore_offsets else _offsets(args.model)
     table = read_columns(args.reference, [args.column])
@@ -126,8 +130,7 @@ def run(args: argparse.Namespace) -> int:
         "versions": versions(),
         **extra,
     }
-    write_outputs({out: lambda tmp: write_csv(tmp, {"t": t, "reference": r, "drive": drive}),
-                   out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})
+    write_outputs(table_writers(out, {"t": t, "reference": r, "drive": drive}, sidecar))
     return 0
 
 
