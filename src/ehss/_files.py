@@ -227,16 +227,16 @@ def check_outputs(
             if _same_file(path, src):
                 raise DataError(f"output {_name(path)}{note} is the input {_name(src)}; "
                                 "writing it would replace the input: choose another name")
-    for i, (path, note) in enumerate(items):
-        for other, other_note in items[:i]:
-            if _same_file(path, other):
-                raise DataError(f"two outputs would be written to one file: {_name(other)}"
-                                f"{other_note} and {_name(path)}{note}")
     probed: set[Path] = set()
     for path, _ in items:
         folder = _parent(path).resolve()
         check_writable(path, probe=folder not in probed)
         probed.add(folder)
+    for i, (path, note) in enumerate(items):
+        for other, other_note in items[:i]:
+            if _same_file(path, other):
+                raise DataError(f"two outputs would be written to one file: {_name(other)}"
+                                f"{other_note} and {_name(path)}{note}")
     return [p for p, _ in items]
 
 
