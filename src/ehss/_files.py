@@ -12,16 +12,20 @@ writes each output to a temporary file beside it and renames it into place on su
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
+import signal
 import stat
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from ehss.errors import DataError
+from ehss.errors import DataError, EhssError
 
 __all__ = [
+    "WriteError",
     "SIDECAR_KEY",
     "atomic_path",
     "check_folder",
@@ -35,6 +39,15 @@ __all__ = [
 SIDECAR_KEY = "ehss_sidecar_of"
 # A sidecar is a few kB; anything much larger is not one of ours (and is not read).
 _SIDECAR_MAX_BYTES = 64 * 2**20
+
+
+
+class WriteError(EhssError, OSError):
+    """An output could not be written after the checks passed (e.g. the disk is full).
+
+    Nothing is left behind: the temporary file is removed and the old file kept.
+    """
+
 
 _KINDS = (
     (stat.S_ISLNK, "a symbolic link"),
@@ -54,17 +67,42 @@ def _parent(path: Path) -> Path:
     return path.parent if str(path.parent) else Path(".")
 
 
-def _probe_folder(folder: Path, what: str) -> None:
-    """Create and remove a temporary file in ``folder``: the only reliable test of
-    writability (permission bits say nothing for root, nor on read-only mounts)."""
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back while a temporary file is created and recorded, so
+    that an interrupt cannot fall between its creation and the clean-up that removes it
+    (the held signal is delivered on the way out)."""
+    mask = getattr(signal, "pthread_sigmask", None)
+    if mask is None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = mask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     try:
-        fd, name = tempfile.mkstemp(prefix=".ehss-probe-", dir=folder)
+        yield
+    finally:
+        mask(signal.SIG_SETMASK, old)
+
+
+def _probe_folder(folder: Path, what: str, name: str = "ehss-probe") -> None:
+    """Create and remove a temporary file in ``folder``, named as :func:`atomic_path`
+    names it for the output ``name``: the only reliable test of writability (permission
+    bits say nothing for root, nor on read-only mounts) and of the name's length."""
+    tmp = None
+    try:
+        with _signals_deferred():
+            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=Path(name).suffix,
+                                       dir=folder)
+            os.close(fd)
     except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            raise DataError(f"cannot write {what}: the name is too long (the temporary "
+                            "file beside it needs about 12 characters more)") from None
         reason = exc.strerror or type(exc).__name__
         raise DataError(f"cannot write {what}: folder {_name(folder)} is not writable "
                         f"({reason})") from None
-    os.close(fd)
-    os.unlink(name)
+    finally:
+        if tmp is not None:
+            os.unlink(tmp)
 
 
 def check_writable(path: str | Path, *, probe: bool = True) -> Path:
@@ -75,8 +113,9 @@ def check_writable(path: str | Path, *, probe: bool = True) -> Path:
     path : str or Path
         The output file.
     probe : bool, default True
-        Also create and remove a temporary file in the folder, to find an unwritable
-        folder now rather than after the work.
+        Also create and remove a temporary file in the folder, named as the output's
+        temporary file will be, to find an unwritable folder or a name too long now
+        rather than after the work.
 
     Returns
     -------
@@ -119,7 +158,7 @@ def check_writable(path: str | Path, *, probe: bool = True) -> Path:
         if not st.st_mode & stat.S_IWUSR or not os.access(path, os.W_OK):
             raise DataError(f"cannot write {_name(path)}: the file is read-only")
     if probe:
-        _probe_folder(parent, _name(path))
+        _probe_folder(parent, _name(path), path.name)
     return path
 
 
@@ -227,11 +266,8 @@ def check_outputs(
             if _same_file(path, src):
                 raise DataError(f"output {_name(path)}{note} is the input {_name(src)}; "
                                 "writing it would replace the input: choose another name")
-    probed: set[Path] = set()
     for path, _ in items:
-        folder = _parent(path).resolve()
-        check_writable(path, probe=folder not in probed)
-        probed.add(folder)
+        check_writable(path)
     for i, (path, note) in enumerate(items):
         for other, other_note in items[:i]:
             if _same_file(path, other):
@@ -253,23 +289,34 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     ------
     DataError
         If :func:`check_writable` refuses ``path``.
+    WriteError
+        If writing fails with an OSError (a full disk, say); ``path`` is untouched.
     """
     path = check_writable(path, probe=False)
+    tmp: Path | None = None
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix,
-                                        dir=_parent(path))
-    except OSError as exc:
-        raise DataError(f"cannot write {_name(path)}: "
-                        f"{exc.strerror or type(exc).__name__}") from None
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        yield tmp
+        with _signals_deferred():
+            try:
+                fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix,
+                                                dir=_parent(path))
+            except OSError as exc:
+                raise DataError(f"cannot write {_name(path)}: "
+                                f"{exc.strerror or type(exc).__name__}") from None
+            os.close(fd)
+            tmp = Path(tmp_name)
+        try:
+            yield tmp
+        except WriteError:
+            raise
+        except OSError as exc:  # disk full, quota, I/O error: one line, nothing written
+            reason = exc.strerror or str(exc).strip().splitlines()[0] or type(exc).__name__
+            raise WriteError(f"cannot write {_name(path)}: {reason}") from None
         # mkstemp creates 0600 files; give the result the usual permissions (umask).
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         tmp.replace(path)
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+        if tmp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()

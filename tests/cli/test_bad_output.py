@@ -279,7 +279,11 @@ def test_sigterm_mid_write_leaves_no_temporary_file(tmp_path):
     p = _run(["-m", "ehss", "simulate", "--loop", "position", "--signal", "random",
               "--duration", "60", "--out", "big.csv"], cwd=tmp_path)
     deadline = time.monotonic() + 600
-    while not any(f.name.startswith(".big.csv.") for f in tmp_path.iterdir()):
+    def writing() -> bool:  # the record's temporary file exists and is growing
+        return any(f.name.startswith(".big.csv.") and f.stat().st_size > 0
+                   for f in tmp_path.iterdir() if f.exists())
+
+    while not writing():
         assert p.poll() is None, p.communicate()[1].decode()
         assert time.monotonic() < deadline
         time.sleep(0.002)
@@ -288,3 +292,53 @@ def test_sigterm_mid_write_leaves_no_temporary_file(tmp_path):
     assert p.returncode == 128 + signal.SIGTERM, err.decode()
     assert err.decode() == "ehss simulate: terminated\n"
     assert list(tmp_path.iterdir()) == []
+
+
+class _FullDisk:
+    """A file whose writes fail as on a full disk."""
+
+    def __init__(self, fh):
+        self._fh = fh
+
+    def write(self, data):
+        import errno
+
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def __getattr__(self, name):
+        return getattr(self._fh, name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._fh.close()
+
+
+@pytest.mark.parametrize("ext", ["csv", "parquet", "h5", "npz", "mat"])
+def test_full_disk_while_writing_is_one_line_and_leaves_nothing(files, capsys, monkeypatch,
+                                                                ext):
+    """A write that fails after the checks (the disk fills up) keeps the old files."""
+    real_open = open
+
+    def full_open(file, mode="r", *args, **kwargs):
+        fh = real_open(file, mode, *args, **kwargs)
+        is_output = isinstance(file, (str, Path)) and Path(file).name.startswith(".s.")
+        return _FullDisk(fh) if is_output and "w" in mode else fh
+
+    Path("s.json").write_text('{"ehss_sidecar_of": "s.csv", "old": true}\n')
+    before = _snapshot(files)
+    monkeypatch.setattr("builtins.open", full_open)
+    if ext in ("csv", "parquet"):  # polars writes in Rust: fail its write as it reports it
+        import polars as pl
+
+        def full(*args, **kwargs):
+            raise pl.exceptions.ComputeError("underlying IO error: No space left on device")
+
+        monkeypatch.setattr(pl.DataFrame, f"write_{ext}", full)
+    code = main(SIM + ["--out", f"s.{ext}"])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert err.count("\n") == 1 and "No space left on device" in err, err
+    assert err.startswith(f"ehss simulate: error: cannot write 's.{ext}'"), err
+    assert _snapshot(files) == before

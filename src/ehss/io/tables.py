@@ -22,9 +22,11 @@ metadata is the same JSON document in each.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -118,6 +120,18 @@ def check_columns(columns: Mapping[str, Any], fmt: str = "csv") -> dict[str, np.
     return arrays
 
 
+@contextlib.contextmanager
+def _os_errors() -> Iterator[None]:
+    """Report a failed polars write (a full disk, say) as the OSError it is."""
+    import polars as pl
+
+    try:
+        yield
+    except pl.exceptions.PolarsError as exc:
+        text = str(exc).strip().splitlines()
+        raise OSError(text[-1] if text else type(exc).__name__) from None
+
+
 def _frame(arrays: Mapping[str, np.ndarray]):
     import polars as pl
 
@@ -134,23 +148,33 @@ def write_csv_text(path: Path, arrays: Mapping[str, np.ndarray], header: str = "
     with open(path, "wb") as fh:
         if header:
             fh.write(header.encode("utf-8"))
-        _frame(arrays).write_csv(fh, include_header=True, line_terminator="\n")
+        with _os_errors():
+            _frame(arrays).write_csv(fh, include_header=True, line_terminator="\n")
 
 
 def write_parquet(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str) -> None:
     """Write float64 columns as Parquet (uncompressed) with the metadata document."""
-    _frame(arrays).write_parquet(path, compression="uncompressed", statistics=False,
-                                 metadata={_PARQUET_KEY: metadata_json})
+    with _os_errors():
+        _frame(arrays).write_parquet(path, compression="uncompressed", statistics=False,
+                                     metadata={_PARQUET_KEY: metadata_json})
 
 
 def write_hdf5(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str) -> None:
-    """Write float64 columns as root datasets of an HDF5 file, metadata as an attribute."""
+    """Write float64 columns as root datasets of an HDF5 file, metadata as an attribute.
+
+    The file is built in memory and then written by Python, so a failed write (a full
+    disk) is an ordinary OSError rather than an error inside the HDF5 library, which can
+    leave it unable to close the file.
+    """
     import h5py
 
-    with h5py.File(path, "w", track_order=True) as fh:
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w", track_order=True) as fh:
         fh.attrs[_HDF5_ATTR] = metadata_json
         for name, a in arrays.items():
             fh.create_dataset(name, data=a)
+    with open(path, "wb") as out:
+        out.write(buffer.getbuffer())
 
 
 def write_npz(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str) -> None:
@@ -165,7 +189,8 @@ def write_mat(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str) 
 
     content: dict[str, Any] = {name: a for name, a in arrays.items()}
     content[METADATA_KEY] = metadata_json
-    scipy.io.savemat(path, content, oned_as="column", do_compression=False)
+    with open(path, "wb") as fh:
+        scipy.io.savemat(fh, content, oned_as="column", do_compression=False)
 
 
 def read_parquet(path: Path, wanted: list[str] | None, optional: str | None
