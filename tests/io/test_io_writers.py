@@ -6,10 +6,13 @@ import csv
 import json
 import math
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_array_equal
 
 from ehss.cli import main
@@ -115,6 +118,18 @@ def test_table_round_trip_is_bit_exact(tmp_path, rng, ext):
     assert read_metadata(tmp_path / f"rec.{ext}") == meta
     expected = {f"rec.{ext}", "rec.json"} if ext == "csv" else {f"rec.{ext}"}
     assert {p.name for p in tmp_path.iterdir()} == expected
+
+
+@settings(max_examples=60, deadline=None)
+@given(values=st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1,
+                       max_size=40),
+       ext=st.sampled_from(FORMATS))
+def test_any_finite_doubles_round_trip(values, ext):
+    x = np.array(values, dtype=np.float64)
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / f"x.{ext}"
+        write_table(path, {"x": x}, {"n": x.size})
+        assert_array_equal(read_columns(path)["x"].view(np.int64), x.view(np.int64))
 
 
 def test_csv_text_reads_back_with_pythons_own_parser(tmp_path, rng):
