@@ -15,10 +15,8 @@ import contextlib
 import errno
 import json
 import os
-import signal
+import secrets
 import stat
-import tempfile
-import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -68,41 +66,54 @@ def _parent(path: Path) -> Path:
 
 
 @contextlib.contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back while a temporary file is created and recorded, so
-    that an interrupt cannot fall between its creation and the clean-up that removes it
-    (the held signal is delivered on the way out)."""
-    mask = getattr(signal, "pthread_sigmask", None)
-    if mask is None or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = mask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
-    try:
-        yield
-    finally:
-        mask(signal.SIG_SETMASK, old)
+def _temporary_file(folder: Path, name: str, what: str = "") -> Iterator[Path]:
+    """Create an empty temporary file in ``folder`` for the output ``name``; remove it on
+    the way out unless it was renamed.
 
+    The temporary name keeps the output's suffix (writers choose formats by it). It is
+    recorded before the file is created, so an interrupt raised at any point (Ctrl-C, or
+    SIGTERM turned into an exception by the command line) still finds and removes it.
 
-def _probe_folder(folder: Path, what: str, name: str = "ehss-probe") -> None:
-    """Create and remove a temporary file in ``folder``, named as :func:`atomic_path`
-    names it for the output ``name``: the only reliable test of writability (permission
-    bits say nothing for root, nor on read-only mounts) and of the name's length."""
-    tmp = None
+    Raises
+    ------
+    DataError
+        If the file cannot be created (folder not writable, name too long).
+    """
+    suffix = Path(name).suffix
+    what = what or _name(folder / name)
+    tmp: Path | None = None
     try:
-        with _signals_deferred():
-            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=Path(name).suffix,
-                                       dir=folder)
-            os.close(fd)
-    except OSError as exc:
-        if exc.errno == errno.ENAMETOOLONG:
-            raise DataError(f"cannot write {what}: the name is too long (the temporary "
-                            "file beside it needs about 12 characters more)") from None
-        reason = exc.strerror or type(exc).__name__
-        raise DataError(f"cannot write {what}: folder {_name(folder)} is not writable "
-                        f"({reason})") from None
+        try:
+            for _ in range(100):
+                tmp = folder / f".{name}.{secrets.token_hex(6)}{suffix}"
+                try:
+                    os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+                    break
+                except FileExistsError:  # not ours: never remove it
+                    tmp = None
+            else:  # pragma: no cover - 100 collisions of 48 random bits
+                raise FileExistsError(errno.EEXIST, "no free temporary name")
+        except OSError as exc:
+            tmp = None
+            if exc.errno == errno.ENAMETOOLONG:
+                raise DataError(f"cannot write {what}: the name is too long (the temporary "
+                                "file beside it needs 14 characters more)") from None
+            reason = exc.strerror or type(exc).__name__
+            raise DataError(f"cannot write {what}: folder {_name(folder)} is not writable "
+                            f"({reason})") from None
+        yield tmp
     finally:
         if tmp is not None:
-            os.unlink(tmp)
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+
+
+def _probe_folder(folder: Path, name: str, what: str = "") -> None:
+    """Create and remove the temporary file :func:`atomic_path` will use for the output
+    ``name``: the only reliable test of writability (permission bits say nothing for
+    root, nor on read-only mounts) and of the name's length."""
+    with _temporary_file(folder, name, what):
+        pass
 
 
 def check_writable(path: str | Path, *, probe: bool = True) -> Path:
@@ -158,7 +169,7 @@ def check_writable(path: str | Path, *, probe: bool = True) -> Path:
         if not st.st_mode & stat.S_IWUSR or not os.access(path, os.W_OK):
             raise DataError(f"cannot write {_name(path)}: the file is read-only")
     if probe:
-        _probe_folder(parent, _name(path), path.name)
+        _probe_folder(parent, path.name)
     return path
 
 
@@ -175,7 +186,7 @@ def check_folder(path: str | Path) -> Path:
     """
     path = Path(path)
     if path.is_dir():
-        _probe_folder(path, f"into {_name(path)}")
+        _probe_folder(path, "ehss-probe", f"into {_name(path)}")
         return path
     if path.exists() or path.is_symlink():
         raise DataError(f"cannot write into {_name(path)}: it exists and is not a folder")
@@ -183,7 +194,7 @@ def check_folder(path: str | Path) -> Path:
     if not parent.is_dir():
         what = "does not exist" if not parent.exists() else "is a file, not a folder"
         raise DataError(f"cannot create folder {_name(path)}: {_name(parent)} {what}")
-    _probe_folder(parent, f"folder {_name(path)}")
+    _probe_folder(parent, "ehss-probe", f"folder {_name(path)}")
     return path
 
 
@@ -293,17 +304,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         If writing fails with an OSError (a full disk, say); ``path`` is untouched.
     """
     path = check_writable(path, probe=False)
-    tmp: Path | None = None
-    try:
-        with _signals_deferred():
-            try:
-                fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix,
-                                                dir=_parent(path))
-            except OSError as exc:
-                raise DataError(f"cannot write {_name(path)}: "
-                                f"{exc.strerror or type(exc).__name__}") from None
-            os.close(fd)
-            tmp = Path(tmp_name)
+    with _temporary_file(_parent(path), path.name) as tmp:
         try:
             yield tmp
         except WriteError:
@@ -311,12 +312,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         except OSError as exc:  # disk full, quota, I/O error: one line, nothing written
             reason = exc.strerror or str(exc).strip().splitlines()[0] or type(exc).__name__
             raise WriteError(f"cannot write {_name(path)}: {reason}") from None
-        # mkstemp creates 0600 files; give the result the usual permissions (umask).
+        # the temporary file is 0600; give the result the usual permissions (umask)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         tmp.replace(path)
-    finally:
-        if tmp is not None:
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
