@@ -60,9 +60,9 @@ def check_paths(args: argparse.Namespace) -> None:
     DataError
         If an output would lose or replace a file, or cannot be written.
     """
-    from ehss._files import check_folder, check_outputs, check_sidecar, sidecar_path
+    from ehss._files import check_folder, check_outputs, check_sidecar
     from ehss.errors import DataError
-    from ehss.io.tables import table_format
+    from ehss.io.tables import table_files
 
     values = _values(args)
     inputs = [Path(v) for v in values if isinstance(v, InputFile)]
@@ -71,10 +71,9 @@ def check_paths(args: argparse.Namespace) -> None:
     folders: list[Path] = []
     for v in values:
         if isinstance(v, OutputTable):
-            table = Path(v)
+            table, *sides = table_files(v)
             outputs.append(table)
-            if table_format(table) == "csv":
-                side = sidecar_path(table)
+            for side in sides:
                 outputs.append((side, f"the JSON sidecar of {str(table)!r}"))
                 sidecars.append((side, table))
         elif isinstance(v, OutputFile):

@@ -39,6 +39,7 @@ __all__ = [
     "TABLE_SUFFIXES",
     "METADATA_KEY",
     "table_format",
+    "table_files",
     "check_columns",
     "write_csv_text",
     "write_parquet",
@@ -83,6 +84,18 @@ def table_format(path: str | Path) -> str:
         raise DataError(f"cannot write a table to {str(path)!r}: unknown ending "
                         f"{suffix or '(none)'!r}; use one of "
                         f"{', '.join(TABLE_SUFFIXES)}") from None
+
+
+def table_files(path: str | Path) -> list[Path]:
+    """The files a table occupies: the table, then its JSON sidecar if it is a CSV.
+
+    Raises
+    ------
+    DataError
+        See :func:`table_format`.
+    """
+    path = Path(path)
+    return [path, sidecar_path(path)] if table_format(path) == "csv" else [path]
 
 
 def check_columns(columns: Mapping[str, Any], fmt: str = "csv") -> dict[str, np.ndarray]:

@@ -11,9 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from ehss._files import SIDECAR_KEY, atomic_path, check_sidecar, sidecar_path
+from ehss._files import SIDECAR_KEY, atomic_path, check_sidecar
 from ehss.io.tables import (
     check_columns,
+    table_files,
     table_format,
     write_csv_text,
     write_hdf5,
@@ -88,12 +89,12 @@ def table_writers(
     TypeError
         If ``metadata`` has values with no JSON form.
     """
-    path = Path(path)
+    path, *sides = table_files(path)
     fmt = table_format(path)
     arrays = check_columns(columns, fmt)
     doc = to_jsonable(dict(metadata))
-    if fmt == "csv":
-        side = sidecar_path(path)
+    if sides:
+        (side,) = sides
         check_sidecar(side, path)
         sidecar_doc = {SIDECAR_KEY: path.name, **doc}
         return {
