@@ -155,8 +155,8 @@ def _frame(arrays: Mapping[str, np.ndarray]):
 def write_csv_text(path: Path, arrays: Mapping[str, np.ndarray], header: str = "") -> None:
     """Write float64 columns as CSV text (one header row) to ``path`` (not atomic).
 
-    Each value is the shortest text that reads back to the same float64 (polars formats
-    floats with the Ryu algorithm), so a round trip is exact; ``header`` is written first.
+    Each value is written by polars with the fewest digits that read back to the same
+    float64, so a round trip is exact; ``header`` is written first.
     """
     with open(path, "wb") as fh:
         if header:
