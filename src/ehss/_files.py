@@ -39,7 +39,6 @@ SIDECAR_KEY = "ehss_sidecar_of"
 _SIDECAR_MAX_BYTES = 64 * 2**20
 
 
-
 class WriteError(EhssError, OSError):
     """An output could not be written after the checks passed (e.g. the disk is full).
 
