@@ -20,7 +20,8 @@ the command line starts at once and answers Ctrl-C during start-up with one line
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Any
+
+TYPE_CHECKING = False  # typing itself imports re: keep ``import ehss`` light
 
 # Public name -> module that defines it (a module itself when the name is a module).
 _LAZY = {
@@ -84,6 +85,8 @@ _LAZY = {
 }
 
 if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
+    from typing import Any
+
     from ehss import linear, signals
     from ehss.compensation import (
         CompensationDemo,

@@ -13,15 +13,16 @@ removed on the way out, and exits with 143.
 
 from __future__ import annotations
 
-import argparse
+# Only light modules here: the console script imports this package before main() can
+# catch Ctrl-C, so argparse and everything heavier are imported inside main().
 import contextlib
-import importlib
 import signal
 import sys
-import threading
 from collections.abc import Iterator, Sequence
 
-from ehss.errors import DataError, EhssError, ParameterError
+TYPE_CHECKING = False  # typing itself imports re: not here
+if TYPE_CHECKING:
+    import argparse
 
 __all__ = [
     "main",
@@ -36,8 +37,8 @@ __all__ = [
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 128 + signal.SIGINT
-EXIT_TERMINATED = 128 + signal.SIGTERM
+EXIT_INTERRUPTED = 128 + int(signal.SIGINT)
+EXIT_TERMINATED = 128 + int(signal.SIGTERM)
 
 # Subcommand modules, in the order they are listed by `ehss --help`.
 _COMMANDS = (
@@ -51,16 +52,18 @@ _COMMANDS = (
 )
 
 
-class _Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line on stderr and exit code 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The ``ehss`` parser with every available subcommand registered."""
+    import argparse
+    import importlib
+
     from ehss import __version__
+
+    class _Parser(argparse.ArgumentParser):
+        """ArgumentParser whose errors are one line on stderr and exit code 2."""
+
+        def error(self, message: str) -> None:  # type: ignore[override]
+            self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
     parser = _Parser(
         prog="ehss",
@@ -91,6 +94,8 @@ def _sigterm_as_exception() -> Iterator[None]:
     Later SIGTERMs are ignored while the clean-up runs; the previous handler is restored
     on the way out.
     """
+    import threading
+
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -128,6 +133,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run(command: str, args: argparse.Namespace) -> int:
     from ehss.cli._outputs import check_paths
+    from ehss.errors import DataError, EhssError, ParameterError
 
     try:
         check_paths(args)
