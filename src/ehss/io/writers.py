@@ -96,7 +96,9 @@ def table_writers(
     if sides:
         (side,) = sides
         check_sidecar(side, path)
-        sidecar_doc = {SIDECAR_KEY: path.name, **doc}
+        # the marker first, and never taken from the metadata (it names this table)
+        sidecar_doc = {SIDECAR_KEY: path.name,
+                       **{k: v for k, v in doc.items() if k != SIDECAR_KEY}}
         return {
             path: lambda tmp: write_csv_text(tmp, arrays),
             side: lambda tmp: _write_json_text(tmp, sidecar_doc),
