@@ -780,14 +780,15 @@ def params_from_dict(data: dict[str, Any], *, base: RigParams | None = None) -> 
 
 
 def save_params(params: RigParams, path: str | Path) -> Path:
-    """Write a parameter set as TOML (written to a temporary file, then renamed)."""
+    """Write a parameter set as TOML, atomically (:func:`ehss._files.atomic_path`)."""
     import tomli_w
+
+    from ehss._files import atomic_path
 
     path = Path(path)
     text = tomli_w.dumps(params_to_dict(params))
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
     return path
 
 

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
 from ehss.errors import DataError, ParameterError
 
 __all__ = ["register"]
@@ -31,9 +32,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "checks and the per-run log); replay with `ehss simulate --loop L --reference "
         "DRIVE.csv --column drive`.",
     )
-    p.add_argument("model", metavar="MODEL.json", help="identified model (ArmaxModel JSON)")
-    p.add_argument("reference", metavar="REFERENCE.csv", help="reference history file")
-    p.add_argument("--out", required=True, metavar="DRIVE.csv", help="output CSV file")
+    p.add_argument("model", metavar="MODEL.json", type=InputFile,
+                   help="identified model (ArmaxModel JSON)")
+    p.add_argument("reference", metavar="REFERENCE.csv", type=InputFile,
+                   help="reference history file")
+    p.add_argument("--out", required=True, metavar="DRIVE.csv", type=OutputTable,
+                   help="drive table: .csv (with a .json sidecar), .parquet, .h5, .npz or "
+                   ".mat")
     p.add_argument("--column", default="reference",
                    help="reference column name (default: %(default)s)")
     p.add_argument("--method", default="stable", choices=("stable", "zpetc", "zmetc", "frf"),
@@ -66,7 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="loop the drive is played into, whose limits it must respect "
                     "(with --params or --preset)")
     par = ck.add_mutually_exclusive_group()
-    par.add_argument("--params", metavar="FILE.toml", help="(partial) TOML parameter file")
+    par.add_argument("--params", metavar="FILE.toml", type=InputFile,
+                     help="(partial) TOML parameter file")
     par.add_argument("--preset", choices=sorted(PRESETS), help="named parameter set")
     ck.add_argument("--max-stroke", type=float, metavar="X",
                     help="bound on |drive| (e.g. m of stroke)")
@@ -87,9 +93,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "gain halved; after three refusals the iteration stops and the best drive is "
         "written back.",
     )
-    it.add_argument("--update", metavar="RUN.csv",
+    it.add_argument("--update", metavar="RUN.csv", type=InputFile,
                     help="record of the previous run (played drive and measured output)")
-    it.add_argument("--previous", metavar="DRIVE.csv",
+    it.add_argument("--previous", metavar="DRIVE.csv", type=InputFile,
                     help="the drive file (written by this command) that was played")
     it.add_argument("--drive-column", default="reference",
                     help="played drive column in RUN.csv (default: %(default)s)")
@@ -111,7 +117,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "CSV/JSON figures and PNG plots to --out.",
     )
     d.add_argument("--loop", required=True, choices=("position", "acceleration"))
-    d.add_argument("--out", default="compensation", metavar="DIR",
+    d.add_argument("--out", default=OutputFolder("compensation"), metavar="DIR",
+                   type=OutputFolder,
                    help="output folder (default: %(default)s)")
     d.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     d.add_argument("--duration", type=float, default=None, metavar="S",
@@ -157,14 +164,12 @@ def _band(args: argparse.Namespace, model: Any) -> tuple[float, float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ehss._files import check_writable
     from ehss._provenance import versions
     from ehss.cli._dataargs import write_outputs
     from ehss.compensation import check_at_rest, check_drive, design_inverse, fade_to_rest
     from ehss.identification.model import ArmaxModel
-    from ehss.io import read_columns, sample_rate, write_csv, write_json
+    from ehss.io import read_columns, sample_rate, table_writers
 
-    check_writable(args.out)
     if args.update is None:
         for flag, given in (("--previous", args.previous is not None),
                             ("--gain", args.gain is not None), ("--reidentify", args.reidentify)):
@@ -246,8 +251,7 @@ def run(args: argparse.Namespace) -> int:
         **extra,
     }
     cols = {"t": t, "reference": r, "drive": drive, **columns}
-    write_outputs({out: lambda tmp: write_csv(tmp, cols),
-                   out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})
+    write_outputs(table_writers(out, cols, sidecar))
     return 0
 
 

@@ -7,12 +7,13 @@ import contextlib
 import math
 import sys
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ehss.cli._outputs import InputFile
 from ehss.errors import ParameterError
 
 __all__ = [
@@ -29,8 +30,8 @@ __all__ = [
 
 def add_record_arguments(p: argparse.ArgumentParser) -> None:
     """DATA, --input, --output, --fs, --time-column."""
-    p.add_argument("data", metavar="DATA",
-                   help="record file: .csv, .mat (v5 or v7.3), .h5/.hdf5 or .npz")
+    p.add_argument("data", metavar="DATA", type=InputFile,
+                   help="record file: .csv, .mat (v5 or v7.3), .h5/.hdf5, .npz or .parquet")
     p.add_argument("--input", required=True, metavar="COL",
                    help="input column (e.g. the loop's reference)")
     p.add_argument("--output", required=True, metavar="COL",
@@ -101,21 +102,22 @@ def holdout_fraction(value: float | None) -> float:
     return float(value)
 
 
-def check_outputs(*paths: str | Path | None) -> list[Path]:
-    """Check before any work that every output can be written, and that none repeats."""
-    from ehss._files import check_writable
+def check_outputs(*paths: str | Path | None, inputs: Sequence[str | Path] = ()) -> list[Path]:
+    """Check before any work that every output can be written without losing a file.
 
-    out = [check_writable(p) for p in paths if p is not None]
-    resolved = [p.resolve() for p in out]
-    if len(set(resolved)) != len(resolved):
-        raise ParameterError("two outputs would be written to the same file")
-    return out
+    The command line already checks every declared file argument before a command runs
+    (:func:`ehss.cli._outputs.check_paths`); this is for outputs known only later.
+    """
+    from ehss._files import check_outputs as check
+
+    return check([p for p in paths if p is not None], inputs=inputs)
 
 
 def write_outputs(writers: dict[Path, Callable[[Path], None]]) -> None:
     """Write every output to a temporary file first; rename them only when all succeeded.
 
-    ``writers`` maps each final path to a function writing the content to a given path.
+    ``writers`` maps each final path to a function writing the content to a given path
+    (for a table and its sidecar: :func:`ehss.io.table_writers`).
     """
     from ehss._files import atomic_path
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ehss.cli._dataargs import add_record_arguments, check_outputs, load_record, write_outputs
+from ehss.cli._dataargs import add_record_arguments, load_record, write_outputs
+from ehss.cli._outputs import OutputFile, OutputTable
 from ehss.errors import ParameterError
 
 __all__ = ["register", "run"]
@@ -25,19 +26,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "about 1 Hz resolution, with at least 8 averages when possible)")
     p.add_argument("--noverlap", type=int, metavar="N",
                    help="segment overlap in samples (default: nperseg/2)")
-    p.add_argument("--out", required=True, metavar="FRF.csv", help="CSV file to write")
-    p.add_argument("--plot", metavar="FRF.png", help="also write a Bode plot")
+    p.add_argument("--out", required=True, metavar="FRF.csv", type=OutputTable,
+                   help="table to write: .csv (with a .json sidecar), .parquet, .h5, .npz "
+                   "or .mat")
+    p.add_argument("--plot", metavar="FRF.png", type=OutputFile, help="also write a Bode plot")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ehss._provenance import versions
     from ehss.frequency import h1_estimate
-    from ehss.io import write_csv, write_json
+    from ehss.io import table_writers
 
     if args.nperseg is not None and args.nperseg < 4:
         raise ParameterError(f"--nperseg {args.nperseg} must be >= 4")
-    check_outputs(args.out, args.plot)
     rec = load_record(args)
     frf = h1_estimate(rec.u, rec.y, rec.fs, nperseg=args.nperseg, noverlap=args.noverlap)
     sidecar = {
@@ -57,10 +59,7 @@ def run(args: argparse.Namespace) -> int:
           f"{frf.resolution_hz:.4g} Hz, {frf.n_averages} averages of {frf.nperseg} samples; "
           f"coherence >= 0.9 at {int(good.sum())} of them")
     out = Path(args.out)
-    writers = {
-        out: lambda tmp: write_csv(tmp, frf.to_columns()),
-        out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar),
-    }
+    writers = table_writers(out, frf.to_columns(), sidecar)
     if args.plot is not None:
         from ehss.plots import DPI, bode_compare
 

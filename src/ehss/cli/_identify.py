@@ -11,12 +11,12 @@ import numpy as np
 
 from ehss.cli._dataargs import (
     add_record_arguments,
-    check_outputs,
     holdout_fraction,
     load_record,
     report_warnings,
     write_outputs,
 )
+from ehss.cli._outputs import OutputFile
 from ehss.errors import ParameterError
 
 __all__ = ["register", "run", "time_plot_path"]
@@ -57,11 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--min-coherence", type=float, default=0.9, metavar="G2",
                    help="H1 points with a lower coherence are not compared "
                    "(default: %(default)s)")
-    p.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
-    p.add_argument("--plot", metavar="BODE.png",
+    p.add_argument("--out", required=True, metavar="MODEL.json", type=OutputFile,
+                   help="model file to write")
+    p.add_argument("--plot", metavar="BODE.png", type=OutputFile,
                    help="write the Bode comparison there, and the time comparison beside it "
                    "(BODE_time.png)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, derived_outputs=lambda a: [time_plot_path(a.plot)] if a.plot
+                   else [])
 
 
 def time_plot_path(plot: str | Path) -> Path:
@@ -91,7 +93,6 @@ def run(args: argparse.Namespace) -> int:
 
     holdout, band = _check_args(args)
     plots = (args.plot, None if args.plot is None else time_plot_path(args.plot))
-    check_outputs(args.out, *plots)
     rec = load_record(args)
     fs = rec.fs
     n = rec.u.size

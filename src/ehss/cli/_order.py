@@ -10,13 +10,13 @@ import numpy as np
 
 from ehss.cli._dataargs import (
     add_record_arguments,
-    check_outputs,
     holdout_fraction,
     int_list,
     load_record,
     report_warnings,
     write_outputs,
 )
+from ehss.cli._outputs import OutputTable
 from ehss.errors import ParameterError
 
 __all__ = ["register", "run"]
@@ -51,7 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
                    help="fraction at the end kept for the fit column; 0 uses all data "
                    "for estimation and leaves fit empty (default: %(default)s)")
-    p.add_argument("--out", metavar="TABLE.csv", help="also write the table as CSV")
+    p.add_argument("--out", metavar="TABLE.csv", type=OutputTable,
+                   help="also write the table: .csv (with a .json sidecar), .parquet, .h5, "
+                   ".npz or .mat")
     p.set_defaults(func=run)
 
 
@@ -64,7 +66,6 @@ def run(args: argparse.Namespace) -> int:
     n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay)
     if n_grid > 500:
         raise ParameterError(f"the grid has {n_grid} candidates; keep it to 500 or fewer")
-    check_outputs(args.out)
     rec = load_record(args)
     n = rec.u.size
     n_est = int(round(n * (1.0 - holdout)))
@@ -80,12 +81,10 @@ def run(args: argparse.Namespace) -> int:
         )
     _print_table(sel, rec, args, n_est)
     if args.out is not None:
-        from ehss.io import write_csv
-
         cols = {c: np.array([_value(r, c) for r in sel.table], dtype=np.float64)
                 for c in _COLUMNS}
         from ehss._provenance import versions
-        from ehss.io import write_json
+        from ehss.io import table_writers
 
         sidecar = {
             "what": f"order selection {args.input} -> {args.output}",
@@ -98,8 +97,7 @@ def run(args: argparse.Namespace) -> int:
             "versions": versions(),
         }
         out = Path(args.out)
-        write_outputs({out: lambda tmp: write_csv(tmp, cols),
-                       out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})
+        write_outputs(table_writers(out, cols, sidecar))
     return 0
 
 

@@ -6,6 +6,8 @@ import argparse
 import sys
 import time
 
+from ehss.cli._outputs import InputFile, OutputFolder
+
 __all__ = ["register"]
 
 
@@ -18,10 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Hann-window H1 estimate and on held-out data. Writes report.html, report.md, "
         "models.json, summary.json, the figures and the data records into --out.",
     )
-    p.add_argument("--out", default="report", metavar="DIR", help="output folder (default: report)")
-    p.add_argument(
-        "--params", metavar="FILE.toml", help="rig parameters (default preset if omitted)"
-    )
+    p.add_argument("--out", default=OutputFolder("report"), metavar="DIR", type=OutputFolder,
+                   help="output folder (default: report)")
+    p.add_argument("--params", metavar="FILE.toml", type=InputFile,
+                   help="rig parameters (default preset if omitted)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random signal (default 0)")
     p.add_argument("--duration", type=float, default=40.0, metavar="S",
                    help="seconds of each identification record (default 40)")

@@ -21,7 +21,9 @@ from ehss.errors import DataError
 __all__ = ["Table", "read_columns", "sample_rate", "SUPPORTED_SUFFIXES"]
 
 #: File name endings understood by :func:`read_columns`.
-SUPPORTED_SUFFIXES = (".csv", ".txt", ".dat", ".tsv", ".mat", ".h5", ".hdf5", ".npz")
+SUPPORTED_SUFFIXES = (
+    ".csv", ".txt", ".dat", ".tsv", ".mat", ".h5", ".hdf5", ".npz", ".parquet",
+)
 
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
@@ -141,6 +143,10 @@ def read_columns(
         raw = _read_hdf5(path, wanted, optional_time, transpose=False)
     elif suffix == ".npz":
         raw = _read_npz(path, wanted, optional_time)
+    elif suffix == ".parquet":
+        from ehss.io.tables import read_parquet
+
+        raw = _Raw(read_parquet(path, wanted, optional_time))
     else:
         raise DataError(
             f"{str(path)!r}: unknown file type {suffix or '(none)'!r}; "
