@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from ehss.errors import ParameterError
 from ehss.params import PRESETS, describe_params, load_params, preset, save_params
 
 __all__ = ["register"]
@@ -28,6 +29,9 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
+    if args.params and args.save and _same_file(args.params, args.save):
+        raise ParameterError(f"--save {args.save!r} is the --params file itself; "
+                             "write the full set to another file")
     params = load_params(args.params) if args.params else preset(args.preset)
     if args.save:
         save_params(params, args.save)
@@ -38,3 +42,9 @@ def run(args: argparse.Namespace) -> int:
         table.add_row(*row)
     Console(width=110).print(table)
     return 0
+
+
+def _same_file(a: str, b: str) -> bool:
+    from pathlib import Path
+
+    return Path(a).resolve() == Path(b).resolve()
