@@ -44,10 +44,17 @@ __all__ = [
     "check_bool",
     "check_choice",
     "format_range",
+    "SAMPLE_RATE_RANGE_HZ",
     "show",
     "as_signal",
     "as_record",
 ]
+
+
+#: Sample rates ehss accepts, Hz: one sample every ~30 years up to 1 GHz. Beyond them the
+#: time column is almost certainly not in seconds, and frequencies and periods lose
+#: meaning (a step of 1e-310 s is not even a normal float).
+SAMPLE_RATE_RANGE_HZ = (1e-9, 1e9)
 
 
 def format_range(
