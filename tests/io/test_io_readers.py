@@ -267,8 +267,12 @@ def test_uneven_time_names_row(tmp_path):
 
 
 def test_time_not_increasing():
-    with pytest.raises(DataError, match=r"not increasing"):
+    with pytest.raises(DataError, match=r"repeats the time 0.0 s at data rows 1 and 2; .* "
+                       r"\(it is constant\)"):
         sample_rate(np.zeros(5))
+    with pytest.raises(DataError, match=r"goes backwards from 0.003 s at data row 4 to "
+                       r"0.002 s at row 5"):
+        sample_rate([0.0, 0.001, 0.002, 0.003, 0.002, 0.005])
 
 
 def test_bad_fs_value():
