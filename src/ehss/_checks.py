@@ -45,6 +45,8 @@ __all__ = [
     "check_choice",
     "format_range",
     "SAMPLE_RATE_RANGE_HZ",
+    "SCALE_RANGE",
+    "check_scale",
     "show",
     "as_signal",
     "as_record",
@@ -55,6 +57,47 @@ __all__ = [
 #: time column is almost certainly not in seconds, and frequencies and periods lose
 #: meaning (a step of 1e-310 s is not even a normal float).
 SAMPLE_RATE_RANGE_HZ = (1e-9, 1e9)
+
+
+#: Magnitudes of samples ehss processes without overflow or underflow: spectra and
+#: coherence multiply four samples together (|S_uy|² / S_uu S_yy), so a sample beyond
+#: 1e60 could overflow a float (1e308) once summed, and a variation below 1e-60 underflow.
+SCALE_RANGE = (1e-60, 1e60)
+
+
+def check_scale(x: np.ndarray, name: str) -> None:
+    """Check that a measured signal varies, on a scale ehss can compute with.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n_samples,)
+        Finite samples.
+    name : str
+        How the signal is named in messages (``"'run.csv': column 'u'"``).
+
+    Raises
+    ------
+    DataError
+        If ``x`` is constant, varies only in the last digits of its level, reaches
+        beyond ``SCALE_RANGE[1]`` or varies by less than ``SCALE_RANGE[0]``. The message
+        says to rescale (change the unit of) the signal.
+    """
+    lo, hi = SCALE_RANGE
+    peak = float(np.max(np.abs(x)))
+    if peak > hi:
+        raise DataError(f"{name} reaches {peak:.3g}; ehss works with samples up to {hi:g} "
+                        "in magnitude (spectra multiply four samples); rescale it, e.g. "
+                        "change its unit")
+    spread = float(np.max(np.abs(x - np.mean(x))))
+    if spread == 0.0:
+        raise DataError(f"{name} is constant (every sample is {float(x[0])!r}): it carries "
+                        "no test signal")
+    if spread <= 64 * np.finfo(np.float64).eps * peak:
+        raise DataError(f"{name} varies by {spread:.3g} about a level of {peak:.6g}, only in "
+                        "the last digits of its samples: it carries no usable test signal")
+    if spread < lo:
+        raise DataError(f"{name} varies by only {spread:.3g}; ehss needs variations of at "
+                        f"least {lo:g}; rescale it, e.g. change its unit")
 
 
 def format_range(

@@ -42,11 +42,20 @@ class Table(Mapping[str, np.ndarray]):
         The columns, each float64, contiguous, finite and of length ``n_rows``.
     time_column : str or None
         Name of the time column (seconds) if the file had one, else None.
+    labels : dict of str to str
+        How each column is named in messages when that is not ``column 'key'``: a column
+        of a headerless text file is ``column 2``; one chosen by number from a file with
+        a header is ``column 'u'`` (its name).
     """
 
     path: Path
     columns: dict[str, np.ndarray] = field(repr=False)
     time_column: str | None = None
+    labels: dict[str, str] = field(default_factory=dict, repr=False)
+
+    def label(self, key: str) -> str:
+        """How column ``key`` is named in messages: ``column 'u'`` or ``column 2``."""
+        return self.labels.get(key, f"column {key!r}")
 
     # Tables compare by identity: comparing columns element-wise has no single answer.
     __eq__ = object.__eq__
@@ -157,7 +166,8 @@ def read_columns(
         )
     table = _finish(path, raw)
     has_time = bool(time_column) and time_column in table.columns
-    return Table(path=path, columns=table.columns, time_column=time_column if has_time else None)
+    return Table(path=path, columns=table.columns, time_column=time_column if has_time else None,
+                 labels=raw.labels)
 
 
 def sample_rate(
@@ -234,6 +244,16 @@ def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
         row = int(np.flatnonzero(~np.isfinite(t))[0]) + 1
         raise DataError(f"{col}: non-finite value at data row {row}")
     steps = np.diff(t)
+    # Large absolute times (e.g. Unix time in seconds) may be stored more coarsely than
+    # the step: the column then looks repeated or uneven, so say what is wrong.
+    span = float(t[-1] - t[0])
+    resolution = float(np.spacing(np.max(np.abs(t))))
+    if span > 0 and resolution > 0.1 * rtol * span / (t.size - 1):
+        raise DataError(
+            f"{col} reaches {float(np.max(np.abs(t))):.6g} s, where a float resolves only "
+            f"{resolution:.3g} s, too coarse for its step of {span / (t.size - 1):.6g} s; "
+            "subtract the start time from the column"
+        )
     back = np.flatnonzero(steps <= 0)
     if back.size:
         k = int(back[0])
@@ -251,13 +271,6 @@ def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
         raise DataError(
             f"{col} has a typical step of {dt:.6g} s, a sample rate of {rate:.6g} Hz; "
             f"accepted rates are {lo_fs:g} to {hi_fs:g} Hz (is the column in seconds?)"
-        )
-    resolution = float(np.spacing(np.max(np.abs(t))))
-    if resolution > 0.1 * rtol * dt:
-        raise DataError(
-            f"{col} reaches {float(np.max(np.abs(t))):.6g} s, where a float resolves only "
-            f"{resolution:.3g} s, too coarse for its step of {dt:.6g} s; subtract the start "
-            "time from the column"
         )
     bad = np.flatnonzero(np.abs(steps - dt) > rtol * dt)
     if bad.size:
@@ -476,8 +489,7 @@ def _resolve_text_columns(
             raise DataError(_no_text_column(path, header, headerless, spec))
         idx.append(j)
         keys.append(spec)
-        labels[spec] = label(j) if headerless or spec == header[j] else (
-            f"column {spec} ({header[j]!r})")
+        labels[spec] = label(j)
     if optional is not None:
         j = find(optional)
         if j is not None and optional not in keys:
