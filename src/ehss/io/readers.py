@@ -135,6 +135,10 @@ def read_columns(
     """
     path = Path(path)
     if not path.exists():
+        blocker = next((p for p in path.parents if p.is_file()), None)
+        if blocker is not None:
+            raise DataError(f"{str(path)!r}: cannot read: {str(blocker)!r} in its path is a "
+                            "file, not a folder")
         raise DataError(f"{str(path)!r}: no such file")
     if path.is_dir():
         raise DataError(f"{str(path)!r}: is a folder, not a data file")
@@ -697,19 +701,21 @@ def _load_ds(ds, transpose: bool) -> np.ndarray:
 
 
 def _read_npz(path: Path, wanted, optional) -> _Raw:
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise DataError(f"{str(path)!r}: not an .npz archive")
-    with archive:
+    # The file is opened here so that it is closed even when numpy refuses it.
+    with open(path, "rb") as fh:
         try:
-            if wanted is None:
-                flat = {k: archive[k] for k in archive.files}
-            else:
-                names = _select(path, list(archive.files), wanted, optional)
-                flat = {k: archive[k] for k in names}
+            archive = np.load(fh, allow_pickle=False)
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
+        if not isinstance(archive, np.lib.npyio.NpzFile):
+            raise DataError(f"{str(path)!r}: not an .npz archive")
+        with archive:
+            try:
+                if wanted is None:
+                    flat = {k: archive[k] for k in archive.files}
+                else:
+                    names = _select(path, list(archive.files), wanted, optional)
+                    flat = {k: archive[k] for k in names}
+            except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+                raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
     return _pick(path, flat, wanted, optional)
