@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_writable(args.out)
     model = ArmaxModel.load_json(args.model)
-    offsets = None if args.ignore_offsets else _offsets(args.model)
+    offsets = None if args.ignore_offsets else model.offsets
     table = read_columns(args.reference, [args.column])
     fs = sample_rate(table, args.fs)
     r = table[args.column]
@@ -145,23 +145,3 @@ def run_demo(args: argparse.Namespace) -> int:
     for p in paths:
         print(f"wrote {p}")
     return 0
-
-
-def _offsets(path: str) -> tuple[float, float] | None:
-    """(u0, y0) of the model file's ``offsets``, or None if it has none (already read as
-    a valid model by :meth:`ArmaxModel.load_json`)."""
-    import json
-    import math
-
-    doc = json.loads(Path(path).read_text())
-    off = doc.get("offsets")
-    if off is None:
-        return None
-    try:
-        u0, y0 = float(off["input"]), float(off["output"])
-    except (TypeError, KeyError, ValueError):
-        raise DataError(f"model file {path!r}: offsets must be an object with numbers "
-                        "'input' and 'output'") from None
-    if not (math.isfinite(u0) and math.isfinite(y0)):
-        raise DataError(f"model file {path!r}: offsets must be finite")
-    return u0, y0

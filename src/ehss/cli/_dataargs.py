@@ -28,9 +28,9 @@ __all__ = [
 
 
 #: How columns are chosen, shown in --help.
-COLUMN_HELP = ("a column is given by its header name or, in text files, by its number "
-               "counted from 1 (1 is the first column, as in MATLAB and awk); text files "
-               "without a header row, such as DaISy .dat records, are read by number")
+COLUMN_HELP = ("by header name or, in text files, by number counted from 1 (1 is the first "
+               "column, as in MATLAB and awk); text files without a header row, such as "
+               "DaISy .dat records, are read by number")
 
 
 def add_record_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,8 +40,7 @@ def add_record_arguments(p: argparse.ArgumentParser) -> None:
                    "whitespace separated; header row optional), .mat (v5 or v7.3), "
                    ".h5/.hdf5 or .npz")
     p.add_argument("--input", required=True, metavar="COL",
-                   help="input column (e.g. the loop's reference): name, or number from 1; "
-                   + COLUMN_HELP)
+                   help="input column (e.g. the loop's reference), " + COLUMN_HELP)
     p.add_argument("--output", required=True, metavar="COL",
                    help="output column (the measured controlled variable): name, or number "
                    "from 1")
