@@ -135,8 +135,9 @@ def test_rounding_to_four_digits_destabilises_lightly_damped_model():
         (dict(c=[0.5]), r"must start with 1"),
         (dict(b=[]), r"must have at least one coefficient"),
         (dict(a=[1.0, np.nan]), r"must be finite"),
-        (dict(delay=-1), r"delay=-1 must be an integer >= 0"),
-        (dict(dt=0.0), r"dt=0.0 must be a finite number > 0"),
+        (dict(delay=-1), r"delay=-1 must be an integer in \[0, inf\)"),
+        (dict(dt=0.0), r"dt=0.0 must be in \(0, inf\) s"),
+        (dict(dt=float("inf")), r"dt=inf must be finite"),
         (dict(covariance=np.eye(2)), r"covariance shape \(2, 2\) must be \(3, 3\)"),
     ],
 )
@@ -242,3 +243,20 @@ def test_model_file_folder_and_path_under_a_file(tmp_path):
     # tests may run as root, for whom permission bits do not stop reading)
     with pytest.raises(DataError, match="cannot read model file"):
         ArmaxModel.load_json(tmp_path / "f" / "m.json")
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    (dict(delay=1.0), r"delay=1.0 must be an integer, not float"),
+    (dict(delay="1"), r"delay='1' must be an integer, not str"),
+    (dict(delay=True), r"delay=True must be an integer"),
+    (dict(dt="0.001"), r"dt='0.001' must be a real number, not str"),
+])
+def test_wrong_python_types_are_type_errors(kwargs, message):
+    with pytest.raises(TypeError, match=message):
+        ArmaxModel(**{"a": [1.0, -0.5], "b": [1.0], **kwargs})
+
+
+def test_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(_GOOD).encode())
+    assert ArmaxModel.load_json(path).delay == 1

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import SAMPLE_RATE_RANGE_HZ, show
+from ehss._checks import SAMPLE_RATE_RANGE_HZ, check_int, check_real, show
 from ehss._files import atomic_path
 from ehss.errors import DataError, EhssWarning, ParameterError
 
@@ -158,15 +158,9 @@ class ArmaxModel:
         object.__setattr__(self, "a", _coeffs("a", self.a, monic=True))
         object.__setattr__(self, "b", _coeffs("b", self.b, monic=False))
         object.__setattr__(self, "c", _coeffs("c", self.c, monic=True))
-        if isinstance(self.delay, bool) or not isinstance(self.delay, (int, np.integer)):
-            raise ParameterError(f"delay={self.delay!r} must be an integer >= 0")
-        if self.delay < 0:
-            raise ParameterError(f"delay={self.delay!r} must be an integer >= 0")
-        object.__setattr__(self, "delay", int(self.delay))
-        dt = self.dt
-        if not isinstance(dt, (int, float, np.floating)) or not (math.isfinite(dt) and dt > 0):
-            raise ParameterError(f"dt={dt!r} must be a finite number > 0 (seconds)")
-        object.__setattr__(self, "dt", float(dt))
+        object.__setattr__(self, "delay", check_int(self.delay, "delay", lo=0))
+        object.__setattr__(self, "dt", check_real(self.dt, "dt", lo=0.0, lo_open=True,
+                                                  unit="s"))
         object.__setattr__(self, "noise_variance", float(self.noise_variance))
         if self.covariance is not None:
             cov = np.array(self.covariance, dtype=np.float64, copy=True)
