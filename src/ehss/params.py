@@ -21,6 +21,14 @@ Two presets exist:
 
 Parameter sets round-trip through TOML (:func:`load_params`, :func:`save_params`);
 variants are made with :func:`dataclasses.replace`.
+
+Every field is checked on construction: booleans must be ``True``/``False`` (a TOML
+``"no"`` is refused, not read as true), integers integers, and real numbers finite and
+inside the physically sensible range of :data:`RANGES`, which also bounds the work a
+simulation implies (integration at most at 1 MHz and :data:`MAX_SUBSTEPS` steps per
+control period). Wrong Python types raise TypeError and bad values ParameterError from the
+API; from a file, both become a ParameterError naming the file, ``section.key`` and what
+is accepted.
 """
 
 from __future__ import annotations
