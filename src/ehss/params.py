@@ -867,7 +867,10 @@ def save_params(params: RigParams, path: str | Path) -> Path:
     from ehss.errors import DataError
 
     path = Path(path)
-    if path.exists() or path.is_symlink():
+    if path.is_symlink():
+        raise DataError(f"cannot write {str(path)!r}: it is a symbolic link; write to another "
+                        "name (or to the file it points to)")
+    if path.exists():
         if path.is_dir():
             raise DataError(f"cannot write {str(path)!r}: it is a folder")
         if not path.is_file():
@@ -897,6 +900,8 @@ def load_params(path: str | Path) -> RigParams:
     try:
         if path.is_dir():
             raise ParameterError(f"{where} is a folder")
+        if path.exists() and not path.is_file():
+            raise ParameterError(f"{where} is not a regular file (a pipe or a device?)")
         size = path.stat().st_size
         if size > MAX_PARAMS_FILE_BYTES:
             raise ParameterError(f"{where} is {size} bytes; a parameter file is a few kB "

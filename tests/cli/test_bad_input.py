@@ -179,6 +179,9 @@ DATA_CASES: dict[str, DataCase] = {
                         extra=("--fs", "0"), names_file=False),
     "fs-nan": DataCase(lambda: _good(), ("fs=nan",), extra=("--fs", "nan"), names_file=False),
     "fs-huge": DataCase(lambda: _good(), ("fs=1e+20",), extra=("--fs", "1e20"), names_file=False),
+    "fs-not-a-number": DataCase(lambda: _good(), ("--fs", "invalid float value: 'abc'"),
+                                extra=("--fs", "abc"), names_file=False),
+    "fifo": DataCase(lambda: "fifo", ("not a regular file",)),
     "scaled-1e200": DataCase(lambda: _scaled(1e200), ("column 'u' (--input) reaches 1.61e+197",
                                                       "rescale"), pair_only=True),
     "scaled-1e-200": DataCase(lambda: _scaled(1e-200), ("column 'u' (--input) varies by only",
@@ -224,11 +227,19 @@ _PAIR_COMMANDS = ("identify", "frf", "order")
 
 
 # --------------------------------------------------------------------------- machinery
-def _snapshot(folder: Path) -> dict[str, bytes | None]:
-    """Every path under ``folder`` with its bytes (None for folders)."""
-    out: dict[str, bytes | None] = {}
+def _snapshot(folder: Path) -> dict[str, object]:
+    """Every path under ``folder`` with its content: bytes of regular files, the target of
+    symbolic links, the mode of folders, pipes and devices (never opened: a pipe would
+    block)."""
+    out: dict[str, object] = {}
     for p in sorted(folder.rglob("*")):
-        out[str(p.relative_to(folder))] = None if p.is_dir() else p.read_bytes()
+        key = str(p.relative_to(folder))
+        if p.is_symlink():
+            out[key] = ("symlink", os.readlink(p))
+        elif p.is_file():
+            out[key] = (p.stat().st_mode, p.read_bytes())
+        else:
+            out[key] = ("other", p.stat().st_mode)
     return out
 
 
@@ -252,6 +263,8 @@ def _place(folder: Path, name: str, content: str | bytes | None) -> Path:
         path.mkdir()
     elif content == "missing":
         pass
+    elif content == "fifo":
+        os.mkfifo(path)
     elif content == "under-file":
         (folder / "plain").write_text("x")
         path = folder / "plain" / name
@@ -265,7 +278,10 @@ def _place(folder: Path, name: str, content: str | bytes | None) -> Path:
 def _check_refused(argv: list[str], folder: Path, capsys, expect: tuple[str, ...],
                    names: tuple[str, ...]) -> None:
     before = _snapshot(folder)
-    code = main(argv)
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argument errors: argparse exits
+        code = exc.code
     out, err = capsys.readouterr()
     assert code == 2, f"exit {code}; stderr: {err!r}"
     assert "Traceback" not in out + err
@@ -301,6 +317,7 @@ MODEL_CASES: dict[str, tuple[Callable[[], str | bytes | None], tuple[str, ...]]]
     "missing": (lambda: "missing", ("does not exist",)),
     "folder": (lambda: None, ("is a folder",)),
     "under-a-file": (lambda: "under-file", ("cannot read model file",)),
+    "fifo": (lambda: "fifo", ("not a regular file",)),
     "empty": (lambda: "", ("is empty",)),
     "not-json": (lambda: "{a: 1", ("is not valid JSON",)),
     "not-utf8": (lambda: json.dumps({**_MODEL, "meta": {"x": "é"}}, ensure_ascii=False)
@@ -384,6 +401,7 @@ PARAM_CASES: dict[str, tuple[Callable[[], str | bytes | None], tuple[str, ...]]]
     "missing": (lambda: "missing", ("does not exist",)),
     "folder": (lambda: None, ("is a folder",)),
     "under-a-file": (lambda: "under-file", ("cannot read",)),
+    "fifo": (lambda: "fifo", ("not a regular file",)),
     "not-utf8": (lambda: "[load]\nmass_kg = 250 # é\n".encode("latin-1"), ("not UTF-8",)),
     "not-toml": (lambda: "[load\nmass_kg = 1\n", ("not valid TOML",)),
     "deeply-nested": (lambda: "x = " + "[" * 10_000 + "]" * 10_000 + "\n",
@@ -432,10 +450,15 @@ def test_bad_parameter_file(folder, capsys, case_name, command):
         ("sub", ("it is a folder",)),
         ("readonly.toml", ("read-only",)),
         ("rig.toml", ("is the --params file itself",)),
+        ("link.toml", ("symbolic link",)),
+        ("pipe.toml", ("not a regular file",)),
     ],
 )
 def test_params_save_refused(folder, capsys, where, expect):
     (folder / "sub").mkdir()
+    (folder / "other.toml").write_text("[load]\nmass_kg = 400\n")
+    (folder / "link.toml").symlink_to(folder / "other.toml")
+    os.mkfifo(folder / "pipe.toml")
     ro = folder / "readonly.toml"
     ro.write_text("# keep me\n")
     ro.chmod(0o444)

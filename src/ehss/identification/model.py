@@ -492,6 +492,8 @@ class ArmaxModel:
         try:
             if path.is_dir():
                 raise DataError(f"{where} is a folder")
+            if path.exists() and not path.is_file():
+                raise DataError(f"{where} is not a regular file (a pipe or a device?)")
             size = path.stat().st_size
             if size > MAX_MODEL_FILE_BYTES:
                 raise DataError(f"{where} is {size} bytes, more than a model file holds "

@@ -142,6 +142,8 @@ def read_columns(
         raise DataError(f"{str(path)!r}: no such file")
     if path.is_dir():
         raise DataError(f"{str(path)!r}: is a folder, not a data file")
+    if not path.is_file():
+        raise DataError(f"{str(path)!r}: is not a regular file (a pipe or a device?)")
     if columns is not None:
         if isinstance(columns, str):
             columns = [columns]
