@@ -379,3 +379,13 @@ def test_degenerate_time_columns(t, match):
 def test_fs_outside_the_accepted_rates(fs):
     with pytest.raises(DataError, match=r"must be in \[1e-09, 1e\+09\] Hz"):
         sample_rate(None, fs)
+
+
+def test_columns_must_be_strings(tmp_path, record):
+    path = tmp_path / "run.csv"
+    write_csv(path, record)
+    with pytest.raises(TypeError, match=r"written as strings \('2' for the second column\), "
+                       r"not int 2"):
+        read_columns(path, [2])
+    with pytest.raises(TypeError, match="time_column"):
+        read_columns(path, ["u"], time_column=1)

@@ -121,6 +121,8 @@ def read_columns(
 
     Raises
     ------
+    TypeError
+        If a column or the time column is not given as a string.
     DataError
         If the file is missing, unreadable or garbled; a column is unknown (the message
         lists the available ones, or the column numbers of a headerless file); a row has
@@ -133,6 +135,9 @@ def read_columns(
     >>> table = read_columns("run.csv", ["u", "y"])        # doctest: +SKIP
     >>> fs = sample_rate(table)                             # doctest: +SKIP
     """
+    if time_column is not None and not isinstance(time_column, str):
+        raise TypeError(f"time_column must be a name or a number written as a string, not "
+                        f"{type(time_column).__name__} {time_column!r}")
     path = Path(path)
     if not path.exists():
         blocker = next((p for p in path.parents if p.is_file()), None)
@@ -147,6 +152,11 @@ def read_columns(
     if columns is not None:
         if isinstance(columns, str):
             columns = [columns]
+        columns = list(columns)
+        for c in columns:
+            if not isinstance(c, str):
+                raise TypeError(f"columns must be names or numbers written as strings "
+                                f"('2' for the second column), not {type(c).__name__} {c!r}")
         columns = list(dict.fromkeys(columns))
         if not columns:
             raise DataError(f"{str(path)!r}: no columns requested")
