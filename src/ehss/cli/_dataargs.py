@@ -28,19 +28,28 @@ __all__ = [
 ]
 
 
+#: How columns are chosen, shown in --help.
+COLUMN_HELP = ("by header name or, in text files, by number counted from 1 (1 is the first "
+               "column, as in MATLAB and awk); text files without a header row, such as "
+               "DaISy .dat records, are read by number")
+
+
 def add_record_arguments(p: argparse.ArgumentParser) -> None:
     """DATA, --input, --output, --fs, --time-column."""
     p.add_argument("data", metavar="DATA", type=InputFile,
-                   help="record file: .csv, .mat (v5 or v7.3), .h5/.hdf5, .npz or .parquet")
+                   help="record file: text (.csv/.txt/.dat/.tsv; comma, semicolon, tab or "
+                   "whitespace separated; header row optional), .mat (v5 or v7.3), "
+                   ".h5/.hdf5, .npz or .parquet")
     p.add_argument("--input", required=True, metavar="COL",
-                   help="input column (e.g. the loop's reference)")
+                   help="input column (e.g. the loop's reference), " + COLUMN_HELP)
     p.add_argument("--output", required=True, metavar="COL",
-                   help="output column (the measured controlled variable)")
+                   help="output column (the measured controlled variable): name, or number "
+                   "from 1")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate in Hz (needed when the file has no time column)")
     p.add_argument("--time-column", default="t", metavar="COL",
-                   help="time column in seconds, used for the sample rate if present "
-                   "(default: %(default)s)")
+                   help="time column in seconds (name, or number from 1), used for the "
+                   "sample rate if present (default: %(default)s)")
 
 
 @dataclass(frozen=True)
@@ -55,14 +64,37 @@ class Record:
 
 
 def load_record(args: argparse.Namespace) -> Record:
-    """Read ``--input``/``--output`` from DATA and find the sample rate."""
+    """Read ``--input``/``--output`` from DATA, find the sample rate and check the scale.
+
+    Raises
+    ------
+    ParameterError
+        If --input, --output and --time-column do not name three different columns.
+    DataError
+        If the file cannot be read (see :func:`ehss.io.read_columns`), the sample rate
+        cannot be found (:func:`ehss.io.sample_rate`), or a column is constant or beyond
+        the magnitudes ehss computes with (:func:`ehss._checks.check_scale`); the message
+        names the file and the column.
+    """
+    from ehss._checks import check_scale
     from ehss.io import read_columns, sample_rate
 
     if args.input == args.output:
         raise ParameterError(f"--input and --output are the same column {args.input!r}")
     table = read_columns(args.data, [args.input, args.output], time_column=args.time_column)
+    where = f"{str(table.path)!r}"
+    if table.label(args.input) == table.label(args.output):
+        raise ParameterError(f"--input {args.input} and --output {args.output} are the same "
+                             f"{table.label(args.input)} of {where}")
+    if table.time_column is not None:
+        for option, key in (("--input", args.input), ("--output", args.output)):
+            if table.label(table.time_column) == table.label(key):
+                raise ParameterError(f"--time-column {table.time_column} and {option} {key} "
+                                     f"are the same {table.label(key)} of {where}")
     fs = sample_rate(table, args.fs)
     u, y = table[args.input], table[args.output]
+    check_scale(u, f"{where}: {table.label(args.input)} (--input)")
+    check_scale(y, f"{where}: {table.label(args.output)} (--output)")
     t = table.time if table.time is not None else np.arange(u.size) / fs
     return Record(path=Path(args.data), t=t, u=u, y=y, fs=fs)
 
