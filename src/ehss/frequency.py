@@ -28,6 +28,7 @@ from ehss.errors import DataError, ParameterError
 
 __all__ = [
     "FrequencyResponse",
+    "EXCITATION_FLOOR",
     "FRF_METHODS",
     "h1_estimate",
     "dft_estimate",
@@ -44,6 +45,13 @@ MIN_SAMPLES = 16
 
 #: Fewest averages the default segment length aims for (Welch segments or DFT bins).
 MIN_AVERAGES = 8
+
+#: Fraction of the record tapered (half at each end) by :func:`dft_estimate`.
+TAPER_FRACTION = 0.1
+
+#: A frequency counts as excited when the input's spectrum there is at least this fraction
+#: of its largest value in the band considered (30 dB down).
+EXCITATION_FLOOR = 1e-3
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -68,6 +76,10 @@ class FrequencyResponse:
         Sample rate in Hz.
     method : {"welch", "dft"}
         How it was estimated: :func:`h1_estimate` or :func:`dft_estimate`.
+    input_power : ndarray, shape (n_freq,), optional
+        The input's (auto-)spectrum at each point, in any consistent scale: where the
+        input put no power the estimate means nothing, whatever the coherence
+        (:func:`ehss.validation.frf_error` leaves such points out).
     """
 
     freq_hz: np.ndarray = field(repr=False)
@@ -77,10 +89,13 @@ class FrequencyResponse:
     nperseg: int
     fs: float
     method: str = "welch"
+    input_power: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         n = np.shape(self.freq_hz)
-        if np.shape(self.response) != n or np.shape(self.coherence) != n:
+        if np.shape(self.response) != n or np.shape(self.coherence) != n or (
+            self.input_power is not None and np.shape(self.input_power) != n
+        ):
             raise ParameterError(
                 "freq_hz, response and coherence must have the same shape, got "
                 f"{n}, {np.shape(self.response)}, {np.shape(self.coherence)}"
@@ -120,14 +135,23 @@ class FrequencyResponse:
             nperseg=self.nperseg,
             fs=self.fs,
             method=self.method,
+            input_power=None if self.input_power is None else self.input_power[mask],
         )
 
-    def covered_hz(self, band_hz: tuple[float, float], min_coherence: float) -> float:
-        """Width (Hz) of the part of ``band_hz`` whose points reach ``min_coherence``:
-        the number of such points times the resolution."""
+    def valid(self, band_hz: tuple[float, float], min_coherence: float) -> np.ndarray:
+        """Points inside ``band_hz`` that the input excited (its spectrum within
+        :data:`EXCITATION_FLOOR` of its largest value in the band) and whose coherence
+        reaches ``min_coherence``: where the estimate can be trusted."""
         lo, hi = _check_band(band_hz)
-        ok = (self.freq_hz >= lo) & (self.freq_hz <= hi) & (self.coherence >= min_coherence)
-        return float(np.count_nonzero(ok)) * self.resolution_hz
+        ok = (self.freq_hz >= lo) & (self.freq_hz <= hi)
+        if self.input_power is not None and np.any(ok):
+            ok &= self.input_power >= EXCITATION_FLOOR * float(np.max(self.input_power[ok]))
+        return ok & (self.coherence >= min_coherence)
+
+    def covered_hz(self, band_hz: tuple[float, float], min_coherence: float) -> float:
+        """Width (Hz) of the part of ``band_hz`` where the estimate is :meth:`valid`: the
+        number of such points times the resolution."""
+        return float(np.count_nonzero(self.valid(band_hz, min_coherence))) * self.resolution_hz
 
     def to_columns(self) -> dict[str, np.ndarray]:
         """Columns for a CSV file: ``freq_hz, magnitude_db, phase_deg, coherence``."""
@@ -312,6 +336,7 @@ def h1_estimate(
         n_averages=n_segments(n, nperseg, noverlap),
         nperseg=nperseg,
         fs=fs,
+        input_power=s_uu.copy(),
     )
 
 
@@ -351,7 +376,7 @@ def dft_estimate(
 
     Notes
     -----
-    With :math:`U_k, Y_k` the DFTs of the mean-removed record (no window) and
+    With :math:`U_k, Y_k` the DFTs of the mean-removed, end-tapered record and
     :math:`\\mathcal K` a group of L adjacent bins,
 
     .. math:: \\hat H = \\frac{\\sum_{\\mathcal K} \\overline{U_k} Y_k}
@@ -360,9 +385,10 @@ def dft_estimate(
               {\\sum_{\\mathcal K} |U_k|^2 \\sum_{\\mathcal K} |Y_k|^2},
 
     the frequency-smoothed (Daniell) form of H1: unbiased by output noise, with L playing
-    the part of the number of averages. The record is not windowed, so a test that does
-    not start and end at rest leaks by about the impulse response's length over the
-    record's.
+    the part of the number of averages. The ends of the record are tapered over 5 % of
+    its length each (Tukey window, :data:`TAPER_FRACTION`): a record cut from a longer
+    test then leaks little, and a slowly varying window scales the input and the output
+    alike as long as the impulse response is shorter than the taper.
     """
     u, y = as_record(u, y)
     fs = _check_fs(fs)
@@ -382,8 +408,12 @@ def dft_estimate(
     n_groups = n_bins // n_average
     if n_groups < 1:
         raise DataError(f"{n} samples hold fewer than {n_average} frequency bins")
-    uf = np.fft.rfft(u - u.mean())
-    yf = np.fft.rfft(y - y.mean())
+    # A short cosine taper (5 % of the record at each end) keeps a record that does not
+    # start or end at rest (the held-out end of a sweep) from leaking its cut into
+    # frequencies it never excited; a slow taper scales U and Y alike, not their ratio.
+    taper = scipy.signal.windows.tukey(n, TAPER_FRACTION)
+    uf = np.fft.rfft((u - u.mean()) * taper)
+    yf = np.fft.rfft((y - y.mean()) * taper)
     f = np.fft.rfftfreq(n, 1.0 / fs)
     sl = slice(1, 1 + n_groups * n_average)
     shape = (n_groups, n_average)
@@ -403,7 +433,7 @@ def dft_estimate(
     np.clip(coherence, 0.0, 1.0, out=coherence)
     return FrequencyResponse(freq_hz=freq, response=response, coherence=coherence,
                              n_averages=n_average, nperseg=n // n_average, fs=fs,
-                             method="dft")
+                             method="dft", input_power=s_uu)
 
 
 def frf_estimate(

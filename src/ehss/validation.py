@@ -146,7 +146,8 @@ def frf_error(
     band_hz : (float, float)
         Frequencies ``lo <= f <= hi`` (Hz) to compare.
     min_coherence : float, default 0.9
-        Points whose coherence is below this are unreliable and left out.
+        Points whose coherence is below this are unreliable and left out, and so are
+        points the input did not excite (:meth:`FrequencyResponse.valid`).
 
     Returns
     -------
@@ -166,7 +167,8 @@ def frf_error(
     lo, hi = _check_band(band_hz)
     if not 0.0 <= float(min_coherence) <= 1.0:
         raise ParameterError(f"{min_coherence=} must be in [0, 1]")
-    mask = (frf.freq_hz >= lo) & (frf.freq_hz <= hi) & (frf.coherence >= min_coherence)
+    # in the band, excited by the input and coherent (FrequencyResponse.valid)
+    mask = frf.valid((lo, hi), float(min_coherence))
     mask &= np.abs(frf.response) > 0
     n = int(mask.sum())
     if n == 0:
