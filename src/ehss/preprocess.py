@@ -40,10 +40,11 @@ __all__ = [
 DETRENDS = ("mean", "linear", None)
 
 #: :func:`auto_decimation` keeps the sample rate at least this many times the highest
-#: frequency of interest: the band's upper edge, or the edge of the record's content,
-#: which lies near twice a loop's bandwidth, so about 20× the bandwidth (the usual
-#: 10–20× rule for identification).
-TARGET_OVERSAMPLING = 10.0
+#: frequency of interest (the band's upper edge, or the edge of the record's content):
+#: the band then lies below a third of the new Nyquist frequency, well inside the
+#: anti-alias filter's pass band, and a loop, whose content edge lies near twice its
+#: bandwidth, is sampled at 10–20 times its bandwidth, the usual rule for identification.
+TARGET_OVERSAMPLING = 6.0
 
 #: Shortest record :func:`decimate` leaves: an identification needs a few hundred samples.
 _MIN_DECIMATED = 256
@@ -185,7 +186,7 @@ def auto_decimation(
     Examples
     --------
     A loop of about 8 Hz bandwidth, driven by a 0.1–15 Hz random test recorded at
-    4 kHz, is decimated by 30 (to 133 Hz, about 17 times its bandwidth):
+    4 kHz, is decimated by 50 (to 80 Hz, ten times its bandwidth):
 
     >>> import numpy as np, scipy.signal
     >>> fs = 4000.0
@@ -194,7 +195,7 @@ def auto_decimation(
     ...                                                  output="sos"), u)
     >>> y = scipy.signal.lfilter(*scipy.signal.butter(2, 8.0, fs=fs), u)
     >>> auto_decimation(u, y, fs)
-    30
+    50
     """
     u, y = as_record(u, y)
     fs = _fs(fs)

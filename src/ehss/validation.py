@@ -555,7 +555,8 @@ class ValidationReport:
         :func:`nrmse_fit` of the simulation on the validation part (``-inf`` if it
         diverges to overflow).
     band_fit_pct : float or None
-        The same after the zero-phase low-pass of :func:`band_fit` (None without a band).
+        The same after the zero-phase low-pass of :func:`band_fit` at 1.5 times the band's
+        upper edge (None without a band, or when that is above 0.45 fs).
     prediction_fit_pct : dict of int to float
         :func:`prediction_fit` on the validation part, by horizon.
     frf : FrequencyResponse
@@ -638,7 +639,7 @@ class ValidationReport:
         ]
         if self.band_fit_pct is not None and self.frf_error is not None:
             lo, hi = self.frf_error.band_hz
-            lines.append(f"  simulation fit in the band (both low-passed above {hi:g} Hz): "
+            lines.append(f"  simulation fit in the band (both low-passed at {1.5 * hi:g} Hz): "
                          f"{fit_text(self.band_fit_pct)}")
         for k, v in self.prediction_fit_pct.items():
             lines.append(f"  {k}-step prediction fit: {fit_text(v)}")
@@ -749,7 +750,7 @@ def validate(
         ])
     sim_fit = nrmse_fit(y[start:], simulated[start:])
     bfit = None
-    if band_hz is not None:
+    if band_hz is not None and 1.5 * float(band_hz[1]) < 0.45 * float(fs):
         bfit = band_fit(y[start:], simulated[start:], fs=fs, band_hz=band_hz)
     pred = {int(h): prediction_fit(model, u, y, int(h), start=start) for h in horizons}
     frf = frf_estimate(u[start:], y[start:], fs, method=frf_method, nperseg=nperseg,

@@ -464,6 +464,8 @@ def identify(
     report = validate(model, prep.u_val, prep.y_val, fs=fs_m, band_hz=band, holdout=None,
                       min_coherence=acceptance.min_coherence, horizons=horizons,
                       nperseg=nperseg, initial=initial, frf_method=frf_method)
+    if not prep.separate_validation:  # the held-out end: say how much came before it
+        report = dataclasses.replace(report, n_estimation=int(prep.u.size))
     verdict = acceptance.judge(report)
     validated = None
     e = report.frf_error
