@@ -311,7 +311,8 @@ class Identification:
     method : str
         Estimator (:data:`ehss.identification.METHODS`).
     orders : (int, int, int, int)
-        ``(na, nb, nc, delay)``.
+        ``(na, nb, nc, delay)`` as given, the delay in samples of the record; the model's
+        own delay (``model.delay``) is ``delay // prepared.decimation`` samples at its rate.
     """
 
     model: ArmaxModel
@@ -358,7 +359,9 @@ class Identification:
                          f"output {p.trend_y.offset!r}")
         if p.decimation > 1:
             lines.append(f"decimated by {p.decimation} (zero-phase anti-alias filter): the "
-                         f"model is at {p.fs_model:g} Hz, not the record's {p.fs:g} Hz")
+                         f"model is at {p.fs_model:g} Hz, not the record's {p.fs:g} Hz; its "
+                         f"delay is {self.model.delay} sample(s) at that rate (given: "
+                         f"{self.orders[3]} at {p.fs:g} Hz)")
         lines.append(self.report.format())
         if self.model.band_hz is not None:
             lo, hi = self.model.band_hz
@@ -394,7 +397,8 @@ def identify(
     fs : float
         Sample rate, Hz.
     orders : (na, nb, nc) or (na, nb, nc, delay)
-        Model orders; the delay defaults to 1 sample.
+        Model orders; the delay (default 1) in samples of the record, divided by the
+        decimation factor (rounded down) for the model.
     method : str, default :data:`DEFAULT_METHOD`
         One of :data:`ehss.identification.METHODS`.
     validation : float or (u_val, y_val), default 0.3
@@ -459,7 +463,10 @@ def identify(
     if nperseg is not None and nperseg > prep.u_val.size:
         raise ParameterError(f"{nperseg=} is longer than the validation data "
                              f"({prep.u_val.size} samples at {fs_m:g} Hz)")
-    model = estimate(prep.u, prep.y, method=method, na=na, nb=nb, nc=nc, delay=delay,
+    # the delay is given in samples of the record; at the decimated rate it is shorter
+    # (rounded down, so the model never waits longer than the loop: b0 takes the rest)
+    delay_m = delay // prep.decimation
+    model = estimate(prep.u, prep.y, method=method, na=na, nb=nb, nc=nc, delay=delay_m,
                      dt=1.0 / fs_m)
     report = validate(model, prep.u_val, prep.y_val, fs=fs_m, band_hz=band, holdout=None,
                       min_coherence=acceptance.min_coherence, horizons=horizons,
