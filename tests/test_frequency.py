@@ -209,21 +209,40 @@ def test_dft_estimate_of_a_periodic_tone_is_exact():
     assert frf.coherence[i] == pytest.approx(1.0, abs=1e-12)
 
 
-def test_auto_picks_welch_for_random_and_dft_for_a_fast_sweep(rng, lowpass):
+def test_auto_keeps_welch_for_random_and_the_better_estimate_for_a_sweep(rng, lowpass):
     b, a = lowpass
     n = 20_000
     u = rng.standard_normal(n)
     y = scipy.signal.lfilter(b, a, u) + 0.05 * rng.standard_normal(n)
     assert frf_estimate(u, y, FS, band_hz=(1.0, 100.0)).method == "welch"
-    # a 20 s log sweep 0.2-100 Hz: below a few Hz a Welch segment of 1 s holds less than
-    # one period of the sweep at its frequency, so its coherence collapses there
+    # a 20 s log sweep 0.05-100 Hz: the low decades pass in a few segments only
     t = np.arange(n) / FS
-    u = scipy.signal.chirp(t, f0=0.2, t1=t[-1], f1=100.0, method="logarithmic", phi=-90.0)
+    u = scipy.signal.chirp(t, f0=0.05, t1=t[-1], f1=100.0, method="logarithmic", phi=-90.0)
     y = scipy.signal.lfilter(b, a, u) + 0.05 * rng.standard_normal(n)
-    welch = h1_estimate(u, y, FS, band_hz=(0.2, 100.0))
-    auto = frf_estimate(u, y, FS, band_hz=(0.2, 100.0))
-    assert auto.method == "dft"
-    assert auto.covered_hz((0.2, 100.0), 0.9) > 1.25 * welch.covered_hz((0.2, 100.0), 0.9)
+    band = (0.05, 100.0)
+    welch = h1_estimate(u, y, FS, band_hz=band)
+    dft = dft_estimate(u, y, FS, band_hz=band)
+    auto = frf_estimate(u, y, FS, band_hz=band)
+    better = dft if dft.covered_decades(band, 0.9) > 1.25 * welch.covered_decades(band, 0.9) \
+        else welch
+    assert auto.method == better.method
+    assert auto.covered_decades(band, 0.9) >= 0.8 * max(welch.covered_decades(band, 0.9),
+                                                        dft.covered_decades(band, 0.9))
+
+
+def test_covered_decades_analytic():
+    # points at 1, 2, 3 Hz with 1 Hz resolution, all valid: log10(1.5/0.5) + log10(2.5/1.5)
+    # + log10(3.5/2.5) = log10(3.5/0.5) = log10(7)
+    frf = FrequencyResponse(freq_hz=np.array([1.0, 2.0, 3.0]), response=np.ones(3, complex),
+                            coherence=np.ones(3), n_averages=8, nperseg=10, fs=10.0)
+    assert frf.covered_decades((0.0, 5.0), 0.9) == pytest.approx(np.log10(7.0), rel=1e-12)
+    assert frf.covered_decades((1.5, 5.0), 0.9) == pytest.approx(np.log10(3.5 / 1.5),
+                                                                 rel=1e-12)
+    # a point the input did not excite (30 dB down) does not count
+    weak = FrequencyResponse(freq_hz=np.array([1.0, 2.0, 3.0]), response=np.ones(3, complex),
+                             coherence=np.ones(3), n_averages=8, nperseg=10, fs=10.0,
+                             input_power=np.array([1.0, 1e-4, 1.0]))
+    assert weak.valid((0.0, 5.0), 0.9).tolist() == [True, False, True]
 
 
 def test_dft_estimate_bad_arguments(rng):

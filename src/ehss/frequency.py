@@ -148,10 +148,15 @@ class FrequencyResponse:
             ok &= self.input_power >= EXCITATION_FLOOR * float(np.max(self.input_power[ok]))
         return ok & (self.coherence >= min_coherence)
 
-    def covered_hz(self, band_hz: tuple[float, float], min_coherence: float) -> float:
-        """Width (Hz) of the part of ``band_hz`` where the estimate is :meth:`valid`: the
-        number of such points times the resolution."""
-        return float(np.count_nonzero(self.valid(band_hz, min_coherence))) * self.resolution_hz
+    def covered_decades(self, band_hz: tuple[float, float], min_coherence: float) -> float:
+        """Width in decades of the part of ``band_hz`` where the estimate is :meth:`valid`:
+        each valid point at f covers ``log10((f + df/2) / (f - df/2))``, df the resolution
+        (a point at f <= df/2 counts as from df/4). On a logarithmic axis, as a loop's
+        response is read, so the low frequencies a sweep spends long on count fully."""
+        ok = self.valid(band_hz, min_coherence)
+        f = self.freq_hz[ok]
+        half = 0.5 * self.resolution_hz
+        return float(np.sum(np.log10((f + half) / np.maximum(f - half, 0.5 * half))))
 
     def to_columns(self) -> dict[str, np.ndarray]:
         """Columns for a CSV file: ``freq_hz, magnitude_db, phase_deg, coherence``."""
@@ -456,10 +461,10 @@ def frf_estimate(
         Sample rate in Hz.
     method : {"auto", "welch", "dft"}, default "auto"
         ``"welch"``: :func:`h1_estimate`; ``"dft"``: :func:`dft_estimate`; ``"auto"``:
-        both, keeping the DFT estimate only when its coherence reaches ``min_coherence``
-        over a quarter more of ``band_hz`` (of the whole axis without a band) than
-        Welch's: random and multisine tests keep Welch's estimate, fast sweeps and steps
-        get the DFT estimate.
+        both, keeping the DFT estimate only when it is valid (coherent and excited) over a
+        quarter more of ``band_hz`` (of the whole axis without a band) than Welch's,
+        measured in decades (:meth:`FrequencyResponse.covered_decades`): random and
+        multisine tests keep Welch's estimate, fast sweeps get the DFT estimate.
     nperseg : int, optional
         Welch segment length (and, as ``n_samples // nperseg``, the DFT estimate's number
         of averaged bins). Default: :func:`default_nperseg`.
@@ -492,7 +497,8 @@ def frf_estimate(
     band = band_hz if band_hz is not None else (0.0, welch.fs / 2.0)
     # the DFT estimate only when it validates over clearly more of the band (a quarter
     # more): on stationary tests both cover the same and Welch's estimate is kept
-    if dft.covered_hz(band, min_coherence) > 1.25 * welch.covered_hz(band, min_coherence):
+    if dft.covered_decades(band, min_coherence) > 1.25 * welch.covered_decades(
+            band, min_coherence):
         return dft
     return welch
 
