@@ -90,7 +90,7 @@ def test_identify_recovers_model_offsets_and_band(rng):
 
 def test_acceptance_is_the_one_definition(rng):
     u, y = _arx_record(rng)
-    strict = Acceptance(max_magnitude_db=1e-6)
+    strict = Acceptance(max_magnitude_db=1e-6, uncertainty_sigmas=0.0)
     res = identify(u, y, fs=100.0, orders=(1, 0, 1), decimate=None, acceptance=strict)
     assert not res.accepted
     assert any("magnitude error" in f for f in res.verdict.failed)
@@ -104,6 +104,25 @@ def test_acceptance_is_the_one_definition(rng):
         Acceptance(max_phase_deg=0)
     with pytest.raises(ParameterError, match="min_frf_points"):
         Acceptance(min_frf_points=0)
+    with pytest.raises(ParameterError, match="uncertainty_sigmas"):
+        Acceptance(uncertainty_sigmas=-1.0)
+
+
+def test_acceptance_allows_for_the_estimates_own_uncertainty(rng):
+    # A model 1.5 dB off judged against an estimate whose standard error is 0.5 dB:
+    # accepted with 2 standard errors allowed (1.5 - 2 * 0.5 = 0.5 <= 1 dB), refused with
+    # none. Built by hand so the numbers are exact.
+    from ehss.validation import FrfError
+
+    e = FrfError(band_hz=(0.0, 1.0), min_coherence=0.9, n_points=3, compared_hz=(0.1, 0.3),
+                 max_magnitude_db=1.5, rms_magnitude_db=1.0, weighted_rms_magnitude_db=1.0,
+                 max_phase_deg=1.0, rms_phase_deg=1.0, freq_hz=np.array([0.1, 0.2, 0.3]),
+                 magnitude_error_db=np.array([1.5, -0.2, 0.1]),
+                 phase_error_deg=np.array([1.0, 0.0, -6.0]),
+                 sigma_magnitude_db=np.array([0.5, 0.5, 0.5]),
+                 sigma_phase_deg=np.array([1.0, 1.0, 1.0]))
+    assert e.beyond_uncertainty(2.0) == (pytest.approx(0.5), pytest.approx(4.0))
+    assert e.beyond_uncertainty(0.0) == (pytest.approx(1.5), pytest.approx(6.0))
 
 
 def test_unstable_model_is_judged_unstable(rng):

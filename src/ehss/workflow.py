@@ -74,6 +74,12 @@ class Acceptance:
     min_fit_pct : float, default 90.0
         Smallest free-run simulation fit on the validation data, percent: in the band of
         interest when one is given (:func:`ehss.validation.band_fit`), raw otherwise.
+    uncertainty_sigmas : float, default 2.0
+        The frequency-response errors are judged after removing this many standard
+        errors of the estimate itself at each point (from its coherence and averages,
+        :class:`ehss.validation.FrfError`): an estimate from 8 averages at γ² = 0.9 is
+        itself uncertain by 0.7 dB / 4.8°, and cannot show a model wrong by less. On a
+        long, coherent record (γ² > 0.99, 10+ averages) this is a few hundredths of a dB.
 
     A model must also be stable (all poles strictly inside the unit circle) and its
     simulation must not diverge; these are not settings.
@@ -84,6 +90,7 @@ class Acceptance:
     max_phase_deg: float = 5.0
     min_frf_points: int = 3
     min_fit_pct: float = 90.0
+    uncertainty_sigmas: float = 2.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_coherence <= 1.0:
@@ -96,6 +103,9 @@ class Acceptance:
                 or self.min_frf_points < 1:
             raise ParameterError(f"min_frf_points={self.min_frf_points!r} must be an "
                                  "integer >= 1")
+        k = self.uncertainty_sigmas
+        if not (isinstance(k, (int, float)) and 0 <= k and math.isfinite(k)):
+            raise ParameterError(f"uncertainty_sigmas={k!r} must be a number >= 0")
         if not (isinstance(self.min_fit_pct, (int, float)) and self.min_fit_pct <= 100):
             raise ParameterError(f"min_fit_pct={self.min_fit_pct!r} must be a number <= 100")
 
@@ -115,12 +125,14 @@ class Acceptance:
             failed.append(f"{n} frequencies with coherence >= {self.min_coherence:g} "
                           f"(at least {self.min_frf_points} needed to compare)")
         else:
-            if e.max_magnitude_db > self.max_magnitude_db:
-                failed.append(f"magnitude error {e.max_magnitude_db:.2f} dB > "
-                              f"{self.max_magnitude_db:g} dB")
-            if e.max_phase_deg > self.max_phase_deg:
-                failed.append(f"phase error {e.max_phase_deg:.1f} deg > "
-                              f"{self.max_phase_deg:g} deg")
+            k = self.uncertainty_sigmas
+            mag, ph = e.beyond_uncertainty(k)
+            if mag > self.max_magnitude_db:
+                failed.append(f"magnitude error {mag:.2f} dB beyond {k:g} standard errors "
+                              f"of the estimate > {self.max_magnitude_db:g} dB")
+            if ph > self.max_phase_deg:
+                failed.append(f"phase error {ph:.1f} deg beyond {k:g} standard errors of "
+                              f"the estimate > {self.max_phase_deg:g} deg")
         return Verdict(accepted=not failed, failed=tuple(failed), acceptance=self)
 
     def summary(self) -> dict[str, Any]:
@@ -139,8 +151,8 @@ class Verdict:
     def format(self) -> str:
         a = self.acceptance
         rule = (f"stable, fit >= {a.min_fit_pct:g} %, frequency response within "
-                f"{a.max_magnitude_db:g} dB / {a.max_phase_deg:g} deg where coherence >= "
-                f"{a.min_coherence:g}")
+                f"{a.max_magnitude_db:g} dB / {a.max_phase_deg:g} deg (+ {a.uncertainty_sigmas:g}"
+                f" standard errors of the estimate) where coherence >= {a.min_coherence:g}")
         if self.accepted:
             return f"verdict: meets the acceptance ({rule})"
         return f"verdict: does NOT meet the acceptance ({rule}): " + "; ".join(self.failed)

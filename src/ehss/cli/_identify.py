@@ -42,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "state, k-step prediction fit, frequency-response error where the coherence is "
         "high, residual tests). Prints the model at full precision with its poles and zeros "
         "and the verdict against the acceptance (stable, fit >= 90 %, within 1 dB / 5 deg "
-        "where coherence >= 0.9), and saves it as JSON or MATLAB .mat. An unstable model "
+        "beyond twice the estimate's own standard error where coherence >= 0.9), and saves "
+        "it as JSON or MATLAB .mat. An unstable model "
         "is not written.",
     )
     add_record_arguments(p)
