@@ -183,6 +183,8 @@ class Prepared:
     trend_u, trend_y : Trend
         What was removed from the estimation data: the operating point of the model is
         ``(trend_u.offset, trend_y.offset)``.
+    trend_y_val : Trend
+        What was removed from the validation output (to plot it as measured).
     separate_validation : bool
         The validation data came from a separate record (else: the held-out end).
     holdout : float or None
@@ -200,6 +202,7 @@ class Prepared:
     detrend: str | None
     trend_u: Trend
     trend_y: Trend
+    trend_y_val: Trend
     separate_validation: bool
     holdout: float | None
     band_hz: tuple[float, float] | None
@@ -292,13 +295,14 @@ def prepare(
     ue, tu = preprocess.detrend(ue, detrend)
     ye, ty = preprocess.detrend(ye, detrend)
     uv, _ = preprocess.detrend(uv, detrend)
-    yv, _ = preprocess.detrend(yv, detrend)
+    yv, tyv = preprocess.detrend(yv, detrend)
     q = _decimation(decimate, ue, ye, fs, band_hz)
     if q > 1:
         ue, ye = preprocess.decimate(ue, ye, q)
         uv, yv = preprocess.decimate(uv, yv, q)
     return Prepared(u=ue, y=ye, u_val=uv, y_val=yv, fs=fs, decimation=q, detrend=detrend,
-                    trend_u=tu, trend_y=ty, separate_validation=separate, holdout=holdout,
+                    trend_u=tu, trend_y=ty, trend_y_val=tyv, separate_validation=separate,
+                    holdout=holdout,
                     band_hz=band_hz)
 
 

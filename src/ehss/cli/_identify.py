@@ -259,9 +259,12 @@ def _plots(res, rec, args, plots, writers) -> None:
     # the time window follows the record: the validation data, at most PLOT_SAMPLES of it
     n_show = min(rep.n_validation, PLOT_SAMPLES)
     t = np.arange(prep.y_val.size) / fs_m
-    y0 = prep.trend_y.offset if prep.detrend is not None else 0.0
+    # back to the validation record's own level (and drift), as measured
+    tr = prep.trend_y_val
+    k = np.arange(t.size) * prep.decimation
+    trend = tr.offset + tr.slope * (k - (k[-1] if k.size else 0) / 2.0)
     where = "separate record" if prep.separate_validation else "held-out data"
-    tfig = time_compare(t, prep.y_val + y0, {"model (simulated)": rep.simulated + y0},
+    tfig = time_compare(t, prep.y_val + trend, {"model (simulated)": rep.simulated + trend},
                         window_s=(0.0, (n_show - 1) / fs_m), ylabel=args.output,
                         title=f"{where}, simulation fit {_fit(rep.simulation_fit_pct)}")
 
