@@ -12,7 +12,7 @@ import scipy.signal
 import ehss
 from ehss.errors import DataError, ParameterError
 from ehss.frequency import h1_estimate
-from ehss.workflow import Acceptance, identify, prepare
+from ehss.workflow import Acceptance, assess, identify, prepare
 
 # ----------------------------------------------------------------------------- prepare
 
@@ -138,6 +138,23 @@ def test_unstable_model_is_judged_unstable(rng):
     assert not res.accepted
     assert any(f.startswith("unstable") for f in res.verdict.failed)
     assert "stable: NO" in res.format()
+
+
+def test_assess_judges_a_given_model_as_identify_does(rng):
+    # The true model, given rather than estimated, is judged on the same prepared data.
+    from ehss.identification import ArmaxModel
+
+    u, y = _arx_record(rng)
+    res = identify(u, y, fs=100.0, orders=(1, 0, 1), decimate=None)
+    report, verdict = assess(res.model, res.prepared)
+    assert verdict.accepted is res.accepted
+    assert report.simulation_fit_pct == pytest.approx(res.report.simulation_fit_pct,
+                                                      rel=1e-12)
+    true = ArmaxModel(a=[1.0, -0.8], b=[0.5], c=[1.0], delay=1, dt=0.01)
+    report_t, verdict_t = assess(true, res.prepared)
+    assert verdict_t.accepted and report_t.n_estimation == 2800
+    with pytest.raises(ParameterError, match="dt="):
+        assess(ArmaxModel(a=[1.0, -0.8], b=[0.5], c=[1.0], delay=1, dt=0.1), res.prepared)
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,8 @@ model "meets the acceptance" in one sense only, the one :class:`Acceptance` defi
    (:func:`ehss.preprocess.detrend`) and decimates an oversampled record
    (:func:`ehss.preprocess.decimate`, factor from :func:`ehss.preprocess.auto_decimation`);
 2. :func:`identify` fits the model with :func:`ehss.identification.estimate`, validates it
-   on the validation data (:func:`ehss.validation.validate`: free-run fit from the
+   on the validation data (:func:`assess`, which serves models made otherwise too;
+   :func:`ehss.validation.validate`: free-run fit from the
    least-squares initial state, k-step prediction fit, frequency-response error where the
    coherence is high, residual tests) and judges it with :meth:`Acceptance.judge`.
 
@@ -44,6 +45,7 @@ __all__ = [
     "DEFAULT_METHOD",
     "prepare",
     "identify",
+    "assess",
 ]
 
 #: Estimator used when none is named: ARMAX by prediction-error minimisation started from
@@ -475,7 +477,6 @@ def identify(
     prep = prepare(u, y, fs=fs, validation=validation, band_hz=band_hz, detrend=detrend,
                    decimate=decimate)
     fs_m = prep.fs_model
-    band = prep.band_hz if prep.band_hz is not None else (0.0, 0.45 * fs_m)
     if nperseg is not None and nperseg > prep.u_val.size:
         raise ParameterError(f"{nperseg=} is longer than the validation data "
                              f"({prep.u_val.size} samples at {fs_m:g} Hz)")
@@ -484,12 +485,8 @@ def identify(
     delay_m = delay // prep.decimation
     model = estimate(prep.u, prep.y, method=method, na=na, nb=nb, nc=nc, delay=delay_m,
                      dt=1.0 / fs_m)
-    report = validate(model, prep.u_val, prep.y_val, fs=fs_m, band_hz=band, holdout=None,
-                      min_coherence=acceptance.min_coherence, horizons=horizons,
-                      nperseg=nperseg, initial=initial, frf_method=frf_method)
-    if not prep.separate_validation:  # the held-out end: say how much came before it
-        report = dataclasses.replace(report, n_estimation=int(prep.u.size))
-    verdict = acceptance.judge(report)
+    report, verdict = assess(model, prep, acceptance=acceptance, nperseg=nperseg,
+                             frf_method=frf_method, initial=initial, horizons=horizons)
     validated = None
     e = report.frf_error
     if e is not None and e.n_points >= 2 and e.compared_hz[0] < e.compared_hz[1]:
@@ -497,6 +494,52 @@ def identify(
     model = dataclasses.replace(model, offsets=prep.offsets, band_hz=validated)
     return Identification(model=model, report=report, verdict=verdict, prepared=prep,
                           method=method, orders=(na, nb, nc, delay))
+
+
+def assess(
+    model: ArmaxModel,
+    prepared: Prepared,
+    *,
+    acceptance: Acceptance | None = None,
+    nperseg: int | None = None,
+    frf_method: str = "auto",
+    initial: str = "estimate",
+    horizons: tuple[int, ...] = (1, 5),
+) -> tuple[ValidationReport, Verdict]:
+    """Validate any model on prepared validation data and judge it: what :func:`identify`
+    does after estimating, for models made otherwise (printed in a paper, composed with a
+    known part, fitted by another tool) or for each candidate of an order search.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+        At the prepared rate (``model.dt == 1 / prepared.fs_model``), about the
+        operating point (its input and output are deviations, as the prepared data).
+    prepared : Prepared
+        From :func:`prepare`; its band (or ``(0, 0.45 fs_model)``) is the band compared.
+    acceptance, nperseg, frf_method, initial, horizons
+        As for :func:`identify`.
+
+    Returns
+    -------
+    report : ValidationReport
+    verdict : Verdict
+    """
+    acceptance = Acceptance() if acceptance is None else acceptance
+    if not isinstance(acceptance, Acceptance):
+        raise TypeError(f"acceptance must be an Acceptance, not {type(acceptance).__name__}")
+    fs_m = prepared.fs_model
+    if not math.isclose(model.dt, 1.0 / fs_m, rel_tol=1e-9):
+        raise ParameterError(f"the model's dt={model.dt!r} s is not the prepared data's "
+                             f"{1.0 / fs_m!r} s")
+    band = prepared.band_hz if prepared.band_hz is not None else (0.0, 0.45 * fs_m)
+    report = validate(model, prepared.u_val, prepared.y_val, fs=fs_m, band_hz=band,
+                      holdout=None, min_coherence=acceptance.min_coherence,
+                      horizons=horizons, nperseg=nperseg, initial=initial,
+                      frf_method=frf_method)
+    if not prepared.separate_validation:  # the held-out end: say how much came before it
+        report = dataclasses.replace(report, n_estimation=int(prepared.u.size))
+    return report, acceptance.judge(report)
 
 
 # ---------------------------------------------------------------------------- helpers

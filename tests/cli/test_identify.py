@@ -280,3 +280,23 @@ def test_identify_missing_required_argument(tmp_path, data_csv, capsys):
         main(["identify", str(data_csv), "--input", "u", "--output", "y", "--out", "m.json"])
     assert exc.value.code == 2
     assert "--na" in capsys.readouterr().err
+
+
+def test_plot_window_follows_the_record(tmp_path, rng, capsys):
+    from ehss.cli._identify import plot_window_s
+
+    # 300 validation samples at 1 Hz: the whole 299 s, not a fixed second (one sample)
+    assert plot_window_s(300, 1.0) == 299.0
+    assert plot_window_s(9000, 1000.0) == pytest.approx(1.999)
+    # and the command draws it for a slow record
+    n = 1000
+    u = rng.standard_normal(n)
+    y = scipy.signal.lfilter([0.0, 0.5], [1.0, -0.7], u) + 0.01 * rng.standard_normal(n)
+    path = tmp_path / "slow.csv"
+    write_csv(path, {"u": u, "y": y})
+    plot = tmp_path / "b.png"
+    code = main(["identify", str(path), "--input", "u", "--output", "y", "--fs", "1",
+                 "--na", "1", "--nb", "0", "--nc", "1", "--out", str(tmp_path / "m.json"),
+                 "--plot", str(plot)])
+    assert code == 0, capsys.readouterr().err
+    assert (tmp_path / "b_time.png").read_bytes()[:4] == b"\x89PNG"

@@ -23,7 +23,8 @@ from ehss.cli._dataargs import (
 )
 from ehss.errors import IdentificationError, ParameterError
 
-__all__ = ["register", "run", "time_plot_path", "model_to_mat", "PLOT_SAMPLES"]
+__all__ = ["register", "run", "time_plot_path", "plot_window_s", "model_to_mat",
+           "PLOT_SAMPLES"]
 
 #: The time comparison shows at most this many samples of the validation data.
 PLOT_SAMPLES = 2000
@@ -102,6 +103,13 @@ def time_plot_path(plot: str | Path) -> Path:
     """Where the time comparison goes for ``--plot plot``: ``<stem>_time<suffix>``."""
     plot = Path(plot)
     return plot.with_name(f"{plot.stem}_time{plot.suffix or '.png'}")
+
+
+def plot_window_s(n_validation: int, fs: float) -> float:
+    """End (s) of the time comparison's window: the validation data from its start, at
+    most :data:`PLOT_SAMPLES` of it, so the window follows the record's rate and length
+    (300 s of a 1 Hz record, 2 s of a 1 kHz rig)."""
+    return (min(int(n_validation), PLOT_SAMPLES) - 1) / float(fs)
 
 
 def _decimate_arg(text: str) -> int | str | None:
@@ -256,8 +264,6 @@ def _plots(res, rec, args, plots, writers) -> None:
              f"({model.na},{model.nb},{model.nc}) d={model.delay}")
     bode = bode_compare(rep.frf, {"identified model": model}, band_hz=band,
                         min_coherence=args.min_coherence, title=title)
-    # the time window follows the record: the validation data, at most PLOT_SAMPLES of it
-    n_show = min(rep.n_validation, PLOT_SAMPLES)
     t = np.arange(prep.y_val.size) / fs_m
     # back to the validation record's own level (and drift), as measured
     tr = prep.trend_y_val
@@ -265,7 +271,8 @@ def _plots(res, rec, args, plots, writers) -> None:
     trend = tr.offset + tr.slope * (k - (k[-1] if k.size else 0) / 2.0)
     where = "separate record" if prep.separate_validation else "held-out data"
     tfig = time_compare(t, prep.y_val + trend, {"model (simulated)": rep.simulated + trend},
-                        window_s=(0.0, (n_show - 1) / fs_m), ylabel=args.output,
+                        window_s=(0.0, plot_window_s(rep.n_validation, fs_m)),
+                        ylabel=args.output,
                         title=f"{where}, simulation fit {_fit(rep.simulation_fit_pct)}")
 
     def saver(fig):
