@@ -90,6 +90,22 @@ def test_frf_error_exact_offsets(true_model):
     assert json.dumps(err.summary())
 
 
+def test_frf_error_standard_errors_and_unexcited_points(true_model):
+    # coherence 0.9 and 8 averages: eps = sqrt(0.1 / (0.9 * 16)) = 0.08333 relative, i.e.
+    # 20/ln(10) * eps = 0.7238 dB and 4.775 deg (Bendat & Piersol 9.90, 9.92)
+    f = np.array([10.0, 20.0, 30.0])
+    g = true_model.frequency_response(f)
+    frf = FrequencyResponse(freq_hz=f, response=g, coherence=np.full(3, 0.9), n_averages=8,
+                            nperseg=100, fs=FS, input_power=np.array([1.0, 1e-4, 0.5]))
+    err = frf_error(true_model, frf, band_hz=(0.0, 100.0))
+    eps = math.sqrt(0.1 / (0.9 * 16))
+    # the 20 Hz point had 40 dB less input than the strongest: not excited, not compared
+    assert err.n_points == 2 and err.freq_hz.tolist() == [10.0, 30.0]
+    np.testing.assert_allclose(err.sigma_magnitude_db, 20 / math.log(10) * eps, rtol=1e-12)
+    np.testing.assert_allclose(err.sigma_phase_deg, math.degrees(eps), rtol=1e-12)
+    assert err.beyond_uncertainty(2.0) == (0.0, 0.0)
+
+
 def test_frf_error_phase_is_wrapped(true_model):
     f = np.array([5.0, 10.0])
     g = true_model.frequency_response(f)
