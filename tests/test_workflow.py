@@ -285,3 +285,31 @@ def test_oversampled_systems_identify_as_well_as_well_sampled_ones(noise, order,
     # the parameter error alone gives about 0.1 dB / 1 deg (seen at 10x, no decimation).
     assert np.max(np.abs(20 * np.log10(np.abs(g / h)))) <= 0.5
     assert np.max(np.abs(np.degrees(np.angle(g / h)))) <= 3.0
+
+
+@pytest.mark.slow
+def test_servo_loop_sampled_at_4_khz_identifies_over_its_band():
+    """A position loop of ~8 Hz bandwidth (5th order, ARX noise 50 dB down) recorded for
+    60 s at 4 kHz, identified over 0.2-50 Hz with the default workflow: decimated, then
+    within 0.5 dB / 3 deg of the true response over the whole band."""
+    fs = 4000.0
+    b, a = scipy.signal.butter(5, 2 * np.pi * 8.0, analog=True)
+    bd, ad, _ = scipy.signal.cont2discrete((b, a), 1.0 / fs, method="zoh")
+    bd = np.squeeze(bd)
+    band = (0.2, 50.0)
+    u = ehss.signals.band_limited_random(band_hz=band, rms=1.0, duration_s=60.0, fs=fs,
+                                         seed=1).values
+    x = scipy.signal.lfilter(bd, ad, u)
+    e = scipy.signal.lfilter([1.0], ad, np.random.default_rng(2).standard_normal(u.size))
+    e *= np.std(x) / np.std(e) / 10 ** (50 / 20)
+    res = identify(u, x + e, fs=fs, orders=(5, 4, 5, 1), band_hz=band)
+    assert res.prepared.decimation > 1 and res.model.dt == pytest.approx(
+        res.prepared.decimation / fs)
+    assert "decimated by" in res.format()
+    assert res.model.is_stable()
+    f = np.linspace(*band, 400)
+    _, h = scipy.signal.freqz(bd, ad, worN=f, fs=fs)
+    g = res.model.frequency_response(f)
+    # the requirement's 0.5 dB / 3 deg; at 50 dB SNR the parameter error is far below it
+    assert np.max(np.abs(20 * np.log10(np.abs(g / h)))) <= 0.5
+    assert np.max(np.abs(np.degrees(np.angle(g / h)))) <= 3.0
