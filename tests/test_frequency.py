@@ -196,7 +196,10 @@ def test_dft_estimate_of_a_sweep_matches_the_exact_response(rng, lowpass):
 
 
 def test_dft_estimate_of_a_periodic_tone_is_exact():
-    # A whole number of periods on the DFT grid: no leakage, ratio exact to rounding.
+    # A whole number of periods on the DFT grid. The end taper (Tukey, 10 %) spreads the
+    # tone over neighbouring bins, all inside the group, and scales input and output alike;
+    # only the image at -f, 2k = 200 bins away, leaks in, at the taper's side-lobe level
+    # (a cosine taper's side lobes fall as 1/m^3): about 1e-6 relative, so 1e-5.
     n, k = 4096, 100
     t = np.arange(n)
     u = np.cos(2 * np.pi * k * t / n)
@@ -204,9 +207,9 @@ def test_dft_estimate_of_a_periodic_tone_is_exact():
     frf = dft_estimate(u, y, FS, n_average=4)
     i = (k - 1) // 4  # groups of 4 bins from bin 1: bin k is in group (k - 1) // 4
     assert frf.freq_hz[i] == pytest.approx((4 * i + 2.5) * FS / n)
-    assert abs(frf.response[i]) == pytest.approx(0.3, rel=1e-12)
-    assert np.angle(frf.response[i]) == pytest.approx(-1.0, abs=1e-12)
-    assert frf.coherence[i] == pytest.approx(1.0, abs=1e-12)
+    assert abs(frf.response[i]) == pytest.approx(0.3, rel=1e-5)
+    assert np.angle(frf.response[i]) == pytest.approx(-1.0, abs=1e-5)
+    assert frf.coherence[i] == pytest.approx(1.0, abs=1e-10)
 
 
 def test_auto_keeps_welch_for_random_and_the_better_estimate_for_a_sweep(rng, lowpass):
