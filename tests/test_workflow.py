@@ -54,6 +54,15 @@ def test_prepare_bad_settings(rng, kw, match):
         prepare(u, u, fs=10.0, **kw)
 
 
+def test_auto_decimation_leaves_the_validation_data_enough_samples(rng):
+    # 20 000 samples at 1 kHz of content below 5 Hz would be decimated by 33; a 10 %
+    # holdout (2000 samples) caps it at 2000 // 256 = 7
+    u = scipy.signal.sosfiltfilt(scipy.signal.butter(4, 5.0, fs=1000.0, output="sos"),
+                                 rng.standard_normal(20_000))
+    p = prepare(u, u, fs=1000.0, validation=0.1)
+    assert p.decimation == 7 and p.u_val.size >= 256
+
+
 def test_prepare_too_short(rng):
     u = rng.standard_normal(60)
     with pytest.raises(DataError, match="too few"):

@@ -299,6 +299,8 @@ def prepare(
     uv, _ = preprocess.detrend(uv, detrend)
     yv, tyv = preprocess.detrend(yv, detrend)
     q = _decimation(decimate, ue, ye, fs, band_hz)
+    if decimate == "auto":  # leave the validation data enough samples too
+        q = max(1, min(q, uv.size // 256))
     if q > 1:
         ue, ye = preprocess.decimate(ue, ye, q)
         uv, yv = preprocess.decimate(uv, yv, q)
