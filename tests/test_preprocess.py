@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import hypothesis.extra.numpy as hnp
+import hypothesis.strategies as st
 import numpy as np
 import pytest
 import scipy.signal
+from hypothesis import given, settings
 from numpy.testing import assert_allclose
 
 from ehss.errors import DataError, ParameterError
@@ -110,3 +113,17 @@ def test_auto_decimation_follows_the_band_and_the_record(rng):
     # a record not oversampled is left alone
     w = rng.standard_normal(5000)
     assert auto_decimation(w, w, 100.0) == 1
+
+
+@settings(max_examples=50, deadline=None)
+@given(hnp.arrays(np.float64, st.integers(2, 200),
+                  elements=st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)))
+def test_detrend_linear_invariants(x):
+    # What is left is orthogonal to a constant and to a ramp, and the removed line plus
+    # the rest gives back the signal (to rounding of values up to 1e6).
+    xl, tr = detrend(x, "linear")
+    k = np.arange(x.size) - (x.size - 1) / 2.0
+    scale = 1.0 + np.max(np.abs(x))
+    assert abs(np.sum(xl)) <= 1e-9 * scale * x.size
+    assert abs(np.dot(k, xl)) <= 1e-9 * scale * x.size**2
+    np.testing.assert_allclose(xl + tr.offset + tr.slope * k, x, rtol=0, atol=1e-9 * scale)
