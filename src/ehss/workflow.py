@@ -151,6 +151,7 @@ class Verdict:
     acceptance: Acceptance
 
     def format(self) -> str:
+        """One line: ``verdict: meets the acceptance (...)`` or what failed."""
         a = self.acceptance
         rule = (f"stable, fit >= {a.min_fit_pct:g} %, frequency response within "
                 f"{a.max_magnitude_db:g} dB / {a.max_phase_deg:g} deg (+ {a.uncertainty_sigmas:g}"
@@ -160,6 +161,7 @@ class Verdict:
         return f"verdict: does NOT meet the acceptance ({rule}): " + "; ".join(self.failed)
 
     def summary(self) -> dict[str, Any]:
+        """Plain values for JSON."""
         return {"accepted": self.accepted, "failed": list(self.failed),
                 "acceptance": self.acceptance.summary()}
 
@@ -344,6 +346,7 @@ class Identification:
 
     @property
     def accepted(self) -> bool:
+        """The model meets the acceptance."""
         return self.verdict.accepted
 
     def summary(self) -> dict[str, Any]:
