@@ -55,6 +55,15 @@ _LAZY = {
     "armax_els": "ehss.identification",
     "select_order": "ehss.identification",
     "OrderSelection": "ehss.identification",
+    "estimate": "ehss.identification",
+    # the identification workflow: prepare, estimate, validate, judge
+    "identify": "ehss.workflow",
+    "Identification": "ehss.workflow",
+    "Acceptance": "ehss.workflow",
+    "assess": "ehss.workflow",
+    "prepare": "ehss.workflow",
+    "preprocess": None,
+    "workflow": None,
     # frequency response and validation
     "FrequencyResponse": "ehss.frequency",
     "h1_estimate": "ehss.frequency",
@@ -87,7 +96,7 @@ _LAZY = {
 if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from typing import Any
 
-    from ehss import linear, signals
+    from ehss import linear, preprocess, signals, workflow
     from ehss.compensation import InverseModel, compensate, design_inverse
     from ehss.control.tuning import tune_force, tune_position, tune_tvc
     from ehss.errors import (
@@ -106,6 +115,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
         RelsEstimator,
         armax_els,
         arx_ls,
+        estimate,
         rels,
         select_order,
     )
@@ -133,6 +143,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
         simulation_fit,
         validate,
     )
+    from ehss.workflow import Acceptance, Identification, assess, identify, prepare
 
 
 def __getattr__(name: str) -> Any:
@@ -194,6 +205,14 @@ __all__ = [
     "armax_els",
     "select_order",
     "OrderSelection",
+    "estimate",
+    "identify",
+    "Identification",
+    "Acceptance",
+    "assess",
+    "prepare",
+    "preprocess",
+    "workflow",
     # frequency response and validation
     "FrequencyResponse",
     "h1_estimate",

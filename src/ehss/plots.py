@@ -115,7 +115,8 @@ def bode_compare(
     # Estimate: faint everywhere, solid where it is reliable.
     ax_m.semilogx(f, mag, color="0.75", lw=0.8)
     ax_p.semilogx(f, phase, color="0.75", lw=0.8)
-    label = f"H1 estimate (Hann, {frf.n_averages} averages)"
+    label = (f"H1 estimate (Hann, {frf.n_averages} averages)" if frf.method == "welch" else
+             f"H1 from the record's DFT ({frf.n_averages} bins averaged)")
     ax_m.semilogx(f, np.where(good, mag, np.nan), color="k", lw=1.2, label=label)
     ax_p.semilogx(f, np.where(good, phase, np.nan), color="k", lw=1.2)
     ref_idx = int(np.flatnonzero(good)[0]) if good.any() else 0
