@@ -2,26 +2,46 @@
 
 ``method`` names the estimator; each returns an :class:`~ehss.identification.ArmaxModel`:
 
-========  ==============================================================
+========  ==============================================================================
 ``arx``   least squares, A y = q^-d B u + e (``nc`` is ignored, C = 1)
-``armax`` extended least squares refined by prediction-error minimisation
+``armax`` prediction-error minimisation started from extended least squares
+          (:func:`~ehss.identification.pem.armax_pem`)
+``oe``    output error y = q^-d B/F u + e by prediction-error minimisation
+          (:func:`~ehss.identification.pem.oe_pem`); returned with a = c = F, so
+          ``na`` is nf and ``nc`` is ignored (the model has nc = na)
 ``rels``  recursive extended least squares, the paper's eqs (19)–(22)
 ``rml``   recursive maximum likelihood (Ljung & Söderström)
-========  ==============================================================
+========  ==============================================================================
+
+Batch start of the recursive estimators (``init="batch"``, the default): the record is
+first identified in batch (ARMAX PEM, or ARX when nc = 0), and the recursion then runs
+over the record from that θ̂ with P(0) = (Σ ψ ψᵀ)⁻¹, the inverse information of the
+batch estimate in the recursion's own metric (ψ the regressor of eq. 19 for RELS, the
+1/Ĉ-filtered regressor for RML). The recursion is then the second pass of a two-pass
+estimate: it starts at the stationary point of its own loss with the gain it would have
+had after one pass, so it cannot wander into the poor local minima that a start from
+θ̂ = 0 with P(0) = α I falls into (RML on output-error records, RELS where 1/C − 1/2 is
+not positive real), and it ends with the P that a streaming estimator needs to keep
+tracking. ``init="zero"`` is the paper's start (θ̂(0) = 0, P(0) = α I).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+from scipy.signal import lfilter
+
 from ehss.errors import ParameterError
-from ehss.identification.batch import armax_els, arx_ls
+from ehss.identification.batch import arx_ls, regression_matrix
 from ehss.identification.model import ArmaxModel
-from ehss.identification.rels import rels
+from ehss.identification.pem import armax_pem, oe_pem
+from ehss.identification.rels import _rms_scale, _theta_scale, check_record, rels
 
-__all__ = ["METHODS", "estimate"]
+__all__ = ["METHODS", "INITS", "estimate"]
 
-METHODS = ("arx", "armax", "rels", "rml")
+METHODS = ("arx", "armax", "oe", "rels", "rml")
+INITS = ("batch", "zero")
 
 
 def estimate(
@@ -34,6 +54,10 @@ def estimate(
     nc: int,
     delay: int = 1,
     dt: float = 1.0,
+    init: str = "batch",
+    forgetting: float = 1.0,
+    p0: float = 1e6,
+    p0_c: float | None = None,
 ) -> ArmaxModel:
     """Fit an ARMAX-family model of orders (na, nb, nc) and delay to one record.
 
@@ -41,24 +65,84 @@ def estimate(
     ----------
     u, y : array_like, shape (n_samples,)
         Input and output (deviations from the operating point).
-    method : {"arx", "armax", "rels", "rml"}
+    method : {"arx", "armax", "oe", "rels", "rml"}
         The estimator (see the module's table).
     na, nb, nc : int
-        Orders of A, B (nb + 1 coefficients) and C.
+        Orders of A (nf for "oe"), B (nb + 1 coefficients) and C (ignored by "arx" and
+        "oe").
     delay : int
         Input delay in samples.
     dt : float
         Sample period in seconds.
+    init : {"batch", "zero"}
+        Start of "rels"/"rml" (ignored by the batch methods): from the batch estimate
+        with its inverse information as P(0) (default, see the module notes), or the
+        paper's θ̂(0) = 0, P(0) = α I.
+    forgetting, p0, p0_c : float
+        λ, α and α_c of :func:`~ehss.identification.rels` ("rels"/"rml" only; ``p0``
+        and ``p0_c`` only with ``init="zero"``).
 
     Raises
     ------
     ParameterError
-        For an unknown ``method``.
+        For an unknown ``method`` or ``init``, or impossible orders.
+    DataError
+        For a bad or too short record.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.signal import lfilter
+    >>> u = np.random.default_rng(0).standard_normal(2000)
+    >>> y = lfilter([0, 0.5], [1, -0.8], u)
+    >>> m = estimate(u, y, method="arx", na=1, nb=0, nc=0)
+    >>> np.round(m.a, 6).tolist()
+    [1.0, -0.8]
     """
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
+    if not isinstance(init, str) or init not in INITS:
+        raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
     if method == "arx":
         return arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
     if method == "armax":
-        return armax_els(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt)
-    return rels(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt, method=method)
+        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt)
+    if method == "oe":
+        return oe_pem(u, y, nf=na, nb=nb, delay=delay, dt=dt)
+    kw = {"na": na, "nb": nb, "nc": nc, "delay": delay, "dt": dt, "forgetting": forgetting,
+          "method": method}
+    if init == "zero":
+        return rels(u, y, p0=p0, p0_c=p0_c, **kw)
+    start = armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt) if nc else \
+        arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
+    u, y = check_record(u, y)
+    P0 = _start_information(u, y, start, filtered=(method == "rml"))
+    model = rels(u, y, theta0=start.theta, p0_matrix=P0, **kw)
+    model.meta.update({"init": "batch", "start_method": start.meta["method"]})
+    return model
+
+
+def _start_information(u: np.ndarray, y: np.ndarray, start: ArmaxModel, *,
+                       filtered: bool) -> np.ndarray:
+    """(Σ ψψᵀ)⁻¹ at the batch estimate, on the RMS-normalised data the recursion uses.
+
+    ψ(k) = [−y(k−1).., u(k−d).., ξ(k−1)..] with ξ the batch model's prediction errors
+    (eq. 19's regressor); for RML ψ is filtered through 1/C, the gradient of ξ. A ridge
+    of 1e-9 of the mean diagonal keeps P(0) positive definite when columns are
+    dependent (an output-error start has C = A).
+    """
+    na, nb, nc, d = start.na, start.nb, start.nc, start.delay
+    su, sy = _rms_scale(u), _rms_scale(y)
+    us, ys = u / su, y / sy
+    theta_s = start.theta / _theta_scale(na, nb, nc, su, sy)
+    a = np.concatenate([[1.0], theta_s[:na]])
+    bd = np.concatenate([np.zeros(d), theta_s[na : na + nb + 1]])
+    c = np.concatenate([[1.0], theta_s[na + nb + 1 :]])
+    xi = lfilter([1.0], c, lfilter(a, [1.0], ys) - lfilter(bd, [1.0], us))
+    psi, _, _ = regression_matrix(us, ys, xi, na, nb, nc, d)
+    if filtered and nc:
+        psi = lfilter([1.0], c, psi, axis=0)
+    info = psi.T @ psi
+    P = np.linalg.pinv(info)
+    P = 0.5 * (P + P.T)
+    return P + np.eye(P.shape[0]) * 1e-9 * max(float(np.mean(np.diag(P))), 1e-300)
