@@ -116,6 +116,7 @@ def select_order(
     p0: float = 1e6,
     p0_c: float | None = None,
     forgetting: float = 1.0,
+    fit_tolerance: float = 0.1,
 ) -> OrderSelection:
     """Fit every (na, nb, nc, delay) of the grid and pick the best stable one.
 
@@ -138,12 +139,16 @@ def select_order(
         Start of "rels"/"rml", as in :func:`~ehss.identification.estimate`.
     p0, p0_c, forgetting : float
         α, α_c and λ of "rels"/"rml" (``p0``, ``p0_c`` with ``init="zero"`` only).
+    fit_tolerance : float
+        With ``criterion="fit"``, candidates within this many fit points of the best are
+        taken as equally good and the one with the fewest parameters is picked (fit
+        differences of a tenth of a point are within what one validation record can
+        resolve; the smaller model generalises better).
 
     Returns
     -------
     OrderSelection
-        Ties are broken towards the candidate listed first (fewest parameters first in
-        the grid order of the CLI).
+        Remaining ties go to the candidate listed first in the grid.
 
     Raises
     ------
@@ -160,6 +165,10 @@ def select_order(
         raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
     if criterion == "fit" and validation is None:
         raise ParameterError("criterion='fit' needs validation=(u_val, y_val)")
+    tol = fit_tolerance
+    if (isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating))
+            or not (math.isfinite(tol) and tol >= 0)):
+        raise ParameterError(f"fit_tolerance={fit_tolerance!r} must be a number >= 0")
     u, y = check_record(u, y)
     if validation is not None:
         uv, yv = check_record(*validation)
@@ -189,6 +198,9 @@ def select_order(
             f"{method!r}; try lower orders, another method or a longer record"
         )
     i = min(ok, key=lambda j: key(rows[j]))
+    if criterion == "fit":
+        near = [j for j in ok if rows[j].fit >= rows[i].fit - tol]
+        i = min(near, key=lambda j: (rows[j].n_params, j))
     return OrderSelection(table=tuple(rows), best=rows[i], criterion=criterion,
                           model=models[i], method=method)
 
