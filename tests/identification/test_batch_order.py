@@ -85,12 +85,25 @@ def test_select_order_never_recommends_an_unstable_model(rng):
         select_order(u, y, na=[1, 2], nb=[0], nc=[0], method="arx", validation=(uv, yv))
 
 
+def test_free_run_fit_estimates_the_initial_state(rng):
+    m = ArmaxModel(a=[1.0, -1.6, 0.8], b=[0.5, 0.2], delay=1)
+    u = rng.standard_normal(500)
+    # the record starts in motion: the model's response from a non-zero initial state
+    y = lfilter([0.0, 0.5, 0.2], [1.0, -1.6, 0.8], u, zi=[3.0, -2.0])[0]
+    # exact model + estimated state: perfect up to least-squares rounding
+    assert free_run_fit(m, u, y) == pytest.approx(100.0, abs=1e-8)
+    assert free_run_fit(m, u, y, initial="zero") < 99.0
+    with pytest.raises(ParameterError, match="initial='guess' must be one of estimate, zero"):
+        free_run_fit(m, u, y, initial="guess")
+
+
 def test_free_run_fit_reports_divergence(rng):
     m = ArmaxModel(a=[1.0, -1.5], b=[1.0], delay=1)
     u = rng.standard_normal(2000)
     assert free_run_fit(m, u, rng.standard_normal(2000)) == -np.inf
+    assert free_run_fit(m, u, rng.standard_normal(2000), initial="zero") == -np.inf
     ok = ArmaxModel(a=[1.0, -0.5], b=[1.0], delay=1)
-    assert free_run_fit(ok, u, ok.simulate(u)) == 100.0
+    assert free_run_fit(ok, u, ok.simulate(u), initial="zero") == 100.0
 
 
 def test_select_order_with_rml(rng):

@@ -15,8 +15,9 @@ estimation data give the loss V = mean(ε²), and with p free parameters and N s
     \\mathrm{MDL} = \\ln V + p\\ln N / N .
 
 The validation fit is fit = 100 (1 − ‖y − ŷ_sim‖ / ‖y − ȳ‖) with ŷ_sim the model's
-noise-free response to the validation input from a zero initial state; a simulation that
-diverges scores −inf.
+noise-free response to the validation input from an initial state estimated by least
+squares (MATLAB ``compare``'s default; or zero, see :func:`free_run_fit`); a simulation
+that diverges scores −inf.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.signal import lfilter
 
 from ehss.errors import DataError, EhssWarning, IdentificationError, ParameterError
 from ehss.identification.estimators import INITS, METHODS, estimate
@@ -38,6 +40,7 @@ from ehss.identification.rels import check_record
 __all__ = ["OrderRow", "OrderSelection", "select_order", "fit_percent", "free_run_fit"]
 
 _CRITERIA = ("aic", "fpe", "mdl", "fit")
+_INITIAL = ("estimate", "zero")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -117,6 +120,7 @@ def select_order(
     p0_c: float | None = None,
     forgetting: float = 1.0,
     fit_tolerance: float = 0.1,
+    initial: str = "estimate",
 ) -> OrderSelection:
     """Fit every (na, nb, nc, delay) of the grid and pick the best stable one.
 
@@ -145,6 +149,9 @@ def select_order(
         differences of a tenth of a point are within what one validation record can
         resolve; the smaller model generalises better).
 
+    initial : {"estimate", "zero"}
+        Initial state of the validation simulation, as in :func:`free_run_fit`.
+
     Returns
     -------
     OrderSelection
@@ -165,6 +172,8 @@ def select_order(
         raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
     if criterion == "fit" and validation is None:
         raise ParameterError("criterion='fit' needs validation=(u_val, y_val)")
+    if initial not in _INITIAL:
+        raise ParameterError(f"initial={initial!r} must be one of {', '.join(_INITIAL)}")
     tol = fit_tolerance
     if (isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating))
             or not (math.isfinite(tol) and tol >= 0)):
@@ -186,7 +195,7 @@ def select_order(
             warnings.simplefilter("ignore", EhssWarning)  # unstable candidates are scored
             m = estimate(u, y, method=method, na=a_, nb=b_, nc=c_, delay=d_, dt=dt, init=init,
                          p0=p0, p0_c=p0_c, forgetting=forgetting)
-        rows.append(_score(m, u, y, None if validation is None else (uv, yv)))
+        rows.append(_score(m, u, y, None if validation is None else (uv, yv), initial))
         models.append(m)
     if not rows:  # pragma: no cover - _candidates forbids empty grids
         raise DataError(f"no candidate orders for {u.size} samples")
@@ -206,7 +215,7 @@ def select_order(
 
 
 def _score(m: ArmaxModel, u: np.ndarray, y: np.ndarray,
-           validation: tuple[np.ndarray, np.ndarray] | None) -> OrderRow:
+           validation: tuple[np.ndarray, np.ndarray] | None, initial: str) -> OrderRow:
     """Loss, AIC, FPE, MDL on the estimation data and the free-run fit on validation."""
     k0 = max(m.na, m.nb + m.delay, m.nc)
     with np.errstate(all="ignore"):
@@ -221,7 +230,7 @@ def _score(m: ArmaxModel, u: np.ndarray, y: np.ndarray,
     radius = m.max_pole_radius()
     fit = math.nan
     if validation is not None:
-        fit = free_run_fit(m, *validation)
+        fit = free_run_fit(m, *validation, initial=initial)
     return OrderRow(
         na=m.na, nb=m.nb, nc=m.nc, delay=m.delay, n_params=p, loss=V,
         aic=math.log(V) + 2 * p / N,
@@ -231,15 +240,42 @@ def _score(m: ArmaxModel, u: np.ndarray, y: np.ndarray,
     )
 
 
-def free_run_fit(model: ArmaxModel, u: Any, y: Any) -> float:
-    """Simulation fit (%) of ``model`` on (u, y) from a zero initial state.
+def free_run_fit(model: ArmaxModel, u: Any, y: Any, *, initial: str = "estimate") -> float:
+    """Simulation fit (%) of ``model`` on (u, y), as MATLAB's ``compare``.
 
-    −inf when the simulation diverges (non-finite, or larger than 1e6 times the output's
-    range), so a diverging model is reported as such, never as a long number.
+    Parameters
+    ----------
+    model : ArmaxModel
+    u, y : array_like, shape (n_samples,)
+        Validation input and output (deviations from the operating point).
+    initial : {"estimate", "zero"}
+        "estimate" (default): the initial state of B/A is chosen by least squares to
+        fit y (the model's free response is linear in it), so a record that does not
+        start at rest is not penalised for its first transient; "zero": the model starts
+        at rest.
+
+    Returns
+    -------
+    float
+        100 (1 − ‖y − ŷ‖/‖y − ȳ‖); −inf when the simulation diverges (non-finite, or
+        larger than 1e6 times the output's range), so a diverging model is reported as
+        such, never as a long number.
     """
+    if initial not in _INITIAL:
+        raise ParameterError(f"initial={initial!r} must be one of {', '.join(_INITIAL)}")
     u, y = check_record(u, y)
+    bd = np.concatenate([np.zeros(model.delay), model.b])
+    a = model.a
     with np.errstate(all="ignore"):
-        ysim = model.simulate(u)
+        ysim = lfilter(bd, a, u)
+        if initial == "estimate":
+            # ŷ = ŷ_0 + Σ z_j r_j with r_j the response to initial state e_j (lfilter's zi)
+            n = max(a.size, bd.size) - 1
+            basis = np.column_stack([lfilter(bd, a, np.zeros(u.size), zi=np.eye(n)[j])[0]
+                                     for j in range(n)]) if n else np.zeros((u.size, 0))
+            if n and np.all(np.isfinite(basis)) and np.all(np.isfinite(ysim)):
+                z = np.linalg.lstsq(basis, y - ysim, rcond=None)[0]
+                ysim = ysim + basis @ z
     span = float(np.max(np.abs(y - np.mean(y)))) or 1.0
     if not np.all(np.isfinite(ysim)) or float(np.max(np.abs(ysim))) > 1e6 * span:
         return -math.inf
