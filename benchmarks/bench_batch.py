@@ -5,9 +5,11 @@ Run from the project root:  .venv/bin/python benchmarks/bench_batch.py
 Records: tests/data/daisy_dryer.csv and daisy_robot_arm.csv (DaISy, see their README).
 Each is split in halves; the means of the first half are removed from both; every tool
 fits on the first half and is scored by its free-run (simulation) fit on the second,
-100 (1 − ‖y − ŷ‖/‖y − ȳ‖), from a zero initial state for ehss and SIPPY and from the
-first measured outputs for sysidentpy (its ``predict`` takes its initial conditions from
-y); all fits are computed over validation samples 10..end so the first lags do not count.
+100 (1 − ‖y − ŷ‖/‖y − ȳ‖). ehss and SIPPY models are scored by the same function,
+:func:`ehss.identification.order.free_run_fit`, from the least-squares initial state
+(MATLAB ``compare``'s default); sysidentpy's ``predict`` takes its initial conditions
+from the first measured outputs instead, so its fit is computed over validation samples
+``max_lag``..end.
 
 All tools fit the same structure (the orders ``ehss order`` picks with its default
 method on that record, reported in the table); sysidentpy's FROLS additionally chooses
@@ -26,19 +28,18 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import lfilter
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from ehss.identification import estimate, select_order  # noqa: E402
+from ehss.identification import ArmaxModel, estimate, select_order  # noqa: E402
+from ehss.identification.order import fit_percent, free_run_fit  # noqa: E402
 from ehss.io import read_columns, sample_rate  # noqa: E402
 
 RECORDS = {
     "dryer": ("daisy_dryer.csv", range(1, 6), range(0, 5), (1, 2)),
     "robot arm": ("daisy_robot_arm.csv", range(2, 9, 2), range(1, 8, 2), (2,)),
 }
-SKIP = 10
 
 
 def halves(name: str):
@@ -50,11 +51,6 @@ def halves(name: str):
     return (u[:n], y[:n]), (u[n:], y[n:]), dt
 
 
-def fit(y: np.ndarray, ysim: np.ndarray) -> float:
-    y, ysim = y[SKIP:], np.asarray(ysim, dtype=float).reshape(-1)[SKIP:]
-    if not np.all(np.isfinite(ysim)):
-        return -np.inf
-    return 100.0 * (1.0 - np.linalg.norm(y - ysim) / np.linalg.norm(y - np.mean(y)))
 
 
 def timed(fn, repeat: int):
@@ -67,12 +63,11 @@ def timed(fn, repeat: int):
     return out, best
 
 
-def tf_simulate(G, u: np.ndarray) -> np.ndarray:
-    """Simulate a python-control discrete SISO transfer function from rest."""
+def tf_model(G, dt: float) -> ArmaxModel:
+    """A python-control discrete SISO transfer function as an ArmaxModel (B/A part)."""
     num = np.atleast_1d(np.squeeze(G.num[0][0])).astype(float)
     den = np.atleast_1d(np.squeeze(G.den[0][0])).astype(float)
-    num = np.concatenate([np.zeros(den.size - num.size), num])
-    return lfilter(num / den[0], den / den[0], u)
+    return ArmaxModel.from_paper_form(num, den, dt=dt)
 
 
 def run_record(label: str, spec, repeat: int) -> list[tuple]:
@@ -91,11 +86,11 @@ def run_record(label: str, spec, repeat: int) -> list[tuple]:
     na, nb, nc, d = best.na, best.nb, best.nc, best.delay
     orders = f"({na},{nb},{nc},{d})"
     rows.append((label, "ehss default workflow (order → armax)", orders,
-                 fit(yv, model.simulate(uv)), t))
+                 free_run_fit(model, uv, yv), t))
     for method in ("arx", "armax", "oe"):
         m, t = timed(lambda method=method: estimate(u, y, method=method, na=na, nb=nb, nc=nc,
                                                     delay=d, dt=dt), repeat)
-        rows.append((label, f"ehss {method}", orders, fit(yv, m.simulate(uv)), t))
+        rows.append((label, f"ehss {method}", orders, free_run_fit(m, uv, yv), t))
 
     from sippy_unipi import system_identification
 
@@ -112,7 +107,7 @@ def run_record(label: str, spec, repeat: int) -> list[tuple]:
         tag = method + (" (OPT)" if kw.get("ARMAX_mod") == "OPT" else "")
         try:
             s, t = timed(lambda method=method, kw=kw: sippy(method, **kw), repeat)
-            rows.append((label, f"SIPPY {tag}", orders, fit(yv, tf_simulate(s.G, uv)), t))
+            rows.append((label, f"SIPPY {tag}", orders, free_run_fit(tf_model(s.G, dt), uv, yv), t))
         except Exception as exc:  # noqa: BLE001 - a failing third-party fit is reported
             rows.append((label, f"SIPPY {tag}", orders, float("nan"), float("nan")))
             print(f"SIPPY {tag} failed on {label}: {exc}", file=sys.stderr)
@@ -134,7 +129,9 @@ def run_record(label: str, spec, repeat: int) -> list[tuple]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         yhat = m.predict(X=uv.reshape(-1, 1), y=yv.reshape(-1, 1))
-    rows.append((label, "sysidentpy FROLS (linear, AIC terms)", orders, fit(yv, yhat), t))
+    lag = m.max_lag
+    rows.append((label, "sysidentpy FROLS (linear, AIC terms)", orders,
+                 fit_percent(yv[lag:], np.asarray(yhat).reshape(-1)[lag:]), t))
     return rows
 
 

@@ -108,3 +108,16 @@ def test_bad_settings(rng, kw, match):
     args = {"nf": 1, "nb": 0, **kw}
     with pytest.raises(ParameterError, match=match):
         oe_pem(u, u, **args)
+
+
+def test_schur_cohn_stability_test_matches_roots(rng):
+    from ehss.identification.pem import _inside
+
+    for _ in range(3000):
+        n = int(rng.integers(1, 8))
+        p = rng.standard_normal(n) * rng.uniform(0.1, 2.0)
+        r = float(rng.uniform(0.5, 0.9999))
+        radius = float(np.max(np.abs(np.roots(np.concatenate([[1.0], p])))))
+        if abs(radius - r) < 1e-9:  # undecidable in floating point at the boundary
+            continue
+        assert _inside(p, r) == (radius < r), (p, r, radius)
