@@ -121,3 +121,47 @@ def test_schur_cohn_stability_test_matches_roots(rng):
         if abs(radius - r) < 1e-9:  # undecidable in floating point at the boundary
             continue
         assert _inside(p, r) == (radius < r), (p, r, radius)
+
+
+def _oversampled_plant(order, fs, f_bw=1.0):
+    """Resonances (ζ = 0.3) spread over the bandwidth f_bw, unit DC gain, delay 1."""
+    from .systems import resonance_poles
+
+    freqs = {2: [f_bw], 4: [0.4 * f_bw, f_bw], 6: [0.3 * f_bw, 0.7 * f_bw, 1.2 * f_bw]}[order]
+    a = np.real(np.poly([p for f in freqs for p in resonance_poles(f, 0.3, fs)]))
+    b = np.array([1.0, 0.5]) * a.sum() / 1.5
+    return a, b
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["oe", "armax"])
+@pytest.mark.parametrize("order", [2, 4, 6])
+@pytest.mark.parametrize("oversampling", [10, 100])
+def test_oversampled_records_identify_within_half_a_db(kind, order, oversampling):
+    from ehss.identification import estimate
+
+    from .systems import band_limited
+
+    f_bw = 1.0
+    fs = oversampling * f_bw
+    a, b = _oversampled_plant(order, fs, f_bw)
+    rng = np.random.default_rng(1000 * order + oversampling)
+    n = 10_000
+    u = band_limited(rng, n, f_lo=0.02 * f_bw, f_hi=min(2 * f_bw, 0.45 * fs), fs=fs)
+    y0 = lfilter(np.r_[0.0, b], a, u)
+    if kind == "oe":  # white sensor noise, 30 dB SNR
+        c = a
+        y = y0 + np.std(y0) * 10 ** (-30 / 20) * rng.standard_normal(n)
+    else:  # coloured equation noise C/A e, 30 dB SNR
+        c = np.real(np.poly([0.5] * (order // 2)))
+        v = lfilter(c, a, rng.standard_normal(n))
+        y = y0 + v * np.std(y0) / np.std(v) * 10 ** (-30 / 20)
+    m = estimate(u, y, method=kind, na=order, nb=1, nc=c.size - 1, dt=1.0 / fs)
+    truth = ArmaxModel(a=a, b=b, c=c, delay=1, dt=1.0 / fs)
+    f = np.linspace(0.05 * f_bw, 2.0 * f_bw, 200)  # the excited band
+    r = m.frequency_response(f) / truth.frequency_response(f)
+    # 0.5 dB / 3° is the accuracy asked of the default estimators at 30 dB SNR; the
+    # statistical error at N = 1e4 is below 0.25 dB / 1.5° in every case here
+    assert np.max(np.abs(20 * np.log10(np.abs(r)))) < 0.5
+    assert np.max(np.abs(np.angle(r, deg=True))) < 3.0
+    assert m.is_stable()
