@@ -189,12 +189,21 @@ def select_order(
         _candidates("delay", delay, 0),
     ))
     rows: list[OrderRow] = []
-    models: list[ArmaxModel] = []
+    models: list[ArmaxModel | None] = []
     for a_, b_, c_, d_ in grid:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", EhssWarning)  # unstable candidates are scored
-            m = estimate(u, y, method=method, na=a_, nb=b_, nc=c_, delay=d_, dt=dt, init=init,
-                         p0=p0, p0_c=p0_c, forgetting=forgetting)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", EhssWarning)  # unstable ones are scored
+                m = estimate(u, y, method=method, na=a_, nb=b_, nc=c_, delay=d_, dt=dt,
+                             init=init, p0=p0, p0_c=p0_c, forgetting=forgetting)
+        except IdentificationError:  # a candidate that cannot be fitted is listed as failed
+            p = a_ + b_ + 1 + c_
+            rows.append(OrderRow(na=a_, nb=b_, nc=c_, delay=d_, n_params=p, loss=math.inf,
+                                 aic=math.inf, fpe=math.inf, mdl=math.inf,
+                                 fit=-math.inf if validation is not None else math.nan,
+                                 stable=False, max_pole_radius=math.inf))
+            models.append(None)
+            continue
         rows.append(_score(m, u, y, None if validation is None else (uv, yv), initial))
         models.append(m)
     if not rows:  # pragma: no cover - _candidates forbids empty grids
