@@ -23,6 +23,11 @@ had after one pass, so it cannot wander into the poor local minima that a start 
 θ̂ = 0 with P(0) = α I falls into (RML on output-error records, RELS where 1/C − 1/2 is
 not positive real), and it ends with the P that a streaming estimator needs to keep
 tracking. ``init="zero"`` is the paper's start (θ̂(0) = 0, P(0) = α I).
+
+The start cannot change where a recursion converges to: RELS's fixed point is the
+prediction-error optimum only where 1/C − 1/2 is strictly positive real, so on
+output-error records (C = A, lightly damped) RELS drifts away from the start even so;
+use RML (or the batch "oe"/"armax") there.
 """
 
 from __future__ import annotations
