@@ -88,3 +88,13 @@ def test_bad_method_or_init(rng, kw, match):
     u = rng.standard_normal(100)
     with pytest.raises(ParameterError, match=match):
         estimate(u, u, na=1, nb=0, nc=0, **kw)
+
+
+def test_unstable_arx_fit_warns(rng):
+    from scipy.signal import lfilter
+
+    u = rng.standard_normal(300)
+    y = lfilter([0.0, 1.0], [1.0, -1.02], u)
+    with pytest.warns(EhssWarning, match="unstable"):
+        m = estimate(u, y, method="arx", na=1, nb=0, nc=0)
+    assert m.meta["stable"] is False

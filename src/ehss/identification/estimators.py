@@ -109,7 +109,9 @@ def estimate(
     if not isinstance(init, str) or init not in INITS:
         raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
     if method == "arx":
-        return arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
+        model = arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
+        model.meta["stable"] = model.check(warn=True)  # an unstable fit is never silent
+        return model
     if method == "armax":
         return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt)
     if method == "oe":
