@@ -1,7 +1,7 @@
 """Prediction-error minimisation (PEM) for ARMAX and output-error models.
 
 Both estimators minimise the sum of squared one-step prediction errors
-V(θ) = Σ ε(k, θ)² with ``scipy.optimize.least_squares`` (trust-region reflective),
+V(θ) = Σ ε(k, θ)² with ``scipy.optimize.least_squares`` (Levenberg–Marquardt, MINPACK),
 given the analytic Jacobian, which is the regressor filtered through the predictor's
 denominator (Ljung, *System Identification*, 2nd ed., 1999, §10.2):
 
@@ -30,11 +30,14 @@ Safeguards:
 * u and y are scaled by their RMS inside (so tolerances mean the same in any units);
   b is de-scaled by s_y/s_u on return;
 * the predictor stays stable: a trial point whose C (ARMAX) or F (OE) has a root at or
-  beyond ``radius`` gets a huge constant residual, so the trust-region step is rejected
-  and shrunk (the cost is compared, never differentiated, there); every start is
-  stabilised first by reflecting roots into the circle;
-* several cheap starts are tried (ARMAX: extended least squares and ARX with C = 1;
-  OE: ARX and Steiglitz–McBride iterations) and the lowest loss wins;
+  beyond ``radius`` (Schur–Cohn test) gets a huge constant residual, so the step is
+  rejected and the damping raised (the cost is compared, never differentiated, there);
+  every start is stabilised first by reflecting roots into the circle;
+* the predictor starts at rest before the first sample (zero initial conditions), and
+  the loss counts the samples from max(na, nb + d, nc) on;
+* several cheap starts are tried (ARMAX: extended least squares, ARX with C = 1 and,
+  when nc ≥ na, the output-error fit with C = F; OE: ARX and Steiglitz–McBride
+  iterations) and the lowest loss wins;
 * an ARMAX estimate whose A is unstable is flagged (``meta["stable"] = False``) and warned
   about, never returned silently.
 """
@@ -83,7 +86,7 @@ def _inside(p: np.ndarray, radius: float) -> bool:
 
 
 def _solve(fun, jac, x0: np.ndarray, max_nfev: int, tol: float):
-    """One trust-region run; returns (x, cost, nfev)."""
+    """One Levenberg–Marquardt run; returns (x, cost, nfev)."""
     sol = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=tol, ftol=tol,
                         gtol=tol, max_nfev=max_nfev)
     return sol.x, float(sol.cost), int(sol.nfev)
@@ -157,7 +160,7 @@ def armax_pem(
     radius : float
         Roots of C are kept inside this radius (0 < radius < 1).
     max_nfev : int
-        Evaluation budget of each start's trust-region run.
+        Evaluation budget of each start's Levenberg–Marquardt run.
     tol : float
         ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
 
