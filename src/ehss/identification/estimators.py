@@ -38,15 +38,25 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ehss.errors import ParameterError
+from ehss.identification import _kernels as _k
 from ehss.identification.batch import arx_ls, regression_matrix
 from ehss.identification.model import ArmaxModel
 from ehss.identification.pem import armax_pem, oe_pem
-from ehss.identification.rels import _rms_scale, _theta_scale, check_record, rels
+from ehss.identification.rels import (
+    _check_settings,
+    _model_from_state,
+    _new_state,
+    _rms_scale,
+    _theta_scale,
+    check_record,
+    rels,
+)
 
 __all__ = ["METHODS", "INITS", "estimate"]
 
 METHODS = ("arx", "armax", "oe", "rels", "rml")
 INITS = ("batch", "zero")
+_C_RADIUS = 0.999  # as the batch PEM start keeps C: no projection at the first sample
 
 
 def estimate(
@@ -120,12 +130,53 @@ def estimate(
           "method": method}
     if init == "zero":
         return rels(u, y, p0=p0, p0_c=p0_c, **kw)
+    na, nb, nc, delay, forgetting, _, dt = _check_settings(na, nb, nc, delay, forgetting,
+                                                           p0, dt)
     start = armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt) if nc else \
         arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
     u, y = check_record(u, y)
+    return _recursion_from(start, u, y, method=method, forgetting=forgetting)
+
+
+def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: str,
+                    forgetting: float) -> ArmaxModel:
+    """RELS/RML over the record from the batch estimate ``start`` (the module's notes).
+
+    The regressor (and, for RML, the 1/Ĉ filter) starts at rest, so the first samples'
+    prediction errors are the record's initial transient, not information: adaptation is
+    held (the kernel's enabled flag, as :meth:`RelsEstimator.freeze`) while the
+    regressors fill and that transient decays — max(na, nb + d, nc) samples plus the
+    settling time of 1/Ĉ to 1e-3, at most a quarter of the record — then runs to the end.
+    """
+    na, nb, nc, d = start.na, start.nb, start.nc, start.delay
+    n = na + nb + 1 + nc
+    su, sy = _rms_scale(u), _rms_scale(y)
+    us, ys = u / su, y / sy
     P0 = _start_information(u, y, start, filtered=(method == "rml"))
-    model = rels(u, y, theta0=start.theta, p0_matrix=P0, **kw)
-    model.meta.update({"init": "batch", "start_method": start.meta["method"]})
+    theta_s = start.theta / _theta_scale(na, nb, nc, su, sy)
+    alpha = float(np.mean(np.diag(P0)))  # what a reset of P returns to (α I)
+    state = _new_state(na, nb, nc, d, forgetting, alpha, float(np.trace(P0)), _C_RADIUS,
+                       theta_s, alpha, method)
+    _k.state_views(state)[1][:] = P0
+    r_c = float(np.max(np.abs(np.roots(start.c)))) if nc else 0.0
+    settle = int(np.ceil(np.log(1e-3) / np.log(r_c))) if 0.0 < r_c < 1.0 else 0
+    warm = min(max(na, nb + d, nc) + settle, u.size // 4)
+    err, xi = np.empty(u.size), np.empty(u.size)
+    no_hist = np.empty((0, n))
+    state[_k.H_ENABLED] = 0.0
+    _k.rels_run(state, us[:warm], ys[:warm], err[:warm], xi[:warm], no_hist, 1)
+    state[_k.H_ENABLED] = 1.0
+    _k.rels_run(state, us[warm:], ys[warm:], err[warm:], xi[warm:], no_hist, 1)
+    nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
+    counters = {k: int(state[h]) for k, h in (("resets", _k.H_RESETS),
+                                              ("c_projections", _k.H_CPROJ),
+                                              ("trace_scalings", _k.H_TRSCALE),
+                                              ("skipped", _k.H_SKIPPED))}
+    meta = {"method": method, "n_samples": int(u.size), "forgetting": forgetting,
+            "init": "batch", "start_method": start.meta["method"], "warm_up": warm,
+            "c_radius": _C_RADIUS, "u_scale": su, "y_scale": sy, **counters}
+    model = _model_from_state(state, na, nb, nc, d, start.dt, su, sy, nv_s, meta)
+    model.check(warn=True)
     return model
 
 

@@ -123,15 +123,6 @@ def _check_theta0(theta0: Any, n: int) -> np.ndarray:
     return t.copy()
 
 
-def _check_p0_matrix(p0_matrix: Any, n: int) -> np.ndarray:
-    P = np.asarray(p0_matrix, dtype=np.float64)
-    if P.shape != (n, n) or not np.all(np.isfinite(P)) or not np.allclose(P, P.T):
-        raise ParameterError(f"p0_matrix must be a finite symmetric ({n}, {n}) matrix")
-    if np.linalg.eigvalsh(P)[0] <= 0:
-        raise ParameterError("p0_matrix must be positive definite")
-    return P.copy()
-
-
 def check_record(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
     """Validate an input/output record: 1-D, equal length, finite; contiguous float64."""
     return as_record(u, y)
@@ -229,7 +220,6 @@ def rels(
     trace_bound: float | None = None,
     c_radius: float = 0.99,
     method: str = "rels",
-    p0_matrix: Any = None,
 ) -> ArmaxModel:
     """Identify an ARMAX model from a whole record with RELS, eqs (19)–(22), or RML.
 
@@ -268,10 +258,6 @@ def rels(
         and P update from the regressor filtered through 1/Ĉ (see the module notes).
         Use "rml" with nc = na when the disturbance is mostly white noise at the
         output (output-error records), where RELS is biased. With nc = 0 both are RLS.
-    p0_matrix : array_like, shape (n, n), optional
-        Full symmetric positive-definite P(0) on the normalised data, e.g. the inverse
-        information of a batch estimate given as ``theta0``; replaces α I (a reset still
-        returns to α I). The trace bound then defaults to its trace.
 
     Returns
     -------
@@ -317,9 +303,6 @@ def rels(
     if not 0.0 < c_radius <= 1.0:
         raise ParameterError(f"c_radius={c_radius!r} must be in (0, 1]")
     theta0 = _check_theta0(theta0, n)
-    P0 = None if p0_matrix is None else _check_p0_matrix(p0_matrix, n)
-    if P0 is not None and trace_bound is None:
-        tb = float(np.trace(P0))
     u, y = check_record(u, y)
     need = max(na, nb + delay, nc) + n + 1
     if u.size < need:
@@ -337,8 +320,6 @@ def rels(
     for _ in range(passes):
         state = _new_state(na, nb, nc, delay, lam, alpha, tb, c_radius, theta_s, alpha_c,
                            method)
-        if P0 is not None:
-            _k.state_views(state)[1][:] = P0
         _k.rels_run(state, us, ys, err, xi, hist, 1)
         for key, v in _counters(state).items():
             if key in totals:
