@@ -17,7 +17,9 @@ Batch start of the recursive estimators (``init="batch"``, the default): the rec
 first identified in batch (ARMAX PEM, or ARX when nc = 0), and the recursion then runs
 over the record from that θ̂ with P(0) = (Σ ψ ψᵀ)⁻¹, the inverse information of the
 batch estimate in the recursion's own metric (ψ the regressor of eq. 19 for RELS, the
-1/Ĉ-filtered regressor for RML). The recursion is then the second pass of a two-pass
+1/Ĉ-filtered regressor for RML), adaptation held for the first samples while its
+regressors fill and the record's initial transient decays (the recursion, like the
+batch predictor, starts at rest). The recursion is then the second pass of a two-pass
 estimate: it starts at the stationary point of its own loss with the gain it would have
 had after one pass, so it cannot wander into the poor local minima that a start from
 θ̂ = 0 with P(0) = α I falls into (RML on output-error records, RELS where 1/C − 1/2 is
