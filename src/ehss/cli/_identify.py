@@ -183,13 +183,14 @@ def run(args: argparse.Namespace) -> int:
             frf_method=args.frf_method, initial=args.initial,
             acceptance=Acceptance(min_coherence=args.min_coherence),
         )
-    model = res.model
-    _print_model(res, rec, args)
-    if not model.is_stable():
-        raise IdentificationError(
-            f"the identified model is unstable (max pole radius {model.max_pole_radius():.4f})"
-            f"; {args.out} not written: try other orders (ehss order), another --method or "
-            "a band-limited record")
+        model = res.model
+        _print_model(res, rec, args)
+        # inside the block: an unstable model is an error, not also a warning
+        if not model.is_stable():
+            raise IdentificationError(
+                f"the identified model is unstable (max pole radius "
+                f"{model.max_pole_radius():.4f}); {args.out} not written: try other orders "
+                "(ehss order), another --method or a band-limited record")
     doc = model.to_dict()
     doc["identification"] = res.summary()
     doc["validation"] = res.report.summary()

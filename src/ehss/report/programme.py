@@ -447,6 +447,7 @@ def _run_loop(
         dt=1.0 / fs,
         criterion="aic",
         method="rels",
+        init="zero",  # the paper's start, as _identify refits the pick
     )
     best = selection.best
     rec_orders = (best.na, best.nb, best.nc, best.delay)
