@@ -15,8 +15,9 @@ import scipy.signal
 from numpy.testing import assert_allclose
 
 from ehss.compensation import design_inverse, refine
+from ehss.control.known import accelerometer_filter
 from ehss.errors import ParameterError
-from ehss.identification.known import accelerometer_filter, compose
+from ehss.identification.known import compose
 from ehss.identification.model import ArmaxModel
 from ehss.params import preset
 

@@ -251,7 +251,8 @@ def demonstrate(
     -------
     CompensationDemo
     """
-    from ehss.identification.known import compose, known_factors
+    from ehss.control.known import known_factors
+    from ehss.identification.known import compose
     from ehss.identification.rels import rels
     from ehss.params import preset
     from ehss.signals import check_feasible

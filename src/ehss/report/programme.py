@@ -23,6 +23,7 @@ from scipy.signal import butter, lfilter, sosfiltfilt
 
 from ehss import signals
 from ehss.compensation import CompensationDemo, demonstrate
+from ehss.control.known import known_factors
 from ehss.errors import ParameterError
 from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import (
@@ -32,7 +33,7 @@ from ehss.identification import (
     rels,
     select_order,
 )
-from ehss.identification.known import compose, known_factors
+from ehss.identification.known import compose
 from ehss.params import GRAVITY_M_S2, RigParams, preset
 from ehss.report.steps import StepMetrics, step_metrics
 from ehss.simulation import SimulationResult, simulate
@@ -359,7 +360,7 @@ def _search(
     paper's delay) the candidates are, in this order: RELS with the paper's nc; RML
     (recursive maximum likelihood) with nc = na, which suits output-error records where
     RELS is biased; and for the acceleration loop both again behind the loop's known
-    factors (:mod:`ehss.identification.known`).
+    factors (:mod:`ehss.control.known`).
     """
     na0, _, nc0, d0 = setup.orders
     num, den = known_factors(setup.loop, params)
