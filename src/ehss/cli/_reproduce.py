@@ -36,8 +36,9 @@ def run(args: argparse.Namespace) -> int:
 
     from ehss.cli._dataargs import report_warnings
     from ehss.errors import DataError
+    from ehss.experiments import ProgrammeSettings, run_programme
     from ehss.params import load_params, preset
-    from ehss.report import ProgrammeSettings, run_programme, write_report
+    from ehss.report import write_report
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

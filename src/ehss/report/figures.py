@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from ehss.report.programme import LoopResult, StepTest
+from ehss.experiments import LoopResult, StepTest
 
 __all__ = ["step_figure", "loop_figure", "convergence_figure", "LOOP_UNITS"]
 

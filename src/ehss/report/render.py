@@ -17,18 +17,19 @@ import numpy as np
 from ehss._provenance import versions
 from ehss.compensation import plot_demo
 from ehss.errors import DataError
-from ehss.identification import ArmaxModel
-from ehss.params import params_to_dict
-from ehss.report.figures import convergence_figure, loop_figure, step_figure
-from ehss.report.paper_models import PRINTED_MODELS, printed_model_findings
-from ehss.report.programme import (
+from ehss.experiments import (
     MAX_MAG_ERROR_DB,
     MAX_PHASE_ERROR_DEG,
     MIN_COHERENCE,
     MIN_FIT_PCT,
     LoopResult,
+    ModelCheck,
     ProgrammeResult,
 )
+from ehss.identification import ArmaxModel
+from ehss.params import params_to_dict
+from ehss.report.figures import convergence_figure, loop_figure, step_figure
+from ehss.report.paper_models import PRINTED_MODELS, printed_model_findings
 
 __all__ = ["write_report", "summary_dict"]
 
@@ -59,7 +60,7 @@ def _model_summary(model: ArmaxModel) -> dict[str, Any]:
     }
 
 
-def _model_entry(chk) -> dict[str, Any]:
+def _model_entry(chk: ModelCheck) -> dict[str, Any]:
     """The model's JSON layout (``a``, ``b``, ``c``, ``delay``, ``dt``, ...) plus its verdict."""
     entry = chk.model.to_dict()
     entry["label"] = chk.label
@@ -67,7 +68,7 @@ def _model_entry(chk) -> dict[str, Any]:
     return entry
 
 
-def _check_summary(chk) -> dict[str, Any]:
+def _check_summary(chk: ModelCheck) -> dict[str, Any]:
     return {
         "label": chk.label,
         "model": _model_summary(chk.model),
@@ -131,7 +132,7 @@ def _fmt(x: float, digits: int = 3) -> str:
     return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}g}"
 
 
-def _row(chk) -> str:
+def _row(chk: ModelCheck) -> str:
     e = chk.error
     return (
         f"| {chk.label} | {_fmt(e.max_magnitude_db)} | {_fmt(e.max_phase_deg)} | {e.n_points} | "
