@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv(tmp_csv, result.to_columns())
         write_json(tmp_json, meta)
         if args.plot:
-            from ehss.simulation.plot import plot_simulation
+            from ehss.plots import plot_simulation
 
             # the temporary file keeps the plot's suffix, which picks the format
             plot_simulation(result, stack.enter_context(atomic_path(args.plot)))

@@ -18,6 +18,7 @@ from ehss.experiments.loop_identification import (
     ModelCheck,
     Record,
     identify_and_check,
+    loop_record,
 )
 from ehss.experiments.programme import (
     DEFAULT_SETUPS,
@@ -37,6 +38,7 @@ __all__ = [
     "ModelCheck",
     "Record",
     "identify_and_check",
+    "loop_record",
     "DEFAULT_SETUPS",
     "LoopResult",
     "LoopSetup",

@@ -1,10 +1,12 @@
 """Identify one closed loop from a test record and judge the model (PAPER.md §6).
 
-The record is split into an estimation part and a held-out end, taken about its
-operating point (RELS has no constant term), identified with RELS or RML (eqs 20–22),
-optionally behind the loop's known factors, and checked against the Hann-window H1
-estimate and on the held-out end. All of that is :func:`identify_and_check`; the rest of
-this module searches orders with it and replays the online estimator.
+The record is taken about its operating point (RELS has no constant term) and split
+into an estimation part and a held-out end (:func:`loop_record`); a model is identified
+on the first with RELS or RML (eqs 20–22), optionally behind the loop's known factors,
+and checked against the Hann-window H1 estimate and on the held-out end
+(:func:`identify_and_check`). These two functions are the whole identification
+workflow of the programme; the rest of this module searches orders with them and
+replays the online estimator.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ __all__ = [
     "MIN_FIT_PCT",
     "Record",
     "ModelCheck",
+    "loop_record",
     "identify_and_check",
     "model_label",
     "simplest_passing",
@@ -100,8 +103,6 @@ class ModelCheck:
         The same without the low-pass (bounded by the sensor noise level).
     simulated : ndarray
         The model's simulated output over the whole record (operating point added).
-    record : Record
-        The record it was identified from and checked on.
     """
 
     label: str
@@ -110,7 +111,6 @@ class ModelCheck:
     fit_pct: float
     raw_fit_pct: float
     simulated: np.ndarray
-    record: Record
 
     @property
     def passes(self) -> bool:
@@ -131,33 +131,63 @@ def model_label(orders: Orders, known: bool = False, method: str = "rels") -> st
     return text + " behind the known generator and accelerometer coupling" if known else text
 
 
-def identify_and_check(
-    u_raw: np.ndarray,
-    y_raw: np.ndarray,
-    orders: Orders,
-    *,
-    fs: float,
-    band_hz: tuple[float, float],
+def loop_record(
+    u_raw: np.ndarray, y_raw: np.ndarray, *, fs: float, band_hz: tuple[float, float],
     holdout: float,
-    forgetting: float,
-    p0: float,
-    method: str = "rels",
-    known: Factors | None = None,
-) -> ModelCheck:
-    """Split, remove the operating point, identify, and check against the acceptance.
+) -> Record:
+    """A closed-loop test record about its operating point, split for identification.
 
     Parameters
     ----------
     u_raw, y_raw : ndarray, shape (n,)
         Reference and measured output of the closed loop, in SI units.
-    orders : (na, nb, nc, delay)
-        ARMAX structure.
     fs : float
         Sample rate (Hz).
     band_hz : (float, float)
         Validation band (the excitation band clipped to [0.5 Hz, 0.45 fs]).
     holdout : float
         Share of the record held out at its end.
+
+    Returns
+    -------
+    Record
+    """
+    # Deviations from the operating point: RELS has no constant term.
+    u_mean, y_mean = float(np.mean(u_raw)), float(np.mean(y_raw))
+    u, y = u_raw - u_mean, y_raw - y_mean
+    lowpass = butter(4, min(1.5 * band_hz[1], 0.45 * fs), fs=fs, output="sos")
+    return Record(
+        u=u,
+        y=y,
+        n_ident=int(round(u.size * (1.0 - holdout))),
+        fs=fs,
+        band_hz=band_hz,
+        # About 0.5 Hz resolution: the slow dynamics near the band's low end need it.
+        frf=h1_estimate(u, y, fs, nperseg=int(2 ** round(np.log2(2.0 * fs)))),
+        y_band=sosfiltfilt(lowpass, y),
+        lowpass=lowpass,
+        input_mean=u_mean,
+        output_mean=y_mean,
+    )
+
+
+def identify_and_check(
+    rec: Record,
+    orders: Orders,
+    *,
+    forgetting: float,
+    p0: float,
+    method: str = "rels",
+    known: Factors | None = None,
+) -> ModelCheck:
+    """Identify on the estimation part of ``rec`` and check against the acceptance.
+
+    Parameters
+    ----------
+    rec : Record
+        From :func:`loop_record`.
+    orders : (na, nb, nc, delay)
+        ARMAX structure.
     forgetting, p0 : float
         RELS forgetting factor and initial covariance scale.
     method : {"rels", "rml"}
@@ -170,13 +200,12 @@ def identify_and_check(
     -------
     ModelCheck
     """
-    rec = _record(u_raw, y_raw, fs=fs, band_hz=band_hz, holdout=holdout)
     n = rec.n_ident
     u = rec.u if known is None else lfilter(known[0], known[1], rec.u)
     na, nb, nc, delay = orders
     model = rels(
         u[:n], rec.y[:n], na=na, nb=nb, nc=nc, delay=delay, forgetting=forgetting, p0=p0,
-        dt=1.0 / fs, method=method,
+        dt=1.0 / rec.fs, method=method,
     )
     if known is not None:
         model = compose(model, *known)
@@ -197,42 +226,14 @@ def identify_and_check(
         fit_pct=fit,
         raw_fit_pct=raw_fit,
         simulated=yhat + rec.output_mean,
-        record=rec,
-    )
-
-
-def _record(
-    u_raw: np.ndarray, y_raw: np.ndarray, *, fs: float, band_hz: tuple[float, float],
-    holdout: float,
-) -> Record:
-    # Deviations from the operating point: RELS has no constant term.
-    u_mean, y_mean = float(np.mean(u_raw)), float(np.mean(y_raw))
-    u, y = u_raw - u_mean, y_raw - y_mean
-    lowpass = butter(4, min(1.5 * band_hz[1], 0.45 * fs), fs=fs, output="sos")
-    return Record(
-        u=u,
-        y=y,
-        n_ident=int(round(u.size * (1.0 - holdout))),
-        fs=fs,
-        band_hz=band_hz,
-        # About 0.5 Hz resolution: the slow dynamics near the band's low end need it.
-        frf=h1_estimate(u, y, fs, nperseg=int(2 ** round(np.log2(2.0 * fs)))),
-        y_band=sosfiltfilt(lowpass, y),
-        lowpass=lowpass,
-        input_mean=u_mean,
-        output_mean=y_mean,
     )
 
 
 def simplest_passing(
-    u_raw: np.ndarray,
-    y_raw: np.ndarray,
+    rec: Record,
     orders: Orders,
     *,
     max_order: int,
-    fs: float,
-    band_hz: tuple[float, float],
-    holdout: float,
     forgetting: float,
     p0: float,
     known: Factors | None = None,
@@ -254,9 +255,8 @@ def simplest_passing(
                 if (na, behind, method) == (na0, False, "rels"):
                     continue
                 candidate = identify_and_check(
-                    u_raw, y_raw, (na, na - 1, nc, d0), method=method,
-                    known=known if behind else None, fs=fs, band_hz=band_hz,
-                    holdout=holdout, forgetting=forgetting, p0=p0,
+                    rec, (na, na - 1, nc, d0), forgetting=forgetting, p0=p0, method=method,
+                    known=known if behind else None,
                 )
                 if candidate.passes:
                     return candidate

@@ -7,7 +7,7 @@
 
 Each identification uses the reference as input and the measured feedback as output
 (the closed-loop transfer function), RELS on the first part of the record and the rest
-held out (:func:`ehss.experiments.loop_identification.identify_and_check`); the model is
+held out (:mod:`ehss.experiments.loop_identification`); the model is
 checked against the Hann-window H1 estimate and on the held-out segment, and order
 selection says which order it would have chosen. Then feed-forward compensation of the
 position and acceleration loops.
@@ -19,7 +19,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
@@ -31,6 +30,7 @@ from ehss.experiments.loop_identification import (
     ModelCheck,
     convergence,
     identify_and_check,
+    loop_record,
     simplest_passing,
 )
 from ehss.experiments.steps import StepTest, step_tests
@@ -194,18 +194,12 @@ def _run_loop(
     skip = int(round(settle_s * fs))
     u_raw = sim.reference[skip:]
     y_raw = sim.output[skip:]
-    check: dict[str, Any] = {
-        "fs": fs,
-        "band_hz": _validation_band(setup, fs),
-        "holdout": settings.holdout,
-        "forgetting": settings.forgetting,
-        "p0": settings.p0,
-    }
-    paper = identify_and_check(u_raw, y_raw, setup.orders, **check)
-    rec = paper.record
-    theta_t, theta_history = convergence(
-        rec, paper.model, forgetting=settings.forgetting, p0=settings.p0
+    rec = loop_record(
+        u_raw, y_raw, fs=fs, band_hz=_validation_band(setup, fs), holdout=settings.holdout
     )
+    lam, p0 = settings.forgetting, settings.p0
+    paper = identify_and_check(rec, setup.orders, forgetting=lam, p0=p0)
+    theta_t, theta_history = convergence(rec, paper.model, forgetting=lam, p0=p0)
     n = rec.n_ident
     selection = select_order(
         rec.u[:n],
@@ -220,15 +214,15 @@ def _run_loop(
     )
     best = selection.best
     recommended = identify_and_check(
-        u_raw, y_raw, (best.na, best.nb, best.nc, best.delay), **check
+        rec, (best.na, best.nb, best.nc, best.delay), forgetting=lam, p0=p0
     )
     passing = None
     if not paper.passes:
         num, den = known_factors(setup.loop, params)
         known = (num, den) if num.size > 1 or den.size > 1 else None
         passing = simplest_passing(
-            u_raw, y_raw, setup.orders, max_order=settings.max_search_order, known=known,
-            **check,
+            rec, setup.orders, max_order=settings.max_search_order, forgetting=lam, p0=p0,
+            known=known,
         )
     return LoopResult(
         setup=setup,
