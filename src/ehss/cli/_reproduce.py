@@ -30,8 +30,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
     from pathlib import Path
 
     from rich.console import Console
@@ -41,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from ehss.errors import DataError
     from ehss.experiments import ProgrammeSettings, run_programme
     from ehss.params import load_params, preset
-    from ehss.report.render import prepare_worker, write_report
+    from ehss.report import write_report
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -50,19 +48,10 @@ def run(args: argparse.Namespace) -> int:
     settings = ProgrammeSettings(seed=args.seed, duration_s=args.duration)
     console = Console(stderr=True, quiet=args.quiet)
     t0 = time.perf_counter()
-    # A second process (started fresh, not forked) imports the drawing stack while the
-    # experiments run, then draws half of the figures while this one draws the rest.
-    # BLAS is held to one thread: the programme's linear algebra is on single records
-    # and small matrices, where handing work to threads costs far more than it saves
-    # (a norm of 12 000 samples: 3 ms with threads on a busy two-core machine, 3 µs
-    # without).
-    pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
-    with (
-        pool,
-        console.status("starting") as status,
-        threadpool_limits(limits=1, user_api="blas"),
-    ):
-        pool.submit(prepare_worker)
+    # The programme's linear algebra is on single records and small matrices, where
+    # handing work to BLAS threads costs far more than it saves (a norm of 12 000
+    # samples: 3 ms with threads on a busy two-core machine, 3 µs without).
+    with console.status("starting") as status, threadpool_limits(limits=1, user_api="blas"):
 
         def progress(msg: str) -> None:
             console.log(msg)
@@ -71,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
         with report_warnings("reproduce"):
             result = run_programme(params, settings, progress=progress)
         status.update("writing the report")
-        html_path = write_report(result, out, pool=pool)
+        html_path = write_report(result, out)
     console.log(f"done in {time.perf_counter() - t0:.1f} s")
     lines = []
     for name, r in result.loops.items():

@@ -8,7 +8,6 @@ import html
 import json
 import shutil
 import tempfile
-from concurrent.futures import BrokenExecutor, Executor, Future
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +16,7 @@ from matplotlib.figure import Figure
 
 from ehss._provenance import versions
 from ehss.compensation import plot_demo
-from ehss.errors import DataError, ParameterError
+from ehss.errors import DataError
 from ehss.experiments import (
     MAX_MAG_ERROR_DB,
     MAX_PHASE_ERROR_DEG,
@@ -33,7 +32,7 @@ from ehss.plots import fixed_layout, png_bytes
 from ehss.report.figures import REPORT_DPI, convergence_figure, loop_figure, step_figure
 from ehss.report.paper_models import PRINTED_MODELS, printed_model_findings
 
-__all__ = ["write_report", "summary_dict", "draw_figure", "prepare_worker"]
+__all__ = ["write_report", "summary_dict"]
 
 CONVERGENCE_FIGURE = "fig18_rels_convergence.png"
 
@@ -425,58 +424,11 @@ def _png(fig: Figure) -> bytes:
     return png_bytes(fig, dpi=REPORT_DPI)
 
 
-def prepare_worker() -> None:
-    """Nothing to do: a worker process that runs this has imported the drawing stack.
-
-    Submit it to a fresh process pool before the experiments, so that the worker's
-    imports overlap them (see :func:`write_report`'s ``pool``).
-    """
-
-
-def draw_figure(kind: str, data: Any) -> bytes:
-    """One of the report's figures as PNG bytes.
-
-    Parameters
-    ----------
-    kind : {"steps", "convergence", "compensation", "position", "acceleration", "force"}
-        Which figure.
-    data
-        What it draws: the step tests, the loops' results, a compensation demonstration,
-        or one loop's result.
-    """
-    if kind == "steps":
-        fig = step_figure(data)
-    elif kind == "convergence":
-        fig = convergence_figure(data)
-    elif kind == "compensation":
-        fig = plot_demo(data)
-        # A fixed layout for the 2 × 2 panels: saved with one draw, no layout engine.
-        fixed_layout(fig, left=0.85, right=0.15, bottom=0.5, top=0.35, wspace=0.95,
-                     hspace=0.75)
-    elif kind in FIGURE_TITLES:
-        fig = loop_figure(data, title=FIGURE_TITLES[kind][1])
-    else:
-        raise ParameterError(f"kind={kind!r} is not a figure of the report")
-    return _png(fig)
-
-
-def write_report(
-    result: ProgrammeResult, out_dir: str | Path, *, pool: Executor | None = None
-) -> Path:
+def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
     """Write every output of the programme into ``out_dir``; return the HTML path.
 
     Everything is first written into a temporary folder beside ``out_dir`` and moved into
     place only when complete, so a failure never leaves a half-written report.
-
-    Parameters
-    ----------
-    result : ProgrammeResult
-        From :func:`ehss.experiments.run_programme`.
-    out_dir : str or Path
-        Folder of the report (created; files in it are replaced).
-    pool : concurrent.futures.Executor, optional
-        A process pool that draws the loop and convergence figures while this process
-        draws the others and writes the data; the figures are the same either way.
     """
     from ehss.io import write_csv
 
@@ -487,24 +439,25 @@ def write_report(
     if out_dir.exists() and not out_dir.is_dir():
         raise DataError(f"cannot write the report into {str(out_dir)!r}: it is a file")
 
-    jobs: dict[str, tuple[str, Any]] = {"fig12_steps.png": ("steps", result.steps)}
-    for name, r in result.loops.items():
-        jobs[FIGURE_TITLES[name][0]] = (name, r)
-    jobs[CONVERGENCE_FIGURE] = ("convergence", result.loops)
-    for name, demo in result.compensation.items():
-        jobs[COMPENSATION_FIGURES[name]] = ("compensation", demo)
-    remote: dict[str, Future[bytes]] = {}
-    if pool is not None:
-        for fname, (kind, data) in jobs.items():
-            if kind in FIGURE_TITLES or kind == "convergence":
-                remote[fname] = pool.submit(draw_figure, kind, data)
-    drawn = {f: draw_figure(*job) for f, job in jobs.items() if f not in remote}
     summary = summary_dict(result)
+    figures = {"fig12_steps.png": _png(step_figure(result.steps))}
+    for name, r in result.loops.items():
+        fname, title = FIGURE_TITLES[name]
+        figures[fname] = _png(loop_figure(r, title=title))
+    figures[CONVERGENCE_FIGURE] = _png(convergence_figure(result.loops))
+    for name, demo in result.compensation.items():
+        fig = plot_demo(demo)
+        # A fixed layout for the 2 × 2 panels: saved with one draw, no layout engine.
+        fixed_layout(fig, left=0.85, right=0.15, bottom=0.5, top=0.35, wspace=0.95,
+                     hspace=0.75)
+        figures[COMPENSATION_FIGURES[name]] = _png(fig)
     md = _markdown(result, summary)
 
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
     try:
         (tmp / "data").mkdir()
+        for fname, data in figures.items():
+            (tmp / fname).write_bytes(data)
         for name, r in result.loops.items():
             write_csv(tmp / "data" / f"{name}.csv", r.sim.to_columns())
         models = {name: _model_entry(r.paper) for name, r in result.loops.items()}
@@ -516,14 +469,6 @@ def write_report(
         (tmp / "best_models.json").write_text(json.dumps(best, indent=2), encoding="utf-8")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
         (tmp / "report.md").write_text(md, encoding="utf-8")
-        for fname, future in remote.items():
-            try:
-                drawn[fname] = future.result()
-            except BrokenExecutor:  # the worker died: draw it here
-                drawn[fname] = draw_figure(*jobs[fname])
-        figures = {fname: drawn[fname] for fname in jobs}  # in the report's order
-        for fname, data in figures.items():
-            (tmp / fname).write_bytes(data)
         (tmp / "report.html").write_text(_html(md, figures), encoding="utf-8")
         out_dir.mkdir(exist_ok=True)
         (out_dir / "data").mkdir(exist_ok=True)
