@@ -1,5 +1,5 @@
 """``python -m ehss``: the same as the ``ehss`` command."""
 
-from ehss.cli import _entry
+from ehss.cli import entry
 
-_entry()
+entry()

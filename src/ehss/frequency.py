@@ -35,6 +35,8 @@ __all__ = [
     "frf_estimate",
     "default_nperseg",
     "n_segments",
+    "check_fs",
+    "check_band",
 ]
 
 #: Accepted ``method`` of :func:`frf_estimate`.
@@ -125,7 +127,7 @@ class FrequencyResponse:
         ParameterError
             If ``lo_hz > hi_hz`` or either is negative/non-finite.
         """
-        lo_hz, hi_hz = _check_band((lo_hz, hi_hz))
+        lo_hz, hi_hz = check_band((lo_hz, hi_hz))
         mask = (self.freq_hz >= lo_hz) & (self.freq_hz <= hi_hz)
         return FrequencyResponse(
             freq_hz=self.freq_hz[mask],
@@ -142,7 +144,7 @@ class FrequencyResponse:
         """Points inside ``band_hz`` that the input excited (its spectrum within
         :data:`EXCITATION_FLOOR` of its largest value in the band) and whose coherence
         reaches ``min_coherence``: where the estimate can be trusted."""
-        lo, hi = _check_band(band_hz)
+        lo, hi = check_band(band_hz)
         ok = (self.freq_hz >= lo) & (self.freq_hz <= hi)
         if self.input_power is not None and np.any(ok):
             ok &= self.input_power >= EXCITATION_FLOOR * float(np.max(self.input_power[ok]))
@@ -206,7 +208,7 @@ def default_nperseg(
     1024
     """
     n = operator.index(n_samples)
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     min_averages = operator.index(min_averages)
     if min_averages < 1:
         raise ParameterError(f"{min_averages=} must be >= 1")
@@ -215,7 +217,7 @@ def default_nperseg(
     while nperseg > floor and n_segments(n, nperseg, nperseg // 2) < min_averages:
         nperseg //= 2
     if band_hz is not None:
-        lo, hi = _check_band(band_hz)
+        lo, hi = check_band(band_hz)
         need_hz = (hi - lo) / 32.0
         if lo > 0:
             need_hz = min(need_hz, lo / 2.0)
@@ -294,7 +296,7 @@ def h1_estimate(
     u, y = as_record(u, y)
     if u.size != y.size:
         raise DataError(f"u and y must have the same length, got {u.size} and {y.size}")
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     n = u.size
     if n < MIN_SAMPLES:
         raise DataError(f"too few samples for a frequency response: {n} < {MIN_SAMPLES}")
@@ -396,7 +398,7 @@ def dft_estimate(
     alike as long as the impulse response is shorter than the taper.
     """
     u, y = as_record(u, y)
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     n = u.size
     if n < MIN_SAMPLES:
         raise DataError(f"too few samples for a frequency response: {n} < {MIN_SAMPLES}")
@@ -513,7 +515,8 @@ def _as_int(x, name: str) -> int:
         raise ParameterError(f"{name}={x!r} must be an integer") from None
 
 
-def _check_fs(fs) -> float:
+def check_fs(fs) -> float:
+    """``fs`` as a positive finite sample rate in Hz, or a ParameterError."""
     try:
         fs = float(fs)
     except (TypeError, ValueError):
@@ -523,7 +526,8 @@ def _check_fs(fs) -> float:
     return fs
 
 
-def _check_band(band) -> tuple[float, float]:
+def check_band(band) -> tuple[float, float]:
+    """``band`` as ``(lo, hi)`` in Hz with 0 <= lo <= hi, or a ParameterError."""
     try:
         lo, hi = (float(v) for v in band)
     except (TypeError, ValueError):

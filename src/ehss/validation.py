@@ -36,7 +36,7 @@ import scipy.stats
 
 from ehss._checks import as_record, as_signal
 from ehss.errors import DataError, ParameterError
-from ehss.frequency import FrequencyResponse, _check_band, frf_estimate
+from ehss.frequency import FrequencyResponse, check_band, frf_estimate
 
 __all__ = [
     "FrfError",
@@ -188,7 +188,7 @@ def frf_error(
     Piersol, *Random Data*, eqs 9.90 and 9.92): at :math:`\\gamma^2 = 0.9` and 8
     averages it is already 0.7 dB and 4.8°.
     """
-    lo, hi = _check_band(band_hz)
+    lo, hi = check_band(band_hz)
     if not 0.0 <= float(min_coherence) <= 1.0:
         raise ParameterError(f"{min_coherence=} must be in [0, 1]")
     # in the band, excited by the input and coherent (FrequencyResponse.valid)
@@ -345,7 +345,7 @@ def band_fit(y, yhat, *, fs: float, band_hz: tuple[float, float]) -> float:
     :func:`nrmse_fit` when the band reaches that close to Nyquist already.
     """
     y = as_signal(y, "y")
-    lo, hi = _check_band(band_hz)
+    lo, hi = check_band(band_hz)
     cut = min(1.5 * hi, 0.45 * float(fs))
     yhat = np.asarray(yhat, dtype=np.float64)
     if cut >= 0.45 * float(fs) or not np.all(np.isfinite(yhat)) or y.size < 30:

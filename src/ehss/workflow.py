@@ -32,7 +32,7 @@ import numpy as np
 from ehss import preprocess
 from ehss._checks import as_record
 from ehss.errors import DataError, ParameterError
-from ehss.frequency import FRF_METHODS, _check_band, _check_fs
+from ehss.frequency import FRF_METHODS, check_band, check_fs
 from ehss.identification import METHODS, ArmaxModel, estimate
 from ehss.preprocess import DETRENDS, Trend
 from ehss.validation import ValidationReport, fit_text, validate
@@ -265,11 +265,11 @@ def prepare(
         For records too short to split or decimate.
     """
     u, y = as_record(u, y)
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     if detrend not in DETRENDS:
         raise ParameterError(f"detrend={detrend!r} must be 'mean', 'linear' or None")
     if band_hz is not None:
-        band_hz = _check_band(band_hz)
+        band_hz = check_band(band_hz)
         if band_hz[1] > fs / 2:
             raise ParameterError(f"band upper edge {band_hz[1]:g} Hz is above fs/2 = "
                                  f"{fs / 2:g} Hz")

@@ -264,8 +264,8 @@ def test_ctrl_c_while_libraries_load_is_one_line(tmp_path, library):
             "builtins.__import__ = hook\n"
             "sys.argv = ['ehss', 'simulate', '--loop', 'position', '--signal', 'sine',\n"
             "            '--out', 'run.csv']\n"
-            "from ehss.cli import _entry\n"
-            "_entry()\n")
+            "from ehss.cli import entry\n"
+            "entry()\n")
     p = _run(["-c", code], cwd=tmp_path)
     out, err = p.communicate(timeout=300)
     assert p.returncode == 130, err.decode()

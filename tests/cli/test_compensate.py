@@ -209,7 +209,8 @@ def test_missing_model_file(tmp_path, reference, capsys):
 def test_model_with_known_factors_needs_band_and_inverts_them(tmp_path, capsys):
     # A model identified behind the acceleration loop's known factors (compose): the
     # factors travel in its JSON, and the drive inverts rest and factors.
-    from ehss.identification.known import compose, known_factors
+    from ehss.control.known import known_factors
+    from ehss.identification.known import compose
     from ehss.identification.model import ArmaxModel
     from ehss.params import preset
 

@@ -229,7 +229,7 @@ def test_reduced_preview_lags():
 
 # --------------------------------------------------------------------------- known factors
 def _acceleration_known():
-    from ehss.identification.known import known_factors
+    from ehss.control.known import known_factors
     from ehss.params import preset
 
     return known_factors("acceleration", preset("default"))

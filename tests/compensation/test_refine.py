@@ -15,9 +15,10 @@ import scipy.signal
 from numpy.testing import assert_allclose
 
 from ehss.compensation import design_inverse
+from ehss.control.known import accelerometer_filter
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine
-from ehss.identification.known import accelerometer_filter, compose
+from ehss.identification.known import compose
 from ehss.identification.model import ArmaxModel
 from ehss.params import preset
 
@@ -68,8 +69,13 @@ def test_reidentification_of_a_noise_free_plant_converges(model, reference):
     true = ArmaxModel(a=a_true, b=0.011 * np.poly([0.4]), c=[1.0], delay=1, dt=1 / FS)
     res = refine(lambda u: true.simulate(u), reference, model=model, iterations=3,
                  band_hz=BAND, reidentify=True)
-    assert np.all(np.diff(res.rms_error) < 0)
-    # Measured: 13 % of the reference RMS one-shot, 3e-5 after one update.
+    e = res.rms_error
+    # Each run is better than the last until the error reaches the rounding floor of an
+    # exact re-identification (float64 filtering of a 1e-1 signal: ~1e-11 relative),
+    # where it only wanders.
+    assert np.all((np.diff(e) < 0) | (e[1:] < 1e-9 * e[0]))
+    # Measured: 13 % of the reference RMS one-shot, 3e-5 (zero start) or the rounding
+    # floor (batch start) after one update.
     assert res.rms_error[1] < 1e-3 * res.rms_error[0]
     assert len(res.models) == 4
 

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "main",
+    "entry",
     "build_parser",
     "EXIT_OK",
     "EXIT_FAILURE",
@@ -151,5 +152,6 @@ def _run(command: str, args: argparse.Namespace) -> int:
     return EXIT_OK if code is None else int(code)
 
 
-def _entry() -> None:  # pragma: no cover - console-script shim
+def entry() -> None:  # pragma: no cover - console-script shim
+    """The `ehss` console script and `python -m ehss`: run :func:`main` and exit."""
     sys.exit(main())

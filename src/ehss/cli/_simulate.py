@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     meta = _metadata(result, kind, settings)
     writers = table_writers(out, result.to_columns(), meta)
     if args.plot:
-        from ehss.simulation.plot import plot_simulation
+        from ehss.plots import plot_simulation
 
         # the temporary file keeps the plot's suffix, which picks the format
         writers[Path(args.plot)] = lambda tmp: plot_simulation(result, tmp)

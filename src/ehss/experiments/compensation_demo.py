@@ -257,8 +257,9 @@ def demonstrate(
     -------
     CompensationDemo
     """
+    from ehss.control.known import known_factors
     from ehss.identification.estimators import estimate
-    from ehss.identification.known import compose, known_factors
+    from ehss.identification.known import compose
     from ehss.params import preset
     from ehss.signals import check_feasible
     from ehss.simulation import simulate
