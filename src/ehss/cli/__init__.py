@@ -30,6 +30,8 @@ _COMMANDS = (
     "order",
     "compensate",
     "reproduce",
+    "live",
+    "stream",
 )
 
 
