@@ -282,8 +282,12 @@ def run(args: argparse.Namespace) -> int:
         return 130
     out = {
         "samples": report.samples, "stream_s": report.stream_s, "wall_s": report.wall_s,
-        "cpu_s": report.cpu_s, "cpu_share": report.cpu_s / report.wall_s if report.wall_s
-        else math.nan, "counters": report.counters, "lag_ms": report.lag_ms,
+        "cpu_s": report.cpu_s, "active_wall_s": report.active_wall_s,
+        "active_cpu_s": report.active_cpu_s,
+        "cpu_share": report.active_cpu_s / report.active_wall_s
+        if report.active_wall_s > 0 else math.nan,
+        "counters": report.counters, "lag_ms": report.lag_ms,
+        "setup_ms": session.setup_ms,
         "alarms": report.alarms,
         "final_theta": {k: (None if v is None else v.tolist())
                         for k, v in report.final_theta.items()},

@@ -154,6 +154,8 @@ class ChannelProcessor:
         self.band_hz: tuple[float, float] | None = det.band_hz or (
             baseline.band_hz if baseline is not None else None)
         self.grid_hz: np.ndarray | None = None
+        self._va: np.ndarray | None = None
+        self._vb: np.ndarray | None = None
         self._h_ref: np.ndarray | None = None
         self._s_ref = complex("nan")
         self._recent: collections.deque = collections.deque()
@@ -257,7 +259,12 @@ class ChannelProcessor:
                 self.messages.append("the baseline model is unstable: comparisons with it "
                                      "are not meaningful")
             self._h_ref = self.baseline.frequency_response(self.grid_hz)
-            self._s_ref = dominant_pole(self.baseline)
+            self._s_ref = dominant_pole(self.baseline.a, 1.0 / self.fs)
+        # z^-k on the grid, k = 0..na for A and d..d+nb for B: H = (V_b b) / (V_a a)
+        e = self.est
+        zi = np.exp(-2j * np.pi * self.grid_hz / self.fs)
+        self._va = zi[:, None] ** np.arange(e.na + 1)
+        self._vb = zi[:, None] ** (e.delay + np.arange(e.nb + 1))
 
     def evaluate(self, t_s: float) -> str | None:
         """Compare the current model with the reference; returns "alarm"/"clear"/None.
@@ -274,9 +281,7 @@ class ChannelProcessor:
             return None
         if self.grid_hz is None:
             self._finish_learning()
-        model = self.estimator.model
-        h = model.frequency_response(self.grid_hz)
-        s = dominant_pole(model)
+        h, s = self._current()
         self.dominant = s
         if self.det.compare == "recent":
             self._recent.append((t_s, h, s))
@@ -295,11 +300,23 @@ class ChannelProcessor:
             self.peak_figures = np.maximum(self.peak_figures, finite)
         return self.detector.step(t_s, self.figures)
 
+    def _current(self) -> tuple[np.ndarray, complex]:
+        """The current model's response on the grid and its dominant pole.
+
+        The same G(e^{jωdt}) = e^{−jωdt·d} B/A as :meth:`ArmaxModel.frequency_response`,
+        from θ̂ through precomputed powers of z⁻¹ (no model object per evaluation).
+        """
+        e = self.est
+        theta = self.estimator.theta
+        a = np.concatenate(([1.0], theta[:e.na]))
+        b = theta[e.na:e.na + e.nb + 1]
+        return (self._vb @ b) / (self._va @ a), dominant_pole(a, 1.0 / self.fs)
+
     def model_response(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """``(grid_hz, current model's H, reference H)`` on the band grid."""
-        if self.grid_hz is None or self.estimator is None:
+        if self.grid_hz is None or self.estimator is None or self._va is None:
             return np.empty(0), None, None
-        return self.grid_hz, self.estimator.model.frequency_response(self.grid_hz), self._h_ref
+        return self.grid_hz, self._current()[0], self._h_ref
 
     def h1(self) -> ehss.FrequencyResponse | None:
         """H1 estimate over the sliding window, or None while it is too short."""

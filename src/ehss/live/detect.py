@@ -23,7 +23,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ehss.errors import ParameterError
-from ehss.identification import ArmaxModel
 
 __all__ = ["FIGURES", "DetectionSettings", "Detector", "dominant_pole", "figures"]
 
@@ -86,16 +85,18 @@ class DetectionSettings:
         return asdict(self)
 
 
-def dominant_pole(model: ArmaxModel) -> complex:
-    """The pole closest to the unit circle, mapped to s = ln(z)/dt (rad/s)."""
-    z = np.asarray(model.poles(), dtype=complex)
+def dominant_pole(a: np.ndarray, dt: float) -> complex:
+    """The root of A(z) closest to the unit circle, mapped to s = ln(z)/dt (rad/s).
+
+    ``a = [1, a1, …, a_na]``; the upper one of a conjugate pair is returned.
+    """
+    z = np.roots(np.asarray(a, dtype=np.float64))
     if z.size == 0:
         return complex("nan")
-    zi = z[np.argmax(np.abs(z))]
+    zi = complex(z[np.argmax(np.abs(z))])
     if zi == 0:
         return complex("nan")
-    s = np.log(zi) / model.dt
-    # a conjugate pair: report the upper one
+    s = np.log(zi) / dt
     return complex(s.real, abs(s.imag))
 
 
