@@ -118,6 +118,10 @@ class LiveSession:
         self._settings = dict(settings or {})
         self._log = log
         self.fs: float | None = source.fs
+        # load the estimator's compiled kernels now, before any data comes
+        warm = ehss.RelsEstimator(na=self.est.na, nb=self.est.nb, nc=self.est.nc,
+                                  delay=self.est.delay, method=self.est.method)
+        warm.update_many(np.zeros(64), np.zeros(64))
         self.channels: list[ChannelProcessor] = []
         self.recorder: LiveRecorder | None = None
         self.events: list[dict] = []
@@ -156,10 +160,6 @@ class LiveSession:
 
     def _setup(self) -> None:
         fs = self.fs
-        # load the estimator's compiled kernels now, not when the first channel starts
-        warm = ehss.RelsEstimator(na=self.est.na, nb=self.est.nb, nc=self.est.nc,
-                                  delay=self.est.delay, method=self.est.method)
-        warm.update_many(np.zeros(64), np.zeros(64))
         self._eval_n = max(1, int(round(self._update_s * fs)))
         self._next_eval = self._eval_n
         self.channels = [

@@ -219,10 +219,12 @@ class UdpSource:
         self.counters["samples"] += samples.shape[0]
         self._expected = first + samples.shape[0]
 
-    def _flush(self, out: list[Block]) -> None:
+    def _flush(self, out: list[Block], *, reordered: bool = True) -> None:
+        """Deliver the held packets that now follow on; ``reordered``: count them as
+        packets that came out of order (not so when they were held over a gap)."""
         while self._expected in self._pending:
             samples, arrival, _ = self._pending.pop(self._expected)
-            self.counters["reordered"] += 1
+            self.counters["reordered"] += reordered
             self._deliver(self._expected, samples, arrival, out)
 
     def _place(self, first: int, samples: np.ndarray, arrival: float,
@@ -246,8 +248,7 @@ class UdpSource:
         self.counters["gaps"] += 1
         self.counters["lost_samples"] += nxt - self._expected
         self._expected = nxt
-        self._flush(out)
-        self.counters["reordered"] -= 1   # the packet after a gap was not out of order
+        self._flush(out, reordered=False)
 
     def _expire(self, out: list[Block], now: float) -> None:
         mono = time.monotonic()
