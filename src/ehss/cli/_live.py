@@ -259,6 +259,9 @@ def run(args: argparse.Namespace) -> int:
             source, est=est, det=det, baselines=baselines, record=args.record,
             update_s=args.update, publish=publish, settings={"argv": sys.argv[1:]}, log=log,
         )
+        where = (f"listening on {source.address[0]}:{source.address[1]}"
+                 if hasattr(source, "address") else "running")
+        print(f"ehss live: ready, {where}", file=sys.stderr, flush=True)
         stop = threading.Event()
         previous = signal.getsignal(signal.SIGTERM)
         if threading.current_thread() is threading.main_thread():
