@@ -160,7 +160,7 @@ def _stats_html(snap: dict) -> str:
 
 def _make_document(doc, latest: dict, token: str | None) -> None:
     from bokeh.layouts import column, row
-    from bokeh.models import ColumnDataSource, Div, Legend, Select
+    from bokeh.models import ColumnDataSource, Div, Legend, LegendItem, Select
     from bokeh.plotting import figure
 
     doc.title = "ehss live"
@@ -186,11 +186,13 @@ def _make_document(doc, latest: dict, token: str | None) -> None:
                 tools=tools)
     for fig, key in ((mag, "mag"), (ph, "ph")):
         items = [
-            ("H1 (sliding)", fig.scatter("f", key, source=bode_h1, size=3, color="#999999")),
-            ("baseline", fig.line("f", key, source=bode_ref, line_width=2, color="#2ca02c",
-                                  line_dash="dashed")),
-            ("current model", fig.line("f", key, source=bode_model, line_width=2,
-                                       color="#1f77b4")),
+            LegendItem(label="H1 (sliding)", renderers=[
+                fig.scatter("f", key, source=bode_h1, size=3, color="#999999")]),
+            LegendItem(label="baseline", renderers=[
+                fig.line("f", key, source=bode_ref, line_width=2, color="#2ca02c",
+                         line_dash="dashed")]),
+            LegendItem(label="current model", renderers=[
+                fig.line("f", key, source=bode_model, line_width=2, color="#1f77b4")]),
         ]
         fig.add_layout(Legend(items=items, location="bottom_left"), "center")
     coef = figure(title="coefficients θ̂", height=260, width=540, x_axis_label="t (s)",
