@@ -257,7 +257,8 @@ def run(args: argparse.Namespace) -> int:
 
         session = LiveSession(
             source, est=est, det=det, baselines=baselines, record=args.record,
-            update_s=args.update, publish=publish, settings={"argv": sys.argv[1:]}, log=log,
+            update_s=args.update, publish=publish, h1=dashboard is not None,
+            settings={"argv": sys.argv[1:]}, log=log,
         )
         where = (f"listening on {source.address[0]}:{source.address[1]}"
                  if hasattr(source, "address") else "running")

@@ -85,8 +85,10 @@ class LiveSession:
     publish : callable, optional
         Receives a snapshot dict every ``display_s`` of wall time; must not block.
     display_s : float
-    h1_s : float
-        Period of the sliding H1 estimate in snapshots (wall time), s.
+    h1 : bool
+        Compute the sliding H1 estimates for the snapshots (for the dashboard): one
+        channel per snapshot, in turn, so that a snapshot costs at most one Welch
+        estimate of the processing's time.
     settings : dict, optional
         Extra JSON-able settings to store with the recording.
     log : callable, optional
@@ -97,7 +99,7 @@ class LiveSession:
         self, source: Source, *, est: EstimatorSettings, det: DetectionSettings,
         baselines: dict[str, ehss.ArmaxModel] | None = None, record=None,
         update_s: float = 0.1, publish: Callable[[dict], None] | None = None,
-        display_s: float = 0.5, h1_s: float = 1.0, settings: dict | None = None,
+        display_s: float = 0.5, h1: bool = False, settings: dict | None = None,
         log: Callable[[dict], None] | None = None,
     ) -> None:
         if not (isinstance(update_s, (int, float)) and update_s > 0):
@@ -114,7 +116,7 @@ class LiveSession:
         self._update_s = float(update_s)
         self._publish = publish
         self._display_s = float(display_s)
-        self._h1_s = float(h1_s)
+        self._with_h1 = bool(h1)
         self._settings = dict(settings or {})
         self._log = log
         self.fs: float | None = source.fs
@@ -132,8 +134,8 @@ class LiveSession:
         self._lag = np.empty(_LAG_KEEP)
         self._n_lag = 0
         self._hist: collections.deque = collections.deque(maxlen=600)
-        self._h1_cache: list = []
-        self._h1_last = -math.inf
+        self._h1_cache: dict[int, ehss.FrequencyResponse | None] = {}
+        self._h1_turn = 0
         self._last_publish = -math.inf
         self._rate = (time.monotonic(), 0)
         self.rate_sps = 0.0
@@ -242,20 +244,21 @@ class LiveSession:
         return {"p50": float(p50), "p99": float(p99), "max": float(lags.max() * 1e3)}
 
     # ------------------------------------------------------------------ display
-    def snapshot(self, *, with_h1: bool = True) -> dict:
+    def snapshot(self) -> dict:
         """The state for a display (small, picklable)."""
         now = time.monotonic()
         t0, n0 = self._rate
         if now - t0 >= 1.0:
             self.rate_sps = (self._n - n0) / (now - t0)
             self._rate = (now, self._n)
-        if with_h1 and now - self._h1_last >= self._h1_s:
-            self._h1_last = now
-            self._h1_cache = [proc.h1() for proc in self.channels]
+        if self._with_h1 and self.channels:
+            k = self._h1_turn % len(self.channels)
+            self._h1_cache[k] = self.channels[k].h1()
+            self._h1_turn += 1
         chans = []
         for k, proc in enumerate(self.channels):
             grid, h, h_ref = proc.model_response()
-            h1 = self._h1_cache[k] if k < len(self._h1_cache) else None
+            h1 = self._h1_cache.get(k)
             s = proc.dominant
             chans.append({
                 "name": proc.name,
