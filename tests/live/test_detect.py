@@ -39,7 +39,7 @@ def test_model_response_matches_armax_model(tmp_path):
     from scipy.signal import lfilter
     y = lfilter([0, 0.5, 0.2], [1, -1.2, 0.5], u)
     proc.feed(u, y)
-    proc.evaluate(3.0)
+    proc.evaluate(3.0, proc.capture())
     grid, h, _ = proc.model_response()
     np.testing.assert_allclose(h, proc.estimator.model.frequency_response(grid), rtol=1e-12)
 

@@ -85,15 +85,17 @@ class EstimatorSettings:
         return asdict(self)
 
 
-def reference_band(u: np.ndarray, fs: float) -> tuple[float, float]:
+def reference_band(u: np.ndarray, fs: float, *, resolution_hz: float = 2.0
+                   ) -> tuple[float, float]:
     """Band where the spectrum of ``u`` is within 20 dB of its peak (Welch, Hann).
 
     Raises
     ------
-    DataError-like ParameterError
+    ParameterError
         If ``u`` has no power.
     """
-    nper = int(min(u.size, 2 ** max(4, math.ceil(math.log2(fs)))))  # ≈ 1 Hz bins
+    # a power of two near fs / resolution
+    nper = int(min(u.size, 2 ** max(4, round(math.log2(fs / resolution_hz)))))
     f, p = welch(u, fs=fs, nperseg=nper)
     if not np.any(p > 0):
         raise ParameterError("the reference has no power: no band to analyse")
@@ -116,8 +118,8 @@ class ChannelProcessor:
     det : DetectionSettings
     baseline : ArmaxModel, optional
         Baseline model: the estimator starts from its θ and detection compares with
-        it. Without one, the baseline is identified (:func:`ehss.rels`, λ = 1, the same
-        structure) over the first ``det.learn_s``.
+        it. Without one, the baseline is identified over the first ``det.learn_s`` by a
+        second :class:`ehss.RelsEstimator` with λ = 1 and the same structure.
     h1_window_s : float
         Length of the sliding window of the H1 estimate.
     """
@@ -142,6 +144,9 @@ class ChannelProcessor:
         self.baseline = baseline
         self.detector = Detector(det)
         self.estimator: ehss.RelsEstimator | None = None
+        self._learner: ehss.RelsEstimator | None = None
+        self.just_set_up = False
+        self._captured_learning = True
         self.n_samples = 0
         self.messages: list[str] = []
         n_learn = max(1, int(round(det.learn_s * self.fs)))
@@ -179,6 +184,13 @@ class ChannelProcessor:
             theta0=theta0, dt=1.0 / self.fs, u_scale=u_scale, y_scale=y_scale,
             method=e.method,
         )
+        if self.baseline is None:
+            # the baseline: the same estimator with λ = 1 over the learning time, run
+            # alongside (a whole-record fit at the end would stall the processing)
+            self._learner = ehss.RelsEstimator(
+                na=e.na, nb=e.nb, nc=e.nc, delay=e.delay, forgetting=1.0, p0=e.p0,
+                dt=1.0 / self.fs, u_scale=u_scale, y_scale=y_scale, method=e.method,
+            )
 
     def feed(self, u: np.ndarray, y: np.ndarray) -> None:
         """Process consecutive samples of the reference ``u`` and feedback ``y``."""
@@ -203,7 +215,12 @@ class ChannelProcessor:
             # buffer: the estimator starts no later than the buffer's end)
             if k0:
                 self.estimator.update_many(uu[:k0], yy[:k0])
+                if self._learner is not None:
+                    self._learner.update_many(uu[:k0], yy[:k0])
         err = self.estimator.update_many(u, y)
+        inside = min(n, max(0, n_learn - k0))
+        if self._learner is not None and inside:
+            self._learner.update_many(u[:inside], y[:inside])
         self.pred_sq += float(np.dot(err, err))
         d = u - y
         self.track_sq += float(np.dot(d, d))
@@ -237,23 +254,23 @@ class ChannelProcessor:
     # ------------------------------------------------------------------ evaluation
     @property
     def learning(self) -> bool:
-        return self.n_samples < self._learn[0].size
+        """True until the learning time is over and the baseline and band are set."""
+        return self.grid_hz is None
 
     def _finish_learning(self) -> None:
-        u, y = self._learn
+        u = self._learn[0]
         if self.band_hz is None:
-            lo, hi = reference_band(u, self.fs)
+            # the last 4 s of the learning time, 2 Hz bins: a few ms at most
+            lo, hi = reference_band(u[-int(4 * self.fs):], self.fs)
             self.band_hz = (lo, hi)
         lo, hi = self.band_hz
         self.grid_hz = np.linspace(max(lo, 0.0), min(hi, 0.5 * self.fs), N_GRID)
-        if self.baseline is None:
-            e = self.est
+        if self.baseline is None and self._learner is not None:
             try:
-                self.baseline = ehss.rels(u, y, na=e.na, nb=e.nb, nc=e.nc, delay=e.delay,
-                                          forgetting=1.0, p0=e.p0, dt=1.0 / self.fs,
-                                          method=e.method)
+                self.baseline = self._learner.model
             except EhssError as exc:
                 self.messages.append(f"no baseline: {exc}")
+            self._learner = None
         if self.baseline is not None:
             if not self.baseline.is_stable():
                 self.messages.append("the baseline model is unstable: comparisons with it "
@@ -266,22 +283,36 @@ class ChannelProcessor:
         self._va = zi[:, None] ** np.arange(e.na + 1)
         self._vb = zi[:, None] ** (e.delay + np.arange(e.nb + 1))
 
-    def evaluate(self, t_s: float) -> str | None:
-        """Compare the current model with the reference; returns "alarm"/"clear"/None.
-
-        Updates :attr:`figures`, :attr:`dominant`, :attr:`tracking_rms` and
-        :attr:`prediction_rms` (over the samples since the last evaluation).
-        """
+    def capture(self) -> np.ndarray | None:
+        """θ̂ now (a copy; None before the estimator starts), and the tracking and
+        prediction-error RMS over the samples since the last capture."""
         if self._acc_n:
             self.tracking_rms = math.sqrt(self.track_sq / self._acc_n)
             self.prediction_rms = math.sqrt(self.pred_sq / self._acc_n)
             self.track_sq = self.pred_sq = 0.0
             self._acc_n = 0
-        if self.estimator is None or self.learning:
+        self._captured_learning = self.n_samples < self._learn[0].size
+        return None if self.estimator is None else self.estimator.theta
+
+    def evaluate(self, t_s: float, theta: np.ndarray | None, *,
+                 may_set_up: bool = True) -> str | None:
+        """Compare the model θ̂ = ``theta`` (from :meth:`capture` at stream time
+        ``t_s``) with the reference model; returns "alarm", "clear" or None.
+
+        When the learning time is over, the first call with ``may_set_up`` sets the
+        baseline, band and grid (:attr:`just_set_up` tells it did; a session lets one
+        channel do so per evaluation, to spread the cost). Updates :attr:`figures` and
+        :attr:`dominant`.
+        """
+        self.just_set_up = False
+        if theta is None or self._captured_learning:
             return None
         if self.grid_hz is None:
+            if not may_set_up:
+                return None
             self._finish_learning()
-        h, s = self._current()
+            self.just_set_up = True
+        h, s = self._response(theta)
         self.dominant = s
         if self.det.compare == "recent":
             self._recent.append((t_s, h, s))
@@ -300,14 +331,13 @@ class ChannelProcessor:
             self.peak_figures = np.maximum(self.peak_figures, finite)
         return self.detector.step(t_s, self.figures)
 
-    def _current(self) -> tuple[np.ndarray, complex]:
-        """The current model's response on the grid and its dominant pole.
+    def _response(self, theta: np.ndarray) -> tuple[np.ndarray, complex]:
+        """The response of the model θ̂ on the grid and its dominant pole.
 
         The same G(e^{jωdt}) = e^{−jωdt·d} B/A as :meth:`ArmaxModel.frequency_response`,
         from θ̂ through precomputed powers of z⁻¹ (no model object per evaluation).
         """
         e = self.est
-        theta = self.estimator.theta
         a = np.concatenate(([1.0], theta[:e.na]))
         b = theta[e.na:e.na + e.nb + 1]
         return (self._vb @ b) / (self._va @ a), dominant_pole(a, 1.0 / self.fs)
@@ -316,7 +346,7 @@ class ChannelProcessor:
         """``(grid_hz, current model's H, reference H)`` on the band grid."""
         if self.grid_hz is None or self.estimator is None or self._va is None:
             return np.empty(0), None, None
-        return self.grid_hz, self._current()[0], self._h_ref
+        return self.grid_hz, self._response(self.estimator.theta)[0], self._h_ref
 
     def h1(self) -> ehss.FrequencyResponse | None:
         """H1 estimate over the sliding window, or None while it is too short."""

@@ -52,7 +52,8 @@ class DetectionSettings:
         Look-back of ``compare="recent"`` (s).
     band_hz : (float, float) or None
         Analysis band; default the baseline model's ``band_hz``, else the band where
-        the reference's spectrum is within 20 dB of its peak over the learning time.
+        the reference's spectrum is within 20 dB of its peak over the last 4 s of the
+        learning time.
     """
 
     compare: str = "baseline"

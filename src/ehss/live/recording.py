@@ -2,7 +2,9 @@
 
 The file is written in HDF5's single-writer/multiple-reader mode (SWMR): every flush
 leaves it consistent, so it can be read while the session runs and stays readable when
-the process is killed (everything up to the last flush, at most ``flush_s`` old).
+the process is killed (everything up to the last flush, at most ``flush_s`` old). The
+writing is done by a thread of its own (HDF5 releases the interpreter while it writes):
+the processing only hands arrays over, and never waits for the disk.
 
 Layout:
 
@@ -21,6 +23,8 @@ versions (JSON in ``settings``).
 from __future__ import annotations
 
 import json
+import queue
+import threading
 import time
 from pathlib import Path
 
@@ -29,7 +33,7 @@ import numpy as np
 
 from ehss._files import check_writable
 from ehss._provenance import versions
-from ehss.errors import DataError
+from ehss.errors import DataError, EhssError
 from ehss.live.detect import FIGURES
 from ehss.live.layout import RecordLayout
 from ehss.live.source import COUNTERS
@@ -55,7 +59,7 @@ class LiveRecorder:
     """
 
     def __init__(self, path: str | Path, layout: RecordLayout, fs: float, n_params: int,
-                 settings: dict, *, flush_s: float = 0.25) -> None:
+                 settings: dict, *, flush_s: float = 1.0) -> None:
         path = check_writable(path)
         if path.exists():
             raise DataError(f"{str(path)!r} exists: a recording is never overwritten")
@@ -94,6 +98,10 @@ class LiveRecorder:
                                           maxshape=(None, len(COUNTERS)),
                                           chunks=(64, len(COUNTERS)), dtype="i8")
         h.swmr_mode = True
+        self._inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self.error: BaseException | None = None
+        self._writer = threading.Thread(target=self._write_loop, name="ehss-recorder",
+                                        daemon=True)
         self._pend_s: list[np.ndarray] = []
         self._pend_i: list[np.ndarray] = []
         self._pend_t: list[float] = []
@@ -103,11 +111,14 @@ class LiveRecorder:
         self._last = time.monotonic()
         self.rows = 0
         self.closed = False
+        self._writer.start()
 
+    # ------------------------------------------------------------------ the caller's side
+    # the caller fills these lists; each flush hands them to the writer in one piece
     def samples(self, first_index: int, samples: np.ndarray) -> None:
         """Append consecutive samples starting at stream index ``first_index``."""
         self._pend_s.append(samples)
-        self._pend_i.append(np.arange(first_index, first_index + samples.shape[0]))
+        self._pend_i.append((first_index, samples.shape[0]))
 
     def estimate(self, t_s: float, theta: np.ndarray, figures: np.ndarray) -> None:
         """Append one evaluation: θ̂ (C, P) and figures (C, 3) at stream time ``t_s``."""
@@ -119,48 +130,72 @@ class LiveRecorder:
         """Append one event (a JSON-able dict)."""
         self._pend_ev.append(json.dumps(record, allow_nan=True))
 
+    def _hand_over(self, kind: str, counters: dict[str, int]) -> None:
+        batch = (self._pend_s, self._pend_i, self._pend_t, self._pend_theta, self._pend_fig,
+                 self._pend_ev)
+        self._pend_s, self._pend_i, self._pend_t = [], [], []
+        self._pend_theta, self._pend_fig, self._pend_ev = [], [], []
+        self._inbox.put((kind, batch, dict(counters)))
+
+    def maybe_flush(self, counters: dict[str, int]) -> None:
+        """Ask for a flush when ``flush_s`` has passed since the last request.
+
+        Raises
+        ------
+        DataError
+            If writing failed (e.g. the disk is full): the session stops cleanly.
+        """
+        if self.error is not None:
+            raise DataError(f"recording to {str(self.path)!r} failed: {self.error}")
+        if time.monotonic() - self._last >= self._flush_s:
+            self._last = time.monotonic()
+            self._hand_over("flush", counters)
+
+    def close(self, counters: dict[str, int]) -> None:
+        """Write everything, flush and close; waits for the writer (idempotent)."""
+        if not self.closed:
+            self.closed = True
+            self._hand_over("close", counters)
+            self._writer.join()
+
+    # ------------------------------------------------------------------ the writer thread
+    def _write_loop(self) -> None:
+        while True:
+            kind, batch, counters = self._inbox.get()
+            if self.error is None:
+                try:
+                    self._write(batch, counters)
+                except (OSError, ValueError, EhssError) as exc:   # disk full, file gone
+                    self.error = exc
+            if kind == "close":
+                try:
+                    self._file.close()
+                except (OSError, ValueError) as exc:
+                    self.error = self.error or exc
+                return
+
     @staticmethod
     def _append(ds, rows: np.ndarray) -> None:
         n = ds.shape[0]
         ds.resize(n + rows.shape[0], axis=0)
         ds[n:] = rows
 
-    def maybe_flush(self, counters: dict[str, int]) -> None:
-        """Flush when ``flush_s`` has passed since the last flush."""
-        if time.monotonic() - self._last >= self._flush_s:
-            self.flush(counters)
-
-    def flush(self, counters: dict[str, int]) -> None:
-        """Write what is pending and make it durable for readers."""
-        if self.closed:
-            return
-        if self._pend_s:
-            x = np.concatenate(self._pend_s)
+    def _write(self, batch: tuple, counters: dict[str, int]) -> None:
+        """Write one handed-over batch and make it durable for readers (writer thread)."""
+        xs, idx, ts, thetas, figs, events = batch
+        if xs:
+            x = np.concatenate(xs)
             self._append(self._samples, x)
-            self._append(self._index, np.concatenate(self._pend_i))
+            self._append(self._index, np.concatenate([np.arange(f, f + n) for f, n in idx]))
             self.rows += x.shape[0]
-            self._pend_s.clear()
-            self._pend_i.clear()
-        if self._pend_t:
-            self._append(self._t, np.asarray(self._pend_t))
-            self._append(self._theta, np.stack(self._pend_theta))
-            self._append(self._fig, np.stack(self._pend_fig))
-            self._pend_t.clear()
-            self._pend_theta.clear()
-            self._pend_fig.clear()
-        if self._pend_ev:
-            self._append(self._events, np.array(self._pend_ev, dtype=object))
-            self._pend_ev.clear()
+        if ts:
+            self._append(self._t, np.asarray(ts))
+            self._append(self._theta, np.stack(thetas))
+            self._append(self._fig, np.stack(figs))
+        if events:
+            self._append(self._events, np.array(events, dtype=object))
         self._append(self._counters, np.array([[counters[k] for k in COUNTERS]]))
         self._file.flush()
-        self._last = time.monotonic()
-
-    def close(self, counters: dict[str, int]) -> None:
-        """Flush and close (idempotent)."""
-        if not self.closed:
-            self.flush(counters)
-            self._file.close()
-            self.closed = True
 
 
 def read_recording(path: str | Path) -> dict:

@@ -140,6 +140,7 @@ class LiveSession:
         self._rate = (time.monotonic(), 0)
         self.rate_sps = 0.0
         self.skipped_snapshots = 0
+        self._evals: dict | None = None
         self._skip_lag = False
         self.setup_ms = math.nan
         self._active0: tuple[float, float] | None = None
@@ -178,8 +179,10 @@ class LiveSession:
                      "forgetting": self.est.lam(fs)})
 
     # ------------------------------------------------------------------ events
-    def _event(self, record: dict) -> None:
-        record = {"t_s": self._n / self.fs if self.fs else 0.0, "wall": time.time(), **record}
+    def _event(self, record: dict, t_s: float | None = None) -> None:
+        if t_s is None:
+            t_s = self._n / self.fs if self.fs else 0.0
+        record = {"t_s": t_s, "wall": time.time(), **record}
         self.events.append(record)
         if self.recorder is not None:
             self.recorder.event(record)
@@ -198,37 +201,54 @@ class LiveSession:
             self._n += take
             i += take
             if self._n == self._next_eval:
-                self._evaluate()
+                self._capture()
                 self._next_eval += self._eval_n
 
-    def _evaluate(self) -> None:
-        t = self._n / self.fs
-        c, p = len(self.channels), self.est.n_params
-        theta = np.full((c, p), np.nan)
-        figs = np.full((c, len(FIGURES)), np.nan)
-        track = np.full(c, np.nan)
-        pred = np.full(c, np.nan)
-        for k, proc in enumerate(self.channels):
-            change = proc.evaluate(t)
-            for msg in proc.messages:
-                self._event({"kind": "message", "channel": proc.name, "text": msg})
-            proc.messages.clear()
-            if proc.estimator is not None:
-                theta[k] = proc.estimator.theta
-            figs[k] = proc.figures
-            track[k], pred[k] = proc.tracking_rms, proc.prediction_rms
-            if change is not None:
-                s = proc.dominant
-                self._event({
-                    "kind": change, "channel": proc.name,
-                    **{name: float(v) for name, v in zip(FIGURES, proc.figures, strict=True)},
-                    "exceeded": proc.detector.exceeded(proc.figures),
-                    "dominant_hz": abs(s) / (2 * math.pi),
-                    "dominant_damping": -s.real / abs(s) if abs(s) > 0 else math.nan,
-                })
-        if self.recorder is not None:
-            self.recorder.estimate(t, theta, figs)
-        self._hist.append((t, theta, track, pred, figs))
+    # Evaluations: at each boundary θ̂ of every channel is captured (cheap); the
+    # comparisons, one channel at a time, run between polls, so that a poll never
+    # waits for all channels' figures. The next boundary completes any left over.
+    def _capture(self) -> None:
+        self._finish_evaluations()
+        c = len(self.channels)
+        thetas = [proc.capture() for proc in self.channels]
+        self._evals = {
+            "t": self._n / self.fs, "theta": thetas, "next": 0, "may_set_up": True,
+            "figures": np.full((c, len(FIGURES)), np.nan),
+            "track": np.array([p.tracking_rms for p in self.channels]),
+        }
+
+    def _evaluate_next(self) -> None:
+        ev = self._evals
+        k = ev["next"]
+        proc = self.channels[k]
+        t = ev["t"]
+        change = proc.evaluate(t, ev["theta"][k], may_set_up=ev["may_set_up"])
+        ev["may_set_up"] = ev["may_set_up"] and not proc.just_set_up  # one per boundary
+        for msg in proc.messages:
+            self._event({"kind": "message", "channel": proc.name, "text": msg}, t)
+        proc.messages.clear()
+        ev["figures"][k] = proc.figures
+        if change is not None:
+            s = proc.dominant
+            self._event({
+                "kind": change, "channel": proc.name,
+                **{name: float(v) for name, v in zip(FIGURES, proc.figures, strict=True)},
+                "exceeded": proc.detector.exceeded(proc.figures),
+                "dominant_hz": abs(s) / (2 * math.pi),
+                "dominant_damping": -s.real / abs(s) if abs(s) > 0 else math.nan,
+            }, t)
+        ev["next"] += 1
+        if ev["next"] == len(self.channels):
+            theta = np.array([np.full(self.est.n_params, np.nan) if th is None else th
+                              for th in ev["theta"]])
+            if self.recorder is not None:
+                self.recorder.estimate(t, theta, ev["figures"])
+            self._hist.append((t, theta, ev["track"], None, ev["figures"]))
+            self._evals = None
+
+    def _finish_evaluations(self) -> None:
+        while self._evals is not None:
+            self._evaluate_next()
 
     def _note_lag(self, arrival: float) -> None:
         lag = time.time() - arrival
@@ -325,13 +345,16 @@ class LiveSession:
                     break
                 if duration_s is not None and self.fs and self._n >= duration_s * self.fs:
                     break
-                blocks = self.source.poll(0.05)
+                # a pending evaluation step first when data waits, else poll briefly
+                blocks = self.source.poll(0.0 if self._evals is not None else 0.05)
                 if blocks:
                     if self._active0 is None:
                         self._active0 = (time.monotonic(), time.process_time())
                     self._process(blocks, duration_s)
                     last_data = time.monotonic()
                     self._active1 = (last_data, time.process_time())
+                if self._evals is not None:
+                    self._evaluate_next()
                 if self.recorder is not None:
                     self.recorder.maybe_flush(self.source.counters)
                 if self._publish is not None and self.fs and \
@@ -339,6 +362,7 @@ class LiveSession:
                     self._last_publish = time.monotonic()
                     self._publish(self.snapshot())
         finally:
+            self._finish_evaluations()
             if self.fs:
                 self._event({"kind": "stop", "counters": dict(self.source.counters),
                              "lag_ms": self.lag_ms()})
