@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import ehss
 from ehss.cli import main
 from ehss.live import read_recording, rig_record
 
 
-def test_live_replay_equals_batch_rels(tmp_path):
+@pytest.mark.parametrize("method, nc", [("rels", 0), ("rml", 4)])
+def test_live_replay_equals_batch_rels(tmp_path, method, nc):
     layout, x, fs = rig_record("position", n_channels=1, duration_s=12.0, seed=3)
     path = tmp_path / "run.csv"
     ehss.write_csv(path, {name: x[:, i] for i, name in enumerate(layout.fields)})
@@ -18,17 +20,18 @@ def test_live_replay_equals_batch_rels(tmp_path):
     lam = 0.999
     code = main(["live", "--replay", str(path), "--speed", "inf", "--quiet",
                  "--forgetting", str(lam), "--p0", "1000", "--na", "4", "--nb", "3",
-                 "--nc", "0", "--u-scale", repr(su), "--y-scale", repr(sy),
+                 "--nc", str(nc), "--method", method, "--u-scale", repr(su), "--y-scale", repr(sy),
                  "--record", str(tmp_path / "rec.h5")])
     assert code == 0
     rec = read_recording(tmp_path / "rec.h5")
-    model = ehss.rels(u, y, na=4, nb=3, nc=0, delay=1, forgetting=lam, p0=1000.0,
-                      dt=1 / fs)
+    model = ehss.rels(u, y, na=4, nb=3, nc=nc, delay=1, forgetting=lam, p0=1000.0,
+                      dt=1 / fs, method=method)
     assert rec["t"][-1] == x.shape[0] / fs
     # the same kernel on the same samples, but rels scales by u/s and the estimator by
     # u·(1/s): the scaled data differ in the last bit (ε = 1.1e-16), and the estimate's
     # sensitivity to its data is the condition number κ of the regressors' weighted
     # covariance (λ-weighted over the memory 1/(1−λ)); bound: 100 ε κ
+    # (the a- and b-part of the regressor; the c-part is the residual history)
     phi = np.column_stack([-y[3:-1], -y[2:-2], -y[1:-3], -y[:-4],
                            u[3:-1], u[2:-2], u[1:-3], u[:-4]])[-1000:]
     phi /= np.r_[[sy] * 4, [su] * 4]

@@ -74,7 +74,8 @@ def test_given_baseline_model_is_the_start_and_the_reference(tmp_path):
     layout, x, fs = rig_record("position", n_channels=1, duration_s=8.0, seed=21,
                                events=(parse_event("5:mass_kg=350"),))
     pre = rig_record("position", n_channels=1, duration_s=10.0, seed=22)[1]
-    base = ehss.rels(pre[:, 1], pre[:, 2], na=4, nb=3, nc=0, delay=1, dt=1 / fs, p0=1e3)
+    base = ehss.rels(pre[:, 1], pre[:, 2], na=4, nb=3, nc=4, delay=1, dt=1 / fs, p0=1e3,
+                     method="rml")
     det = DetectionSettings(learn_s=1.0)
     session = LiveSession(PacedSource(layout, x, fs, speed=math.inf),
                           est=EstimatorSettings(), det=det, baselines={"1": base})

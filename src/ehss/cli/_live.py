@@ -111,9 +111,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     e = p.add_argument_group("estimation")
     e.add_argument("--na", type=int, default=4, metavar="N", help="order of A (default: 4)")
     e.add_argument("--nb", type=int, default=3, metavar="N", help="order of B (default: 3)")
-    e.add_argument("--nc", type=int, default=0, metavar="N", help="order of C (default: 0)")
+    e.add_argument("--nc", type=int, default=4, metavar="N", help="order of C (default: 4)")
     e.add_argument("--delay", type=int, default=1, metavar="D", help="delay (default: 1)")
-    e.add_argument("--method", choices=("rels", "rml"), default="rels")
+    e.add_argument("--method", choices=("rels", "rml"), default="rml",
+                   help="rml (default): recursive maximum likelihood, unbiased when the "
+                   "feedback carries mostly sensor noise; rels: the paper's eqs (19)-(22)")
     e.add_argument("--memory", type=float, default=0.3, metavar="S",
                    help="memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: "
                    "%(default)s s)")
@@ -130,13 +132,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     d = p.add_argument_group("change detection")
     d.add_argument("--compare", choices=("baseline", "recent"), default="baseline",
                    help="compare with the baseline, or the model of --recent s ago")
-    d.add_argument("--frf-db", type=float, default=1.2, metavar="DB",
+    d.add_argument("--frf-db", type=float, default=0.5, metavar="DB",
                    help="threshold of the RMS dB distance of the responses over the band "
                    "(default: %(default)s)")
-    d.add_argument("--gain-db", type=float, default=3.0, metavar="DB",
+    d.add_argument("--gain-db", type=float, default=1.0, metavar="DB",
                    help="threshold of the gain change at the band's lower edge (default: "
                    "%(default)s)")
-    d.add_argument("--pole-shift", type=float, default=0.25, metavar="FRACTION",
+    d.add_argument("--pole-shift", type=float, default=0.1, metavar="FRACTION",
                    help="threshold of the dominant pole's relative shift (default: "
                    "%(default)s)")
     d.add_argument("--hold", type=float, default=0.2, metavar="S",

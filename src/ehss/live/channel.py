@@ -34,6 +34,8 @@ class EstimatorSettings:
     na, nb, nc, delay : int
         Model structure.
     method : {"rels", "rml"}
+        Default RML with nc = na: a rig's feedback carries mostly sensor noise (an
+        output-error record), where RELS and least squares are biased and noisier.
     memory_s : float
         Memory of the forgetting factor: λ = 1 − 1 / (memory_s · fs), unless
         ``forgetting`` is given.
@@ -50,9 +52,9 @@ class EstimatorSettings:
 
     na: int = 4
     nb: int = 3
-    nc: int = 0
+    nc: int = 4
     delay: int = 1
-    method: str = "rels"
+    method: str = "rml"
     memory_s: float = 0.3
     forgetting: float | None = None
     p0: float = 1e3

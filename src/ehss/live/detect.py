@@ -40,7 +40,10 @@ class DetectionSettings:
         Compare with the baseline model (given, or identified over the first
         ``learn_s``) or with the model of ``recent_s`` ago.
     frf_db, gain_db, pole_shift : float
-        Thresholds of the figures (dB, dB, fraction); ``inf`` disables one.
+        Thresholds of the figures (dB, dB, fraction); ``inf`` disables one. The default
+        0.5 dB is half the 1 dB a validated model may differ from the H1 estimate; each
+        threshold should sit well above the figure's stationary spread (shown as the
+        peak figure by the summary and recorded with every evaluation).
     hold_s : float
         How long a figure must stay beyond its threshold before the alarm (s).
     clear_s : float
@@ -57,9 +60,9 @@ class DetectionSettings:
     """
 
     compare: str = "baseline"
-    frf_db: float = 1.2
-    gain_db: float = 3.0
-    pole_shift: float = 0.25
+    frf_db: float = 0.5
+    gain_db: float = 1.0
+    pole_shift: float = 0.1
     hold_s: float = 0.2
     clear_s: float = 2.0
     learn_s: float = 10.0
