@@ -171,7 +171,7 @@ def _make_document(doc, latest: dict, token: str | None) -> None:
                              name="status"))
             return
     status = Div(text="waiting for data…", name="status", width=1100)
-    log = Div(text="<b>Alarm log</b><br>no alarms", name="alarms", width=1100)
+    log = Div(text="<b>Alarm log</b><br>no alarms", name="alarms", width=600)
     pick = Select(title="channel", value="", options=[], name="channel", width=120)
     bode_model = ColumnDataSource(dict(f=[], mag=[], ph=[]), name="bode_model")
     bode_ref = ColumnDataSource(dict(f=[], mag=[], ph=[]), name="bode_reference")
@@ -179,9 +179,9 @@ def _make_document(doc, latest: dict, token: str | None) -> None:
     hist = ColumnDataSource(dict(t=[], tracking=[], frf=[]), name="history")
     theta = ColumnDataSource(dict(t=[]), name="theta")
     tools = "pan,wheel_zoom,box_zoom,reset,save"
-    mag = figure(title="Bode magnitude", x_axis_type="log", height=300, width=540,
+    mag = figure(title="Bode magnitude", x_axis_type="log", height=300, width=520,
                  x_axis_label="frequency (Hz)", y_axis_label="dB", tools=tools)
-    ph = figure(title="Bode phase", x_axis_type="log", height=300, width=540,
+    ph = figure(title="Bode phase", x_axis_type="log", height=300, width=520,
                 x_range=mag.x_range, x_axis_label="frequency (Hz)", y_axis_label="degrees",
                 tools=tools)
     for fig, key in ((mag, "mag"), (ph, "ph")):
@@ -195,12 +195,12 @@ def _make_document(doc, latest: dict, token: str | None) -> None:
                 fig.line("f", key, source=bode_model, line_width=2, color="#1f77b4")]),
         ]
         fig.add_layout(Legend(items=items, location="bottom_left"), "center")
-    coef = figure(title="coefficients θ̂", height=260, width=540, x_axis_label="t (s)",
+    coef = figure(title="coefficients θ̂", height=260, width=520, x_axis_label="t (s)",
                   tools=tools)
-    err = figure(title="tracking error RMS (ref − fb)", height=260, width=540,
+    err = figure(title="tracking error RMS (ref − fb)", height=260, width=520,
                  x_axis_label="t (s)", tools=tools)
     err.line("t", "tracking", source=hist, line_width=1.5, color="#d62728")
-    frf = figure(title="FRF distance to the reference model (dB)", height=260, width=540,
+    frf = figure(title="FRF distance to the reference model (dB)", height=260, width=520,
                  x_axis_label="t (s)", tools=tools)
     frf.line("t", "frf", source=hist, line_width=1.5, color="#9467bd")
     made = {"names": None}
@@ -245,8 +245,11 @@ def _make_document(doc, latest: dict, token: str | None) -> None:
                 for i, n in enumerate(names_t):
                     coef.line("t", n, source=theta, legend_label=n,
                               color=_COLORS[i % len(_COLORS)], line_width=1.5)
-                coef.legend.location = "top_left"
-                coef.legend.orientation = "horizontal"
+                legend = coef.legend[0]
+                legend.label_text_font_size = "8pt"
+                legend.spacing = 0
+                legend.ncols = 2
+                coef.add_layout(legend, "right")
             theta.data = {"t": t.tolist(), **{n: th[:, i].tolist()
                                               for i, n in enumerate(names_t)}}
             hist.data = dict(t=t.tolist(),
@@ -259,6 +262,11 @@ def _make_document(doc, latest: dict, token: str | None) -> None:
 
 def _serve(host: str, port: int, token: str | None, snapshots, ready) -> None:
     """Entry point of the dashboard's process."""
+    import logging
+
+    # the server's access log would fill the terminal (or a pipe nobody reads)
+    for name in ("bokeh", "tornado"):
+        logging.getLogger(name).setLevel(logging.WARNING)
     try:
         from bokeh.application import Application
         from bokeh.application.handlers.function import FunctionHandler
