@@ -55,4 +55,5 @@ def test_rig_run_writes_a_report(tmp_path, capsys):
                  "--report", str(tmp_path / "r.json")]) == 0
     r = json.loads((tmp_path / "r.json").read_text())
     assert r["samples"] == 3000 and r["counters"]["lost_samples"] == 0
-    assert set(r["final_theta"]) == {"1", "2"} and len(r["final_theta"]["1"]) == 4 + 4 + 4  # a1..a4, b0..b3, c1..c4
+    assert set(r["final_theta"]) == {"1", "2"}
+    assert len(r["final_theta"]["1"]) == 4 + 4 + 4  # a1..a4, b0..b3, c1..c4

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import ehss
-from ehss.errors import ParameterError
+from ehss._files import check_writable
+from ehss.errors import DataError, ParameterError
 from ehss.live.channel import ChannelProcessor, EstimatorSettings
 from ehss.live.detect import FIGURES, DetectionSettings
 from ehss.live.recording import LiveRecorder
@@ -112,6 +113,10 @@ class LiveSession:
         if unknown:
             raise ParameterError(f"baselines for unknown channels {sorted(unknown)}; the "
                                  f"stream has {', '.join(self.layout.channels)}")
+        if record is not None:
+            record = check_writable(record)
+            if record.exists():
+                raise DataError(f"{str(record)!r} exists: a recording is never overwritten")
         self._record_path = record
         self._update_s = float(update_s)
         self._publish = publish
@@ -139,7 +144,6 @@ class LiveSession:
         self._last_publish = -math.inf
         self._rate = (time.monotonic(), 0)
         self.rate_sps = 0.0
-        self.skipped_snapshots = 0
         self._evals: dict | None = None
         self._skip_lag = False
         self.setup_ms = math.nan
@@ -243,7 +247,7 @@ class LiveSession:
                               for th in ev["theta"]])
             if self.recorder is not None:
                 self.recorder.estimate(t, theta, ev["figures"])
-            self._hist.append((t, theta, ev["track"], None, ev["figures"]))
+            self._hist.append((t, theta, ev["track"], ev["figures"]))
             self._evals = None
 
     def _finish_evaluations(self) -> None:
@@ -302,7 +306,7 @@ class LiveSession:
             "t": np.array([h[0] for h in hist]),
             "theta": np.array([h[1] for h in hist]) if hist else np.empty((0, 0, 0)),
             "tracking": np.array([h[2] for h in hist]) if hist else np.empty((0, 0)),
-            "figures": np.array([h[4] for h in hist]) if hist else np.empty((0, 0, 3)),
+            "figures": np.array([h[3] for h in hist]) if hist else np.empty((0, 0, 3)),
         }
         return {
             "t_s": self._n / self.fs if self.fs else 0.0,

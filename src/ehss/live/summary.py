@@ -43,20 +43,23 @@ def summary_table(snap: dict) -> Table:
 
 
 class TerminalSummary:
-    """A table refreshed in place on a terminal; plain lines on anything else."""
+    """A table refreshed in place on a terminal (by rich's own thread, twice a second:
+    :meth:`update` only hands the table over); a table every 10 s of stream time on
+    anything else."""
 
     def __init__(self, stream: TextIO) -> None:
         self._console = Console(file=stream)
         self._live: Live | None = None
         if self._console.is_terminal:
-            self._live = Live(console=self._console, auto_refresh=False, transient=False)
+            self._live = Live(console=self._console, auto_refresh=True, refresh_per_second=2,
+                              transient=False)
             self._live.start()
         self._last_plain = -math.inf
 
     def update(self, snap: dict) -> None:
         table = summary_table(snap)
         if self._live is not None:
-            self._live.update(table, refresh=True)
+            self._live.update(table)
         elif snap["t_s"] - self._last_plain >= 10.0:
             self._last_plain = snap["t_s"]
             self._console.print(table)
