@@ -57,9 +57,21 @@ def test_detector_waits_for_the_hold_time_and_clears():
     assert det.step(0.8, under) == "clear"
 
 
-def test_nan_counts_as_beyond():
+def test_nan_raises_nothing():
     det = Detector(DetectionSettings())
-    assert det.exceeded(np.array([np.nan, 0, 0])) == ["frf_db"]
+    assert det.exceeded(np.array([np.nan, 0, np.nan])) == []
+
+
+def test_dominant_pole_in_band_only():
+    # a slow real pole at 0.2 Hz (closest to the circle) and a pair at 25 Hz
+    dt = 1e-3
+    zs = [np.exp(-2 * np.pi * 0.2 * dt),
+          np.exp((-30 + 2j * np.pi * 25) * dt), np.exp((-30 - 2j * np.pi * 25) * dt)]
+    a = np.poly(zs).real
+    assert abs(dominant_pole(a, dt)) == pytest.approx(2 * np.pi * 0.2, rel=1e-6)
+    s = dominant_pole(a, dt, (1.0, 50.0))
+    assert s.imag == pytest.approx(2 * np.pi * 25, rel=1e-9)
+    assert math.isnan(dominant_pole(a, dt, (60.0, 100.0)).real)
 
 
 @pytest.mark.parametrize("kw", [{"compare": "x"}, {"frf_db": 0}, {"hold_s": -1},

@@ -120,8 +120,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: "
                    "%(default)s s)")
     e.add_argument("--forgetting", type=float, metavar="LAMBDA", help="λ itself")
-    e.add_argument("--p0", type=float, default=1e3, metavar="ALPHA",
-                   help="P(0) = α I on the scaled data (default: %(default)g)")
+    e.add_argument("--p0", type=float, default=1e6, metavar="ALPHA",
+                   help="P(0) = α I on the scaled data; tr P(0) also bounds tr P "
+                   "(default: %(default)g)")
     e.add_argument("--u-scale", type=float, metavar="U",
                    help="scale of the references (default: RMS of the first 0.5 s)")
     e.add_argument("--y-scale", type=float, metavar="Y",
@@ -138,9 +139,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--gain-db", type=float, default=1.0, metavar="DB",
                    help="threshold of the gain change at the band's lower edge (default: "
                    "%(default)s)")
-    d.add_argument("--pole-shift", type=float, default=0.1, metavar="FRACTION",
-                   help="threshold of the dominant pole's relative shift (default: "
-                   "%(default)s)")
+    d.add_argument("--pole-shift", type=float, default=math.inf, metavar="FRACTION",
+                   help="threshold of the relative shift of the dominant pole in the band "
+                   "(default: off; recorded all the same)")
     d.add_argument("--hold", type=float, default=0.2, metavar="S",
                    help="a figure must stay beyond its threshold this long (default: "
                    "%(default)s s)")

@@ -42,7 +42,9 @@ class EstimatorSettings:
     forgetting : float or None
         λ itself.
     p0 : float
-        α of P(0) = α I (on the scaled data).
+        α of P(0) = α I (on the scaled data). It also sets the bound of tr P (tr P(0)):
+        a small α would hold P, and with it the tracking speed, below what the
+        forgetting asks for.
     u_scale, y_scale : float or None
         Scales of u and y (see :class:`ehss.RelsEstimator`); None: the RMS of each
         channel's first ``scale_s`` of data (the estimator starts once it has them).
@@ -57,7 +59,7 @@ class EstimatorSettings:
     method: str = "rml"
     memory_s: float = 0.3
     forgetting: float | None = None
-    p0: float = 1e3
+    p0: float = 1e6
     u_scale: float | None = None
     y_scale: float | None = None
     scale_s: float = 0.5
@@ -120,8 +122,9 @@ class ChannelProcessor:
     det : DetectionSettings
     baseline : ArmaxModel, optional
         Baseline model: the estimator starts from its θ and detection compares with
-        it. Without one, the baseline is identified over the first ``det.learn_s`` by a
-        second :class:`ehss.RelsEstimator` with λ = 1 and the same structure.
+        it. Without one, the baseline is the mean of the estimates over the second half
+        of the first ``det.learn_s`` (the same estimator and memory as the comparisons:
+        its figures then measure change, not the difference of two estimators).
     h1_window_s : float
         Length of the sliding window of the H1 estimate.
     """
@@ -146,7 +149,8 @@ class ChannelProcessor:
         self.baseline = baseline
         self.detector = Detector(det)
         self.estimator: ehss.RelsEstimator | None = None
-        self._learner: ehss.RelsEstimator | None = None
+        self._theta_sum: np.ndarray | None = None
+        self._theta_count = 0
         self.just_set_up = False
         self._captured_learning = True
         self.n_samples = 0
@@ -186,13 +190,6 @@ class ChannelProcessor:
             theta0=theta0, dt=1.0 / self.fs, u_scale=u_scale, y_scale=y_scale,
             method=e.method,
         )
-        if self.baseline is None:
-            # the baseline: the same estimator with λ = 1 over the learning time, run
-            # alongside (a whole-record fit at the end would stall the processing)
-            self._learner = ehss.RelsEstimator(
-                na=e.na, nb=e.nb, nc=e.nc, delay=e.delay, forgetting=1.0, p0=e.p0,
-                dt=1.0 / self.fs, u_scale=u_scale, y_scale=y_scale, method=e.method,
-            )
 
     def feed(self, u: np.ndarray, y: np.ndarray) -> None:
         """Process consecutive samples of the reference ``u`` and feedback ``y``."""
@@ -217,12 +214,7 @@ class ChannelProcessor:
             # buffer: the estimator starts no later than the buffer's end)
             if k0:
                 self.estimator.update_many(uu[:k0], yy[:k0])
-                if self._learner is not None:
-                    self._learner.update_many(uu[:k0], yy[:k0])
         err = self.estimator.update_many(u, y)
-        inside = min(n, max(0, n_learn - k0))
-        if self._learner is not None and inside:
-            self._learner.update_many(u[:inside], y[:inside])
         self.pred_sq += float(np.dot(err, err))
         d = u - y
         self.track_sq += float(np.dot(d, d))
@@ -267,18 +259,25 @@ class ChannelProcessor:
             self.band_hz = (lo, hi)
         lo, hi = self.band_hz
         self.grid_hz = np.linspace(max(lo, 0.0), min(hi, 0.5 * self.fs), N_GRID)
-        if self.baseline is None and self._learner is not None:
+        if self.baseline is None and self._theta_count:
+            # the mean of the estimates over the learning time's second half
+            e = self.est
+            th = self._theta_sum / self._theta_count
             try:
-                self.baseline = self._learner.model
+                self.baseline = ehss.ArmaxModel(
+                    a=np.r_[1.0, th[:e.na]], b=th[e.na:e.na + e.nb + 1],
+                    c=np.r_[1.0, th[e.na + e.nb + 1:]], delay=e.delay, dt=1.0 / self.fs,
+                    meta={"baseline": "mean of the live estimates over "
+                          f"{self._theta_count} evaluations"},
+                )
             except EhssError as exc:
                 self.messages.append(f"no baseline: {exc}")
-            self._learner = None
         if self.baseline is not None:
             if not self.baseline.is_stable():
                 self.messages.append("the baseline model is unstable: comparisons with it "
                                      "are not meaningful")
             self._h_ref = self.baseline.frequency_response(self.grid_hz)
-            self._s_ref = dominant_pole(self.baseline.a, 1.0 / self.fs)
+            self._s_ref = dominant_pole(self.baseline.a, 1.0 / self.fs, self.band_hz)
         # z^-k on the grid, k = 0..na for A and d..d+nb for B: H = (V_b b) / (V_a a)
         e = self.est
         zi = np.exp(-2j * np.pi * self.grid_hz / self.fs)
@@ -307,7 +306,12 @@ class ChannelProcessor:
         :attr:`dominant`.
         """
         self.just_set_up = False
-        if theta is None or self._captured_learning:
+        if theta is None:
+            return None
+        if self._captured_learning:
+            if self.baseline is None and self.n_samples >= self._learn[0].size / 2:
+                self._theta_sum = theta if self._theta_sum is None else self._theta_sum + theta
+                self._theta_count += 1
             return None
         if self.grid_hz is None:
             if not may_set_up:
@@ -342,7 +346,7 @@ class ChannelProcessor:
         e = self.est
         a = np.concatenate(([1.0], theta[:e.na]))
         b = theta[e.na:e.na + e.nb + 1]
-        return (self._vb @ b) / (self._va @ a), dominant_pole(a, 1.0 / self.fs)
+        return (self._vb @ b) / (self._va @ a), dominant_pole(a, 1.0 / self.fs, self.band_hz)
 
     def model_response(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """``(grid_hz, current model's H, reference H)`` on the band grid."""
