@@ -89,7 +89,7 @@ class EstimatorSettings:
         return asdict(self)
 
 
-def reference_band(u: np.ndarray, fs: float, *, resolution_hz: float = 2.0
+def reference_band(u: np.ndarray, fs: float, *, resolution_hz: float = 0.5
                    ) -> tuple[float, float]:
     """Band where the spectrum of ``u`` is within 20 dB of its peak (Welch, Hann).
 
@@ -254,7 +254,8 @@ class ChannelProcessor:
     def _finish_learning(self) -> None:
         u = self._learn[0]
         if self.band_hz is None:
-            # the last 4 s of the learning time, 2 Hz bins: a few ms at most
+            # the last 4 s of the learning time, 0.5 Hz bins (coarser bins smear a band
+            # that starts at 1 Hz down to 0 Hz): a few ms at most
             lo, hi = reference_band(u[-int(4 * self.fs):], self.fs)
             self.band_hz = (lo, hi)
         lo, hi = self.band_hz
