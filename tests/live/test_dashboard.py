@@ -54,7 +54,7 @@ def test_dashboard_in_headless_chromium(tmp_path):
     env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
     live = subprocess.Popen(
         [sys.executable, "-m", "ehss", "live", "--rig", "position", "--channels", "2",
-         "--duration", "40", "--event", "15:mass_kg=350@1", "--learn", "5",
+         "--duration", "30", "--event", "8:mass_kg=350@1", "--learn", "4", "--speed", "2",
          "--dashboard", "0", "--quiet"], env=env, stderr=subprocess.PIPE, text=True)
     try:
         url = None
@@ -90,7 +90,7 @@ def test_dashboard_in_headless_chromium(tmp_path):
         alarm = seen[-1][1]
         assert "ALARM" in alarm and "channel 1" in alarm and "channel 2" not in alarm
         t_alarm = float(re.search(r"ALARM</b></span> t = ([0-9.]+) s", alarm).group(1))
-        assert 15.0 < t_alarm <= 16.0
+        assert 8.0 < t_alarm <= 9.0
         driver.save_screenshot(str(tmp_path / "dashboard.png"))
     finally:
         driver.quit()
