@@ -156,6 +156,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="analysis band, Hz (default: the baseline's, else where the "
                    "reference's spectrum is within 20 dB of its peak)")
+    e.add_argument("--batch", type=float, default=0.002, metavar="S",
+                   help="after a datagram, wait up to S s for more before updating (the "
+                   "estimators' cost is mostly per call; default: %(default)s s)")
     d.add_argument("--update", type=float, default=0.1, metavar="S",
                    help="evaluation period, s of stream time (default: %(default)s)")
     o = p.add_argument_group("output")
@@ -261,6 +264,7 @@ def run(args: argparse.Namespace) -> int:
         session = LiveSession(
             source, est=est, det=det, baselines=baselines, record=args.record,
             update_s=args.update, publish=publish, h1=dashboard is not None,
+            batch_s=args.batch,
             settings={"argv": sys.argv[1:]}, log=log,
         )
         where = (f"listening on {source.address[0]}:{source.address[1]}"
