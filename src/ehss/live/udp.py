@@ -186,7 +186,7 @@ class UdpSource:
                 if got is None:
                     break
                 self._accept(*got, out)
-        self._expire(out, time.time())
+        self._expire(out)
         return out
 
     def _accept(self, size: int, flags: int, sender: tuple[str, int], arrival: float,
@@ -250,9 +250,10 @@ class UdpSource:
         self._expected = nxt
         self._flush(out, reordered=False)
 
-    def _expire(self, out: list[Block], now: float) -> None:
-        mono = time.monotonic()
-        while self._pending and mono - min(v[2] for v in self._pending.values()) > self._hold_s:
+    def _expire(self, out: list[Block]) -> None:
+        """Give up on gaps whose oldest held packet waited longer than ``reorder_s``."""
+        now = time.monotonic()
+        while self._pending and now - min(v[2] for v in self._pending.values()) > self._hold_s:
             self._give_up(out)
 
 
