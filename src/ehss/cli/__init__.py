@@ -50,6 +50,8 @@ _COMMANDS = (
     "order",
     "compensate",
     "reproduce",
+    "live",
+    "stream",
 )
 
 
