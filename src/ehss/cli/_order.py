@@ -236,6 +236,8 @@ def _print_table(search, rec, args) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from ehss.validation import fit_text
+
     p = search.prepared
     where = (f"validated on {Path(args.validate).name}" if args.validate is not None
              else f"validated on the held-out {p.holdout:g}")
@@ -265,9 +267,9 @@ def _print_table(search, rec, args) -> None:
     console.print(table)
     na, nb, nc, d = search.best_orders
     rep = search.reports[search.best_index]
-    fit = f"simulation fit {_fit_text(rep.simulation_fit_pct)} %"
+    fit = f"simulation fit {fit_text(rep.simulation_fit_pct)}"
     if rep.band_fit_pct is not None:
-        fit += f", in the band {_fit_text(rep.band_fit_pct)} %"
+        fit += f", in the band {fit_text(rep.band_fit_pct)}"
     console.print(f"best by {search.selection.criterion}: --na {na} --nb {nb} --nc {nc} "
                   f"--delay {d} (method {search.method}; {fit}; unstable candidates are "
                   "never recommended)")
