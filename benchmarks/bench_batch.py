@@ -6,7 +6,7 @@ Records: tests/data/daisy_dryer.csv and daisy_robot_arm.csv (DaISy, see their RE
 Each is split in halves; the means of the first half are removed from both; every tool
 fits on the first half and is scored by its free-run (simulation) fit on the second,
 100 (1 − ‖y − ŷ‖/‖y − ȳ‖). ehss and SIPPY models are scored by the same function,
-:func:`ehss.identification.order.free_run_fit`, from the least-squares initial state
+:func:`ehss.validation.simulation_fit`, from the least-squares initial state
 (MATLAB ``compare``'s default); sysidentpy's ``predict`` takes its initial conditions
 from the first measured outputs instead, so its fit is computed over validation samples
 ``max_lag``..end.
@@ -33,8 +33,15 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from ehss.identification import ArmaxModel, estimate, select_order  # noqa: E402
-from ehss.identification.order import fit_percent, free_run_fit  # noqa: E402
 from ehss.io import read_columns, sample_rate  # noqa: E402
+from ehss.validation import nrmse_fit as fit_percent  # noqa: E402
+from ehss.validation import simulation_fit  # noqa: E402
+
+
+def free_run_fit(model, u, y):
+    """Free-run fit from the least-squares initial state (MATLAB ``compare``'s default)."""
+    return simulation_fit(model, u, y, initial="estimate")
+
 
 RECORDS = {
     "dryer": ("daisy_dryer.csv", range(1, 6), range(0, 5), (1, 2)),
@@ -77,7 +84,7 @@ def run_record(label: str, spec, repeat: int) -> list[tuple]:
 
     def workflow():
         sel = select_order(u, y, na=list(na_g), nb=list(nb_g), nc=list(nc_g), dt=dt,
-                           validation=(uv, yv))
+                           score=lambda m: free_run_fit(m, uv, yv))
         b = sel.best
         return estimate(u, y, method=sel.method, na=b.na, nb=b.nb, nc=b.nc, delay=b.delay,
                         dt=dt), b

@@ -62,6 +62,8 @@ _LAZY = {
     "Acceptance": "ehss.workflow",
     "assess": "ehss.workflow",
     "prepare": "ehss.workflow",
+    "select_orders": "ehss.workflow",
+    "OrderSearch": "ehss.workflow",
     "preprocess": None,
     "workflow": None,
     # frequency response and validation
@@ -143,7 +145,15 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
         simulation_fit,
         validate,
     )
-    from ehss.workflow import Acceptance, Identification, assess, identify, prepare
+    from ehss.workflow import (
+        Acceptance,
+        Identification,
+        OrderSearch,
+        assess,
+        identify,
+        prepare,
+        select_orders,
+    )
 
 
 def __getattr__(name: str) -> Any:
@@ -211,6 +221,8 @@ __all__ = [
     "Acceptance",
     "assess",
     "prepare",
+    "select_orders",
+    "OrderSearch",
     "preprocess",
     "workflow",
     # frequency response and validation

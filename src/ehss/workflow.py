@@ -11,7 +11,11 @@ model "meets the acceptance" in one sense only, the one :class:`Acceptance` defi
    on the validation data (:func:`assess`, which serves models made otherwise too;
    :func:`ehss.validation.validate`: free-run fit from the
    least-squares initial state, k-step prediction fit, frequency-response error where the
-   coherence is high, residual tests) and judges it with :meth:`Acceptance.judge`.
+   coherence is high, residual tests) and judges it with :meth:`Acceptance.judge`;
+3. :func:`select_orders` prepares the record once as :func:`identify` does, fits every
+   candidate of a grid of orders with the same estimator and ranks them by the same
+   validation (:func:`assess`), so its pick validates the same when :func:`identify`
+   refits it.
 
 The model comes back with its operating point (``offsets``) and with ``band_hz`` set to
 the span of frequencies over which the validation compared it with the data. A decimated
@@ -33,7 +37,8 @@ from ehss import preprocess
 from ehss._checks import as_record
 from ehss.errors import DataError, ParameterError
 from ehss.frequency import FRF_METHODS, check_band, check_fs
-from ehss.identification import METHODS, ArmaxModel, estimate
+from ehss.identification import INITS, METHODS, ArmaxModel, estimate
+from ehss.identification.order import OrderRow, OrderSelection, select_order
 from ehss.preprocess import DETRENDS, Trend
 from ehss.validation import ValidationReport, fit_text, validate
 
@@ -46,6 +51,8 @@ __all__ = [
     "prepare",
     "identify",
     "assess",
+    "OrderSearch",
+    "select_orders",
 ]
 
 #: Estimator used when none is named: ARMAX by prediction-error minimisation started from
@@ -401,6 +408,7 @@ def identify(
     fs: float,
     orders: tuple[int, ...],
     method: str = DEFAULT_METHOD,
+    init: str = "batch",
     validation: float | tuple[Any, Any] = 0.3,
     band_hz: tuple[float, float] | None = None,
     detrend: str | None = "mean",
@@ -424,6 +432,8 @@ def identify(
         decimation factor (rounded down) for the model.
     method : str, default :data:`DEFAULT_METHOD`
         One of :data:`ehss.identification.METHODS`.
+    init : {"batch", "zero"}, default "batch"
+        Start of "rels" and "rml" (:func:`ehss.identification.estimate`).
     validation : float or (u_val, y_val), default 0.3
         Held-out fraction or separate validation record (:func:`prepare`).
     band_hz : (float, float), optional
@@ -467,6 +477,8 @@ def identify(
     na, nb, nc, delay = _orders(orders)
     if method not in METHODS:
         raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
+    if init not in INITS:
+        raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
     if frf_method not in FRF_METHODS:
         raise ParameterError(f"frf_method={frf_method!r} must be one of "
                              f"{', '.join(FRF_METHODS)}")
@@ -489,7 +501,7 @@ def identify(
     # (rounded down, so the model never waits longer than the loop: b0 takes the rest)
     delay_m = delay // prep.decimation
     model = estimate(prep.u, prep.y, method=method, na=na, nb=nb, nc=nc, delay=delay_m,
-                     dt=1.0 / fs_m)
+                     dt=1.0 / fs_m, init=init)
     report, verdict = assess(model, prep, acceptance=acceptance, nperseg=nperseg,
                              frf_method=frf_method, initial=initial, horizons=horizons)
     validated = None
@@ -545,6 +557,167 @@ def assess(
     if not prepared.separate_validation:  # the held-out end: say how much came before it
         report = dataclasses.replace(report, n_estimation=int(prepared.u.size))
     return report, acceptance.judge(report)
+
+
+# ------------------------------------------------------------------------ order search
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class OrderSearch:
+    """Result of :func:`select_orders`.
+
+    Attributes
+    ----------
+    selection : OrderSelection
+        The table (AIC, FPE, MDL on the estimation data; ``fit`` the fit on the
+        validation data that the verdict judges, :attr:`ValidationReport.fit_pct
+        <ehss.validation.ValidationReport.fit_pct>`: the free-run simulation fit, in the
+        band when one is given), the pick and its model, at the prepared rate.
+    reports : tuple of (ValidationReport or None)
+        Validation of each row's model (:func:`assess`); None where it could not be
+        fitted.
+    verdicts : tuple of (Verdict or None)
+        Each row's verdict against the acceptance.
+    prepared : Prepared
+        The data every candidate was estimated and validated on.
+    method, init, initial : str
+        Estimator, start of the recursive ones, initial state of the validation simulation.
+    delays : tuple of int
+        The record delay (samples of the record, as given) of each row; the rows' own
+        ``delay`` is at the prepared rate (``delay // prepared.decimation``).
+    """
+
+    selection: OrderSelection
+    reports: tuple[ValidationReport | None, ...] = field(repr=False)
+    verdicts: tuple[Verdict | None, ...] = field(repr=False)
+    prepared: Prepared = field(repr=False)
+    method: str
+    init: str
+    initial: str
+    delays: tuple[int, ...]
+
+    @property
+    def best(self) -> OrderRow:
+        """The pick (a stable candidate)."""
+        return self.selection.best
+
+    @property
+    def best_index(self) -> int:
+        """Row of the pick in :attr:`table`."""
+        return next(i for i, r in enumerate(self.selection.table) if r is self.best)
+
+    @property
+    def best_orders(self) -> tuple[int, int, int, int]:
+        """``(na, nb, nc, delay)`` of the pick, the delay in samples of the record: what
+        :func:`identify` takes to refit it."""
+        b = self.best
+        return b.na, b.nb, b.nc, self.delays[self.best_index]
+
+    @property
+    def table(self) -> tuple[OrderRow, ...]:
+        """All candidates in grid order."""
+        return self.selection.table
+
+
+def select_orders(
+    u,
+    y,
+    *,
+    fs: float,
+    na,
+    nb,
+    nc,
+    delay=1,
+    method: str = DEFAULT_METHOD,
+    init: str = "batch",
+    validation: float | tuple[Any, Any] = 0.3,
+    band_hz: tuple[float, float] | None = None,
+    detrend: str | None = "mean",
+    decimate: int | str | None = "auto",
+    initial: str = "estimate",
+    criterion: str = "fit",
+    fit_tolerance: float = 0.1,
+    acceptance: Acceptance | None = None,
+) -> OrderSearch:
+    """Search a grid of orders the way :func:`identify` fits and validates one.
+
+    The record is prepared once (:func:`prepare`: split or separate validation record,
+    detrend, decimation); every candidate is fitted with
+    :func:`ehss.identification.estimate` on the estimation data and validated with
+    :func:`assess` on the validation data; the candidates are ranked by the fit the
+    verdict judges (:attr:`ehss.validation.ValidationReport.fit_pct`) through
+    :func:`ehss.identification.select_order`, which never picks an unstable one. Refitting
+    the pick with :func:`identify` and the same settings gives the same model and fit.
+
+    Parameters
+    ----------
+    u, y : array_like, shape (n_samples,)
+        Input and output as measured.
+    fs : float
+        Sample rate, Hz.
+    na, nb, nc, delay : int or iterable of int
+        Candidate orders; delays in samples of the record (as :func:`identify` takes
+        them), each divided by the decimation factor for the model.
+    method, init, validation, band_hz, detrend, decimate, initial
+        As for :func:`identify`.
+    criterion : {"fit", "aic", "fpe", "mdl"}, default "fit"
+        How the pick is made: the validation fit, or an information criterion on the
+        estimation data's one-step prediction errors.
+    fit_tolerance : float, default 0.1
+        As for :func:`ehss.identification.select_order`.
+    acceptance : Acceptance, optional
+        For the verdict of each row (default ``Acceptance()``).
+
+    Returns
+    -------
+    OrderSearch
+
+    Raises
+    ------
+    IdentificationError
+        If no candidate is stable.
+    ParameterError, DataError
+        For bad settings or records, as :func:`prepare`.
+    """
+    if method not in METHODS:
+        raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
+    if initial not in ("estimate", "zero"):
+        raise ParameterError(f"initial={initial!r} must be 'estimate' or 'zero'")
+    acceptance = Acceptance() if acceptance is None else acceptance
+    if not isinstance(acceptance, Acceptance):
+        raise TypeError(f"acceptance must be an Acceptance, not {type(acceptance).__name__}")
+    delays = [delay] if isinstance(delay, (int, np.integer)) else list(delay)
+    for d in delays:
+        if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0:
+            raise ParameterError(f"delay={delay!r} must hold integers >= 0")
+    if not delays:
+        raise ParameterError(f"delay={delay!r} must list at least one delay")
+    prep = prepare(u, y, fs=fs, validation=validation, band_hz=band_hz, detrend=detrend,
+                   decimate=decimate)
+    q = prep.decimation
+    # delays at the model's rate (as identify rounds them), each with the first record
+    # delay that gives it, so that identify's --delay refits the same model
+    record_delay: dict[int, int] = {}
+    for d in delays:
+        record_delay.setdefault(int(d) // q, int(d))
+    assessed: dict[tuple[int, ...], tuple[ValidationReport, Verdict]] = {}
+
+    def score(model: ArmaxModel) -> float:
+        report, verdict = assess(model, prep, acceptance=acceptance, initial=initial)
+        assessed[(model.na, model.nb, model.nc, model.delay)] = (report, verdict)
+        return report.fit_pct
+
+    sel = select_order(prep.u, prep.y, na=na, nb=nb, nc=nc, delay=list(record_delay),
+                       dt=1.0 / prep.fs_model, criterion=criterion, score=score,
+                       method=method, init=init, fit_tolerance=fit_tolerance)
+    reports, verdicts = [], []
+    for r in sel.table:
+        got = assessed.get((r.na, r.nb, r.nc, r.delay)) if math.isfinite(r.loss) else None
+        reports.append(None if got is None else got[0])
+        verdicts.append(None if got is None else got[1])
+    return OrderSearch(selection=sel, reports=tuple(reports), verdicts=tuple(verdicts),
+                       prepared=prep, method=method, init=init, initial=initial,
+                       delays=tuple(record_delay[r.delay] for r in sel.table))
 
 
 # ---------------------------------------------------------------------------- helpers

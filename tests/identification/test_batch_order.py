@@ -9,8 +9,8 @@ from scipy.signal import lfilter
 
 from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification.batch import armax_els, arx_ls
-from ehss.identification.model import ArmaxModel
-from ehss.identification.order import free_run_fit, select_order
+from ehss.identification.order import select_order
+from ehss.validation import simulation_fit
 
 from .systems import DT_S, armax_data, system
 
@@ -36,12 +36,17 @@ def test_armax_els_recovers_c_and_noise_variance(rng):
     assert m.covariance.shape == (5, 5)
 
 
+def _fit_on(uv, yv):
+    """The validation fit the workflow scores with: free run from the fitted state."""
+    return lambda m: simulation_fit(m, uv, yv, initial="estimate")
+
+
 def test_select_order_prefers_true_order(rng):
     a, b, c = system(2)
     u, y, _ = armax_data(rng, a, b, c, 6000, snr_db=30.0)
     uv, yv, _ = armax_data(rng, a, b, c, 3000, snr_db=30.0)
     sel = select_order(u, y, na=[1, 2, 3], nb=[0, 1], nc=[1], delay=1, dt=DT_S,
-                       criterion="mdl", validation=(uv, yv))
+                       criterion="mdl", score=_fit_on(uv, yv))
     assert len(sel.table) == 6
     assert (sel.best.na, sel.best.nb) in {(2, 1), (2, 0)}
     assert sel.best.fit > 90.0
@@ -65,7 +70,7 @@ def test_select_order_defaults_to_validation_fit_with_the_armax_estimator(rng):
     u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=30.0)
     uv, yv, _ = armax_data(rng, a, b, c, 2000, snr_db=30.0)
     sel = select_order(u, y, na=[1, 2, 3], nb=[1], nc=[1], delay=1, dt=DT_S,
-                       validation=(uv, yv))
+                       score=_fit_on(uv, yv))
     assert sel.criterion == "fit" and sel.method == "armax"
     assert sel.model.meta["method"] == "armax_pem"
     # the pick is the smallest candidate within 0.1 point of the highest validation fit
@@ -82,28 +87,7 @@ def test_select_order_never_recommends_an_unstable_model(rng):
     yv = lfilter([0.0, 1.0], [1.0, -1.02], uv)
     with pytest.raises(IdentificationError, match="none of the 2 candidate orders gives a "
                        "stable model with method 'arx'"):
-        select_order(u, y, na=[1, 2], nb=[0], nc=[0], method="arx", validation=(uv, yv))
-
-
-def test_free_run_fit_estimates_the_initial_state(rng):
-    m = ArmaxModel(a=[1.0, -1.6, 0.8], b=[0.5, 0.2], delay=1)
-    u = rng.standard_normal(500)
-    # the record starts in motion: the model's response from a non-zero initial state
-    y = lfilter([0.0, 0.5, 0.2], [1.0, -1.6, 0.8], u, zi=[3.0, -2.0])[0]
-    # exact model + estimated state: perfect up to least-squares rounding
-    assert free_run_fit(m, u, y) == pytest.approx(100.0, abs=1e-8)
-    assert free_run_fit(m, u, y, initial="zero") < 99.0
-    with pytest.raises(ParameterError, match="initial='guess' must be one of estimate, zero"):
-        free_run_fit(m, u, y, initial="guess")
-
-
-def test_free_run_fit_reports_divergence(rng):
-    m = ArmaxModel(a=[1.0, -1.5], b=[1.0], delay=1)
-    u = rng.standard_normal(2000)
-    assert free_run_fit(m, u, rng.standard_normal(2000)) == -np.inf
-    assert free_run_fit(m, u, rng.standard_normal(2000), initial="zero") == -np.inf
-    ok = ArmaxModel(a=[1.0, -0.5], b=[1.0], delay=1)
-    assert free_run_fit(ok, u, ok.simulate(u), initial="zero") == 100.0
+        select_order(u, y, na=[1, 2], nb=[0], nc=[0], method="arx", score=_fit_on(uv, yv))
 
 
 def test_select_order_with_rml(rng):
@@ -129,8 +113,10 @@ def test_select_order_errors(rng):
         select_order(u, u, na=[1], nb=[0], nc=[0], method="rml", init="warm")
     with pytest.raises(ParameterError, match="criterion='bic' must be one of"):
         select_order(u, u, na=[1], nb=[0], nc=[0], criterion="bic")
-    with pytest.raises(ParameterError, match="criterion='fit' needs validation"):
+    with pytest.raises(ParameterError, match="criterion='fit' needs a score"):
         select_order(u, u, na=[1], nb=[0], nc=[0], criterion="fit")
+    with pytest.raises(TypeError, match="score must be callable"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], score=50.0)
     with pytest.raises(ParameterError, match=r"na=\[0\] must hold integers >= 1"):
         select_order(u, u, na=[0], nb=[0], nc=[0])
     with pytest.raises(DataError, match=r"y\[3\]=nan is not finite"):

@@ -1,7 +1,8 @@
 """The default workflow on two measured public records (tests/data/README.md).
 
-order (default method, validation fit on the second half) → refit of its pick with the
-same estimator on the first half → free-run fit on the second half. It must be stable and
+:func:`ehss.workflow.select_orders` (default method and settings, validation on the second
+half) → :func:`ehss.workflow.identify` of its pick with the same settings → free-run fit
+on the second half. It must be stable, report the fit the order search reported, and be
 within 0.5 fit points of, or above, the best plain least-squares ARX over the same order
 grid and split, computed here independently with numpy.linalg.lstsq. Every free-run fit
 starts from the initial state that fits the validation half best (as MATLAB's
@@ -17,26 +18,32 @@ import numpy as np
 import pytest
 from scipy.signal import BadCoefficients, dlsim, tf2ss
 
-from ehss.identification import estimate, select_order
+from ehss.identification import estimate
 from ehss.io import read_columns, sample_rate
+from ehss.workflow import identify, select_orders
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
-#: record → (na grid, nb grid, nc grid)
+#: record → (na grid, nb grid, nc grid): small grids around the records' known orders
 RECORDS = {
-    "daisy_dryer.csv": (range(1, 6), range(0, 5), (1, 2)),
-    "daisy_robot_arm.csv": (range(2, 9, 2), range(1, 8, 2), (2,)),
+    "daisy_dryer.csv": (range(1, 5), range(0, 4), (1, 2)),
+    "daisy_robot_arm.csv": (range(2, 7, 2), range(1, 6, 2), (2,)),
 }
 
 
-def _halves(name):
+def _record(name):
     table = read_columns(DATA / name, ["u", "y"], time_column="t")
-    fs = sample_rate(table, None)
-    u, y = table["u"], table["y"]
+    return table["u"], table["y"], sample_rate(table, None)
+
+
+def _halves(name):
+    u, y, fs = _record(name)
     n = u.size // 2
-    # deviations from the estimation half's operating point, as ehss order does
-    u, y = u - np.mean(u[:n]), y - np.mean(y[:n])
-    return (u[:n], y[:n]), (u[n:], y[n:]), 1.0 / fs
+    # each half about its own operating point (its mean), as the workflow's detrend
+    ue, ye, uv, yv = u[:n], y[:n], u[n:], y[n:]
+    est = (ue - np.mean(ue), ye - np.mean(ye))
+    val = (uv - np.mean(uv), yv - np.mean(yv))
+    return est, val, 1.0 / fs
 
 
 def _fit(y, ysim):
@@ -83,22 +90,26 @@ def _best_plain_arx(est, val, na_grid, nb_grid, delay=1):
     return best
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(RECORDS))
 def test_default_workflow_is_stable_and_at_least_plain_arx(name):
-    est, val, dt = _halves(name)
+    u, y, fs = _record(name)
     na_grid, nb_grid, nc_grid = RECORDS[name]
-    sel = select_order(*est, na=list(na_grid), nb=list(nb_grid), nc=list(nc_grid), delay=1,
-                       dt=dt, validation=val)
-    assert sel.criterion == "fit" and sel.method == "armax"
-    b = sel.best
-    model = estimate(*est, method=sel.method, na=b.na, nb=b.nb, nc=b.nc, delay=b.delay, dt=dt)
+    search = select_orders(u, y, fs=fs, na=na_grid, nb=nb_grid, nc=nc_grid, validation=0.5)
+    # records at 10-20x their bandwidth: no decimation, so the split below is the same
+    assert search.prepared.decimation == 1
+    assert search.selection.criterion == "fit" and search.method == "armax"
+    res = identify(u, y, fs=fs, orders=search.best_orders, validation=0.5)
+    model = res.model
     assert model.is_stable()
+    # the refit is the same model (deterministic estimator, same prepared data)
+    assert res.report.simulation_fit_pct == search.best.fit
+    est, val, dt = _halves(name)
+    assert np.array_equal(search.prepared.y, est[1])
+    assert np.array_equal(search.prepared.y_val, val[1])
     fit = _sim_fit(np.concatenate([np.zeros(model.delay), model.b]), model.a, *val)
-    # the refit is the same model (deterministic estimator, same data) and the two
-    # initial-state fits agree to the least-squares rounding (condition of the free-
-    # response basis of a lightly damped 6th-order model: ~1e8 → 1e-6 fit points)
-    assert fit == pytest.approx(b.fit, abs=1e-6)
+    # the two initial-state fits agree to the least-squares rounding (condition of the
+    # free-response basis of a lightly damped 6th-order model: ~1e8 → 1e-6 fit points)
+    assert fit == pytest.approx(search.best.fit, abs=1e-6)
     reference = _best_plain_arx(est, val, na_grid, nb_grid)
     assert np.isfinite(reference)
     assert fit >= reference - 0.5, (fit, reference)

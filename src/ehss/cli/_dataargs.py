@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -24,7 +23,6 @@ __all__ = [
     "check_outputs",
     "write_outputs",
     "report_warnings",
-    "holdout_fraction",
 ]
 
 
@@ -123,15 +121,6 @@ def int_list(text: str) -> list[int]:
     if not out:
         raise argparse.ArgumentTypeError(f"{text!r} holds no integers")
     return list(dict.fromkeys(out))
-
-
-def holdout_fraction(value: float | None) -> float:
-    """Check ``--holdout`` (0 allowed: no held-out part)."""
-    if value is None:
-        return 0.0
-    if not (math.isfinite(value) and 0.0 <= value < 1.0):
-        raise ParameterError(f"--holdout {value} must be in [0, 1)")
-    return float(value)
 
 
 def check_outputs(*paths: str | Path | None, inputs: Sequence[str | Path] = ()) -> list[Path]:

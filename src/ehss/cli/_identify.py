@@ -31,7 +31,7 @@ PLOT_SAMPLES = 2000
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ehss.identification import METHODS
+    from ehss.identification import INITS, METHODS
     from ehss.workflow import DEFAULT_METHOD
 
     p = sub.add_parser(
@@ -60,6 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "minimisation started from extended least squares; rels = the paper's "
                    "recursive extended least squares (eqs 19-22); rml = recursive maximum "
                    "likelihood (default: %(default)s)")
+    p.add_argument("--init", choices=INITS, default="batch",
+                   help="start of rels/rml: from the batch (armax) estimate, or the paper's "
+                   "zero start (default: %(default)s; ignored by the batch methods)")
     p.add_argument("--holdout", type=float, metavar="FRACTION",
                    help="fraction at the end of the record kept for validation "
                    "(default: 0.3, or none with --validate)")
@@ -178,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     with report_warnings("identify"):
         res = identify(
             rec.u, rec.y, fs=rec.fs, orders=(args.na, args.nb, args.nc, args.delay),
-            method=args.method, validation=validation, band_hz=opts["band"],
+            method=args.method, init=args.init, validation=validation, band_hz=opts["band"],
             detrend=opts["detrend"], decimate=opts["decimate"], nperseg=args.nperseg,
             frf_method=args.frf_method, initial=args.initial,
             acceptance=Acceptance(min_coherence=args.min_coherence),
@@ -302,7 +305,7 @@ def _provenance(rec, val_rec, args, opts) -> dict[str, Any]:
         "n_samples": int(rec.u.size),
         "settings": {
             "na": args.na, "nb": args.nb, "nc": args.nc, "delay": args.delay,
-            "method": args.method,
+            "method": args.method, "init": args.init,
             "holdout": None if val_rec is not None else opts["holdout"],
             "band_hz": None if opts["band"] is None else list(opts["band"]),
             "min_coherence": args.min_coherence,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from ehss.identification.batch import armax_els, arx_ls
 from ehss.identification.estimators import INITS, METHODS, estimate
 from ehss.identification.model import ArmaxModel, RoundingSensitivity
-from ehss.identification.order import OrderRow, OrderSelection, free_run_fit, select_order
+from ehss.identification.order import OrderRow, OrderSelection, select_order
 from ehss.identification.pem import armax_pem, oe_pem
 from ehss.identification.rels import RelsEstimator, rels
 
@@ -21,7 +21,6 @@ __all__ = [
     "estimate",
     "METHODS",
     "INITS",
-    "free_run_fit",
     "OrderRow",
     "OrderSelection",
     "select_order",

@@ -220,8 +220,13 @@ def armax_pem(
             x, cost, nfev = x0, 0.5 * float(np.sum(_armax_residual(x0, *args) ** 2)), 0
         nfev_total += nfev
         losses[name] = 2.0 * cost / (ys.size - k0)
-        if np.all(np.isfinite(x)) and (best is None or cost < best[1]):
-            best = (name, cost, x)
+        if not np.all(np.isfinite(x)):
+            continue
+        # a stable A beats any unstable one: a lower loss bought with a pole outside the
+        # unit circle is over-fitting (a near pole-zero-noise cancellation), not a model
+        key = (_radius(x[:na]) >= 1.0, cost)
+        if best is None or key < best[1]:
+            best = (name, key, x)
     if best is None:
         raise IdentificationError("prediction-error minimisation diverged (non-finite θ)")
     name, _, theta = best
