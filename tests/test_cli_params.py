@@ -30,3 +30,11 @@ def test_unknown_preset_exit_2(capsys):
     except SystemExit as exc:
         assert exc.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_save_onto_the_params_file_is_refused(tmp_path, capsys):
+    f = tmp_path / "p.toml"
+    f.write_text("[load]\nmass_kg = 300\n")
+    assert main(["params", "--params", str(f), "--save", str(f)]) == 2
+    assert "would replace the input" in capsys.readouterr().err
+    assert f.read_text() == "[load]\nmass_kg = 300\n"

@@ -8,7 +8,14 @@ import scipy.signal
 from numpy.testing import assert_allclose
 
 from ehss.errors import DataError, ParameterError
-from ehss.frequency import FrequencyResponse, default_nperseg, h1_estimate
+from ehss.frequency import (
+    FrequencyResponse,
+    default_nperseg,
+    dft_estimate,
+    frf_estimate,
+    h1_estimate,
+    n_segments,
+)
 
 FS = 1000.0
 
@@ -27,7 +34,7 @@ def test_h1_matches_exact_response_noise_free(rng, lowpass):
     b, a = lowpass
     u = rng.standard_normal(40_000)
     y = scipy.signal.lfilter(b, a, u)
-    frf = h1_estimate(u, y, FS)
+    frf = h1_estimate(u, y, FS, nperseg=1024)
     assert frf.nperseg == 1024 and frf.n_averages == 77
     assert frf.freq_hz[0] == pytest.approx(FS / 1024)  # 0 Hz left out after detrending
     h = _exact(b, a, frf.freq_hz)
@@ -88,7 +95,7 @@ def test_sine_gives_exact_gain_and_phase(gain, phase_deg):
 def test_pure_delay_phase(rng):
     u = rng.standard_normal(30_000)
     y = np.concatenate([np.zeros(3), u[:-3]])
-    frf = h1_estimate(u, y, FS)
+    frf = h1_estimate(u, y, FS, nperseg=1024)
     band = frf.freq_hz <= 200
     expected = -360.0 * frf.freq_hz * 3 / FS
     # Unwrapped phase of a 3-sample delay is a straight line; the segment-edge error of
@@ -111,11 +118,33 @@ def test_band_and_columns(rng):
 
 
 @pytest.mark.parametrize(
-    "n,fs,expected", [(20_000, 1000.0, 1024), (2_000, 1000.0, 256), (100, 1000.0, 16),
-                      (200_000, 4096.0, 4096)]
+    "n,fs,band,expected",
+    [
+        # no band: the longest power of two giving >= 8 half-overlapping averages,
+        # whatever the sample rate
+        (20_000, 1000.0, None, 4096), (20_000, 1.0, None, 4096), (1000, 1.0, None, 128),
+        (2_000, 1000.0, None, 256), (100, 1000.0, None, 16), (60, 1.0, None, 8),
+        # a band asks for resolution min(lo/2, (hi-lo)/32): 2-100 Hz needs 1 Hz -> 1024
+        (20_000, 1000.0, (2.0, 100.0), 1024),
+        # 0.5-20 Hz needs 0.25 Hz -> 4096, which 60 s at 1 kHz affords
+        (60_000, 1000.0, (0.5, 20.0), 4096),
+        # a band finer than the record can resolve keeps the 8 averages
+        (1000, 1.0, (0.001, 0.4), 128),
+        # 4 kHz, 60 s, 0.2-50 Hz: 0.1 Hz -> 65536 is too long; 8 averages -> 32768
+        (240_000, 4000.0, (0.2, 50.0), 32768),
+    ],
 )
-def test_default_nperseg(n, fs, expected):
-    assert default_nperseg(n, fs) == expected
+def test_default_nperseg(n, fs, band, expected):
+    nperseg = default_nperseg(n, fs, band_hz=band)
+    assert nperseg == expected
+    assert n_segments(n, nperseg, nperseg // 2) >= 8 or nperseg <= 16
+
+
+def test_frf_of_a_1000_sample_record_at_1_hz_is_not_16_samples(rng):
+    u = rng.standard_normal(1000)
+    y = scipy.signal.lfilter([0.0, 0.5], [1.0, -0.7], u)
+    frf = h1_estimate(u, y, 1.0)
+    assert frf.nperseg == 128 and frf.n_averages == 14
 
 
 def test_bad_arguments(rng):
@@ -141,3 +170,89 @@ def test_bad_arguments(rng):
     with pytest.raises(ParameterError, match="same shape"):
         FrequencyResponse(freq_hz=np.zeros(3), response=np.zeros(2), coherence=np.zeros(3),
                           n_averages=1, nperseg=4, fs=1.0)
+
+
+# ------------------------------------------------------------------ whole-record DFT
+
+
+def test_dft_estimate_of_a_sweep_matches_the_exact_response(rng, lowpass):
+    b, a = lowpass
+    fs = FS
+    t = np.arange(60_000) / fs
+    # linear sweep 1-200 Hz over 60 s, starting and ending at rest
+    u = scipy.signal.chirp(t, f0=1.0, t1=t[-1], f1=200.0, phi=-90.0)
+    u *= scipy.signal.windows.tukey(u.size, 0.02)
+    y = scipy.signal.lfilter(b, a, u) + 0.01 * rng.standard_normal(u.size)
+    frf = dft_estimate(u, y, fs, n_average=16)
+    assert frf.method == "dft" and frf.n_averages == 16 and frf.nperseg == 60_000 // 16
+    band = (frf.freq_hz >= 5.0) & (frf.freq_hz <= 150.0)
+    h = _exact(b, a, frf.freq_hz[band])
+    # The input has |U|^2 ~ n / (2 * 199 Hz * 60 s) per bin, the noise 0.01^2 n / 2:
+    # SNR per bin ~ 1e4 / 12 ~ 840 and with 16 bins the relative error is about
+    # 1 / sqrt(2 * 16 * 840) ~ 0.6 %, plus the sweep's own ripple between bins (none in
+    # the ratio). 2 % is three times that.
+    assert_allclose(frf.response[band], h, rtol=0, atol=0.02)
+    assert np.all(frf.coherence[band] > 0.99)
+
+
+def test_dft_estimate_of_a_periodic_tone_is_exact():
+    # A whole number of periods on the DFT grid. The end taper (Tukey, 10 %) spreads the
+    # tone over neighbouring bins, all inside the group, and scales input and output alike;
+    # only the image at -f, 2k = 200 bins away, leaks in, at the taper's side-lobe level
+    # (a cosine taper's side lobes fall as 1/m^3): about 1e-6 relative, so 1e-5.
+    n, k = 4096, 100
+    t = np.arange(n)
+    u = np.cos(2 * np.pi * k * t / n)
+    y = 0.3 * np.cos(2 * np.pi * k * t / n - 1.0)
+    frf = dft_estimate(u, y, FS, n_average=4)
+    i = (k - 1) // 4  # groups of 4 bins from bin 1: bin k is in group (k - 1) // 4
+    assert frf.freq_hz[i] == pytest.approx((4 * i + 2.5) * FS / n)
+    assert abs(frf.response[i]) == pytest.approx(0.3, rel=1e-5)
+    assert np.angle(frf.response[i]) == pytest.approx(-1.0, abs=1e-5)
+    assert frf.coherence[i] == pytest.approx(1.0, abs=1e-10)
+
+
+def test_auto_keeps_welch_for_random_and_the_better_estimate_for_a_sweep(rng, lowpass):
+    b, a = lowpass
+    n = 20_000
+    u = rng.standard_normal(n)
+    y = scipy.signal.lfilter(b, a, u) + 0.05 * rng.standard_normal(n)
+    assert frf_estimate(u, y, FS, band_hz=(1.0, 100.0)).method == "welch"
+    # a 20 s log sweep 0.05-100 Hz: the low decades pass in a few segments only
+    t = np.arange(n) / FS
+    u = scipy.signal.chirp(t, f0=0.05, t1=t[-1], f1=100.0, method="logarithmic", phi=-90.0)
+    y = scipy.signal.lfilter(b, a, u) + 0.05 * rng.standard_normal(n)
+    band = (0.05, 100.0)
+    welch = h1_estimate(u, y, FS, band_hz=band)
+    dft = dft_estimate(u, y, FS, band_hz=band)
+    auto = frf_estimate(u, y, FS, band_hz=band)
+    better = dft if dft.covered_decades(band, 0.9) > 1.25 * welch.covered_decades(band, 0.9) \
+        else welch
+    assert auto.method == better.method
+    assert auto.covered_decades(band, 0.9) >= 0.8 * max(welch.covered_decades(band, 0.9),
+                                                        dft.covered_decades(band, 0.9))
+
+
+def test_covered_decades_analytic():
+    # points at 1, 2, 3 Hz with 1 Hz resolution, all valid: log10(1.5/0.5) + log10(2.5/1.5)
+    # + log10(3.5/2.5) = log10(3.5/0.5) = log10(7)
+    frf = FrequencyResponse(freq_hz=np.array([1.0, 2.0, 3.0]), response=np.ones(3, complex),
+                            coherence=np.ones(3), n_averages=8, nperseg=10, fs=10.0)
+    assert frf.covered_decades((0.0, 5.0), 0.9) == pytest.approx(np.log10(7.0), rel=1e-12)
+    assert frf.covered_decades((1.5, 5.0), 0.9) == pytest.approx(np.log10(3.5 / 1.5),
+                                                                 rel=1e-12)
+    # a point the input did not excite (30 dB down) does not count
+    weak = FrequencyResponse(freq_hz=np.array([1.0, 2.0, 3.0]), response=np.ones(3, complex),
+                             coherence=np.ones(3), n_averages=8, nperseg=10, fs=10.0,
+                             input_power=np.array([1.0, 1e-4, 1.0]))
+    assert weak.valid((0.0, 5.0), 0.9).tolist() == [True, False, True]
+
+
+def test_dft_estimate_bad_arguments(rng):
+    u = rng.standard_normal(100)
+    with pytest.raises(ParameterError, match="n_average"):
+        dft_estimate(u, u, FS, n_average=1)
+    with pytest.raises(DataError, match="constant"):
+        dft_estimate(np.ones(100), u, FS)
+    with pytest.raises(ParameterError, match="method"):
+        frf_estimate(u, u, FS, method="h2")

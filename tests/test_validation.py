@@ -15,6 +15,10 @@ from ehss.frequency import FrequencyResponse
 from ehss.identification.model import ArmaxModel
 from ehss.io import to_jsonable
 from ehss.validation import (
+    DIVERGED_FIT_PCT,
+    band_fit,
+    fit_text,
+    free_run,
     frf_error,
     ljung_box,
     nrmse_fit,
@@ -84,6 +88,22 @@ def test_frf_error_exact_offsets(true_model):
     assert err.max_phase_deg == pytest.approx(10.0, abs=1e-9)
     assert err.rms_phase_deg == pytest.approx(10.0, abs=1e-9)
     assert json.dumps(err.summary())
+
+
+def test_frf_error_standard_errors_and_unexcited_points(true_model):
+    # coherence 0.9 and 8 averages: eps = sqrt(0.1 / (0.9 * 16)) = 0.08333 relative, i.e.
+    # 20/ln(10) * eps = 0.7238 dB and 4.775 deg (Bendat & Piersol 9.90, 9.92)
+    f = np.array([10.0, 20.0, 30.0])
+    g = true_model.frequency_response(f)
+    frf = FrequencyResponse(freq_hz=f, response=g, coherence=np.full(3, 0.9), n_averages=8,
+                            nperseg=100, fs=FS, input_power=np.array([1.0, 1e-4, 0.5]))
+    err = frf_error(true_model, frf, band_hz=(0.0, 100.0))
+    eps = math.sqrt(0.1 / (0.9 * 16))
+    # the 20 Hz point had 40 dB less input than the strongest: not excited, not compared
+    assert err.n_points == 2 and err.freq_hz.tolist() == [10.0, 30.0]
+    np.testing.assert_allclose(err.sigma_magnitude_db, 20 / math.log(10) * eps, rtol=1e-12)
+    np.testing.assert_allclose(err.sigma_phase_deg, math.degrees(eps), rtol=1e-12)
+    assert err.beyond_uncertainty(2.0) == (0.0, 0.0)
 
 
 def test_frf_error_phase_is_wrapped(true_model):
@@ -218,7 +238,80 @@ def test_validate_unstable_model_does_not_blow_up(true_model, rng):
 
 def test_validate_short_holdout(true_model, rng):
     u = rng.standard_normal(100)
-    with pytest.raises(DataError, match="held-out part has 30 samples"):
+    with pytest.raises(DataError, match="validation part has 30 samples"):
         validate(true_model, u, u, fs=FS)
     with pytest.raises(ParameterError, match="holdout"):
         validate(true_model, u, u, fs=FS, holdout=1.5)
+
+
+# ----------------------------------------------------------- initial state, divergence
+
+
+def test_free_run_recovers_a_nonzero_initial_state(true_model, rng):
+    # The record starts with the model in motion: y = free response + B/A u. From rest the
+    # simulation misses the transient; the least-squares initial state finds it exactly
+    # (noise-free, so to rounding: 1e-9 of a unit-scale signal).
+    n = 3000
+    u = rng.standard_normal(n)
+    a, b = true_model.a, np.concatenate([[0.0], true_model.b])
+    zi = scipy.signal.lfiltic(b, a, y=[3.0, -2.0], x=[0.5, 0.0])
+    y = scipy.signal.lfilter(b, a, u, zi=zi)[0]
+    assert simulation_fit(true_model, u, y, initial="estimate") == pytest.approx(100, abs=1e-9)
+    assert simulation_fit(true_model, u, y, initial="zero") < 99.0
+    assert_free = free_run(true_model, u, y, initial="estimate")
+    np.testing.assert_allclose(assert_free, y, rtol=0, atol=1e-9)
+    with pytest.raises(ParameterError, match="needs the measured output"):
+        free_run(true_model, u, initial="estimate")
+    with pytest.raises(ParameterError, match="initial"):
+        free_run(true_model, u, y, initial="warm")
+
+
+def test_unstable_model_is_simulated_from_rest_and_reported_as_diverging(rng):
+    # A growing free response fitted to the data would hide the divergence: an unstable
+    # model keeps the zero initial state.
+    u = rng.standard_normal(2000)
+    unstable = ArmaxModel(a=[1.0, -1.01], b=[0.1], c=[1.0], delay=1, dt=1 / FS)
+    np.testing.assert_array_equal(free_run(unstable, u, u, initial="estimate"),
+                                  unstable.simulate(u))
+    fit = simulation_fit(unstable, u, u, initial="estimate")
+    assert fit < DIVERGED_FIT_PCT
+    assert fit_text(fit).startswith("diverges")
+    assert fit_text(-99.0) == "-99.00 %" and fit_text(float("-inf")).startswith("diverges")
+
+
+def test_diverging_fit_prints_no_long_number(rng):
+    # pole radius 1.05 over 4000 samples grows to 1e84: the fit is a huge negative number,
+    # which the report must show as a divergence, not as digits.
+    u, y = rng.standard_normal(4000), rng.standard_normal(4000)
+    unstable = ArmaxModel(a=[1.0, -1.05], b=[0.1], c=[1.0], delay=1, dt=1 / FS)
+    rep = validate(unstable, u, y, fs=FS, holdout=None, band_hz=(1, 100))
+    assert rep.diverged and rep.initial_state == "estimate"
+    text = rep.format()
+    assert "diverges" in text
+    assert max(len(w) for w in text.split()) < 40
+    summ = rep.summary()
+    assert summ["diverged"] is True and summ["simulation_fit_pct"] is None
+
+
+def test_band_fit_ignores_noise_above_the_band(true_model, rng):
+    # White output noise as large as the signal: the raw fit is near 100(1 - 1/sqrt(2)),
+    # but low-passing both at 1.5 x 20 Hz keeps the signal's low part (the model's
+    # response is mostly below 50 Hz) and 3 % of the noise power.
+    n = 20_000
+    u = scipy.signal.lfilter(*scipy.signal.butter(4, 20, fs=FS), rng.standard_normal(n))
+    clean = true_model.simulate(u)
+    y = clean + np.std(clean) * rng.standard_normal(n)
+    raw = nrmse_fit(y, clean)
+    banded = band_fit(y, clean, fs=FS, band_hz=(0.0, 20.0))
+    assert raw < 35.0 and banded > 75.0
+
+
+def test_validate_on_a_separate_record(true_model, rng):
+    u, y, _ = _armax_data(true_model, rng, n=5000, sigma_e=0.001)
+    rep = validate(true_model, u, y, fs=FS, band_hz=(1, 100), holdout=None)
+    assert rep.n_estimation == 0 and rep.n_validation == 5000
+    assert rep.initial_state == "estimate"
+    assert rep.simulation_fit_pct > 95 and rep.band_fit_pct > 95
+    assert "separate record" in rep.format()
+    rep0 = validate(true_model, u, y, fs=FS, holdout=None, initial="zero")
+    assert rep0.initial_state == "zero" and "from rest" in rep0.format()

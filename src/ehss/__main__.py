@@ -1,7 +1,5 @@
 """``python -m ehss``: the same as the ``ehss`` command."""
 
-import sys
+from ehss.cli import entry
 
-from ehss.cli import main
-
-sys.exit(main())
+entry()

@@ -1,18 +1,235 @@
-"""Checks of user-supplied sample arrays, shared by every public entry point.
+"""Checks of user-supplied values, shared by every public entry point.
 
-A signal must be a 1-D array of finite real numbers; the error names the argument, the
-first bad index (0-based, as Python counts) and its value.
+Two families:
+
+Scalars — :func:`check_real`, :func:`check_int`, :func:`check_bool`, :func:`check_choice`.
+    Each takes the value and the name to show (``"valve.damping"``, ``"--fs"``) and
+    returns the value converted to a plain Python type. A value of the wrong Python type
+    raises :class:`TypeError`; a value of the right type that is out of range, not finite
+    or not among the choices raises :class:`~ehss.errors.ParameterError`. The message names
+    the value and what is accepted, e.g. ``damping=-1.0 must be in (0, 100]``.
+
+Sample arrays — :func:`as_signal`, :func:`as_record`.
+    A signal must be a 1-D array of finite real numbers; the error names the argument,
+    the first bad index (0-based, as Python counts) and its value.
+
+The names are stable; new code should use these instead of writing its own checks.
+
+Examples
+--------
+>>> check_real(2, "gain", lo=0.0, lo_open=True)
+2.0
+>>> check_int(3, "order", lo=0, hi=10)
+3
+>>> check_real(-1.0, "mass_kg", lo=0.0, lo_open=True)
+Traceback (most recent call last):
+...
+ehss.errors.ParameterError: mass_kg=-1.0 must be in (0, inf)
 """
 
 from __future__ import annotations
 
+import math
+import numbers
+from collections.abc import Collection
 from typing import Any
 
 import numpy as np
 
-from ehss.errors import DataError
+from ehss.errors import DataError, ParameterError
 
-__all__ = ["as_signal", "as_record"]
+__all__ = [
+    "check_real",
+    "check_int",
+    "check_bool",
+    "check_choice",
+    "format_range",
+    "SAMPLE_RATE_RANGE_HZ",
+    "SCALE_RANGE",
+    "check_scale",
+    "show",
+    "as_signal",
+    "as_record",
+]
+
+
+#: Sample rates ehss accepts, Hz: one sample every ~30 years up to 1 GHz. Beyond them the
+#: time column is almost certainly not in seconds, and frequencies and periods lose
+#: meaning (a step of 1e-310 s is not even a normal float).
+SAMPLE_RATE_RANGE_HZ = (1e-9, 1e9)
+
+
+#: Magnitudes of samples ehss processes without overflow or underflow: spectra and
+#: coherence multiply four samples together (|S_uy|² / S_uu S_yy), so a sample beyond
+#: 1e60 could overflow a float (1e308) once summed, and a variation below 1e-60 underflow.
+SCALE_RANGE = (1e-60, 1e60)
+
+
+def check_scale(x: np.ndarray, name: str) -> None:
+    """Check that a measured signal varies, on a scale ehss can compute with.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n_samples,)
+        Finite samples.
+    name : str
+        How the signal is named in messages (``"'run.csv': column 'u'"``).
+
+    Raises
+    ------
+    DataError
+        If ``x`` is constant, varies only in the last digits of its level, reaches
+        beyond ``SCALE_RANGE[1]`` or varies by less than ``SCALE_RANGE[0]``. The message
+        says to rescale (change the unit of) the signal.
+    """
+    lo, hi = SCALE_RANGE
+    peak = float(np.max(np.abs(x)))
+    if peak > hi:
+        raise DataError(f"{name} reaches {peak:.3g}; ehss works with samples up to {hi:g} "
+                        "in magnitude (spectra multiply four samples); rescale it, e.g. "
+                        "change its unit")
+    spread = float(np.max(np.abs(x - np.mean(x))))
+    if spread == 0.0:
+        raise DataError(f"{name} is constant (every sample is {float(x[0])!r}): it carries "
+                        "no test signal")
+    if spread <= 64 * np.finfo(np.float64).eps * peak:
+        raise DataError(f"{name} varies by {spread:.3g} about a level of {peak:.6g}, only in "
+                        "the last digits of its samples: it carries no usable test signal")
+    if spread < lo:
+        raise DataError(f"{name} varies by only {spread:.3g}; ehss needs variations of at "
+                        f"least {lo:g}; rescale it, e.g. change its unit")
+
+
+def format_range(
+    lo: float | None, hi: float | None, *, lo_open: bool = False, hi_open: bool = False,
+    unit: str = "",
+) -> str:
+    """An interval as people write it: ``[0, 1)``, ``(0, inf)``, ``[1, 1e+06] Hz``."""
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
+    a = "-inf" if lo is None else f"{lo:g}"
+    b = "inf" if hi is None else f"{hi:g}"
+    return f"{left}{a}, {b}{right}" + (f" {unit}" if unit else "")
+
+
+def show(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, shortened in the middle when longer than ``limit`` characters."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[: limit // 2]}...{text[-10:]} ({len(text)} characters)"
+
+
+def _in_range(x: float, lo, hi, lo_open: bool, hi_open: bool) -> bool:
+    if lo is not None and (x < lo or (lo_open and x == lo)):
+        return False
+    return not (hi is not None and (x > hi or (hi_open and x == hi)))
+
+
+def check_real(
+    value: Any,
+    name: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    unit: str = "",
+) -> float:
+    """``value`` as a finite float inside ``[lo, hi]`` (ends open on request).
+
+    Parameters
+    ----------
+    value : int or float
+        A real number (Python or NumPy; ``bool`` is refused).
+    name : str
+        How the value is named in messages.
+    lo, hi : float, optional
+        Bounds; None means unbounded on that side.
+    lo_open, hi_open : bool, default False
+        Exclude the bound itself.
+    unit : str, optional
+        Unit shown after the accepted range.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not a real number (a string, None, a bool, complex, an array...).
+    ParameterError
+        If it is NaN, infinite, too large for a float or outside the range.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name}={show(value)} must be a real number, not {type(value).__name__}")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise ParameterError(f"{name}={show(value)} is too large for a float") from None
+    accepted = format_range(lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
+    if not math.isfinite(x):
+        raise ParameterError(f"{name}={show(value)} must be finite, in {accepted}")
+    if not _in_range(x, lo, hi, lo_open, hi_open):
+        raise ParameterError(f"{name}={show(value)} must be in {accepted}")
+    return x
+
+
+def check_int(value: Any, name: str, *, lo: int | None = None, hi: int | None = None) -> int:
+    """``value`` as a Python int inside ``[lo, hi]``.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not an integer (a float such as ``2.0`` or ``1.5``, a string, a bool).
+    ParameterError
+        If it is outside the range.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name}={show(value)} must be an integer, not {type(value).__name__}")
+    k = int(value)
+    if not _in_range(k, lo, hi, False, False):
+        raise ParameterError(f"{name}={show(value)} must be an integer in "
+                             f"{format_range(lo, hi)}")
+    return k
+
+
+def check_bool(value: Any, name: str) -> bool:
+    """``value`` as a bool; only ``True``/``False`` are accepted (never ``"no"`` or 0).
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not a boolean.
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}={show(value)} must be true or false, not {type(value).__name__}")
+    return bool(value)
+
+
+def check_choice(value: Any, name: str, choices: Collection[Any]) -> Any:
+    """``value`` if it is one of ``choices``.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not of the type of the choices (e.g. a number where names are
+        expected).
+    ParameterError
+        If it is not among them.
+    """
+    kinds = {type(c) for c in choices}
+    if kinds and not isinstance(value, tuple(kinds)):
+        raise TypeError(f"{name}={show(value)} must be one of {_listing(choices)}, "
+                        f"not {type(value).__name__}")
+    if value not in choices:
+        raise ParameterError(f"{name}={show(value)} must be one of {_listing(choices)}")
+    return value
+
+
+def _listing(choices: Collection[Any]) -> str:
+    return ", ".join(repr(c) for c in choices)
 
 
 def as_signal(x: Any, name: str, *, allow_empty: bool = False) -> np.ndarray:

@@ -26,10 +26,34 @@ import scipy.signal
 from ehss._checks import as_record
 from ehss.errors import DataError, ParameterError
 
-__all__ = ["FrequencyResponse", "h1_estimate", "default_nperseg", "n_segments"]
+__all__ = [
+    "FrequencyResponse",
+    "EXCITATION_FLOOR",
+    "FRF_METHODS",
+    "h1_estimate",
+    "dft_estimate",
+    "frf_estimate",
+    "default_nperseg",
+    "n_segments",
+    "check_fs",
+    "check_band",
+]
+
+#: Accepted ``method`` of :func:`frf_estimate`.
+FRF_METHODS = ("auto", "welch", "dft")
 
 #: Fewest samples accepted by :func:`h1_estimate`.
 MIN_SAMPLES = 16
+
+#: Fewest averages the default segment length aims for (Welch segments or DFT bins).
+MIN_AVERAGES = 8
+
+#: Fraction of the record tapered (half at each end) by :func:`dft_estimate`.
+TAPER_FRACTION = 0.1
+
+#: A frequency counts as excited when the input's spectrum there is at least this fraction
+#: of its largest value in the band considered (30 dB down).
+EXCITATION_FLOOR = 1e-3
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -45,11 +69,19 @@ class FrequencyResponse:
     coherence : ndarray, shape (n_freq,)
         Magnitude-squared coherence :math:`\\hat\\gamma^2(f) \\in [0, 1]`.
     n_averages : int
-        Number of Welch segments averaged.
+        Number of Welch segments averaged (``method="welch"``), or of adjacent DFT bins
+        averaged per point (``method="dft"``).
     nperseg : int
-        Segment length in samples (frequency resolution ``fs / nperseg``).
+        Segment length in samples, so the frequency resolution is ``fs / nperseg``; for
+        ``method="dft"`` the equivalent length ``n_samples // n_averages``.
     fs : float
         Sample rate in Hz.
+    method : {"welch", "dft"}
+        How it was estimated: :func:`h1_estimate` or :func:`dft_estimate`.
+    input_power : ndarray, shape (n_freq,), optional
+        The input's (auto-)spectrum at each point, in any consistent scale: where the
+        input put no power the estimate means nothing, whatever the coherence
+        (:func:`ehss.validation.frf_error` leaves such points out).
     """
 
     freq_hz: np.ndarray = field(repr=False)
@@ -58,10 +90,14 @@ class FrequencyResponse:
     n_averages: int
     nperseg: int
     fs: float
+    method: str = "welch"
+    input_power: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         n = np.shape(self.freq_hz)
-        if np.shape(self.response) != n or np.shape(self.coherence) != n:
+        if np.shape(self.response) != n or np.shape(self.coherence) != n or (
+            self.input_power is not None and np.shape(self.input_power) != n
+        ):
             raise ParameterError(
                 "freq_hz, response and coherence must have the same shape, got "
                 f"{n}, {np.shape(self.response)}, {np.shape(self.coherence)}"
@@ -91,7 +127,7 @@ class FrequencyResponse:
         ParameterError
             If ``lo_hz > hi_hz`` or either is negative/non-finite.
         """
-        lo_hz, hi_hz = _check_band((lo_hz, hi_hz))
+        lo_hz, hi_hz = check_band((lo_hz, hi_hz))
         mask = (self.freq_hz >= lo_hz) & (self.freq_hz <= hi_hz)
         return FrequencyResponse(
             freq_hz=self.freq_hz[mask],
@@ -100,7 +136,29 @@ class FrequencyResponse:
             n_averages=self.n_averages,
             nperseg=self.nperseg,
             fs=self.fs,
+            method=self.method,
+            input_power=None if self.input_power is None else self.input_power[mask],
         )
+
+    def valid(self, band_hz: tuple[float, float], min_coherence: float) -> np.ndarray:
+        """Points inside ``band_hz`` that the input excited (its spectrum within
+        :data:`EXCITATION_FLOOR` of its largest value in the band) and whose coherence
+        reaches ``min_coherence``: where the estimate can be trusted."""
+        lo, hi = check_band(band_hz)
+        ok = (self.freq_hz >= lo) & (self.freq_hz <= hi)
+        if self.input_power is not None and np.any(ok):
+            ok &= self.input_power >= EXCITATION_FLOOR * float(np.max(self.input_power[ok]))
+        return ok & (self.coherence >= min_coherence)
+
+    def covered_decades(self, band_hz: tuple[float, float], min_coherence: float) -> float:
+        """Width in decades of the part of ``band_hz`` where the estimate is :meth:`valid`:
+        each valid point at f covers ``log10((f + df/2) / (f - df/2))``, df the resolution
+        (a point at f <= df/2 counts as from df/4). On a logarithmic axis, as a loop's
+        response is read, so the low frequencies a sweep spends long on count fully."""
+        ok = self.valid(band_hz, min_coherence)
+        f = self.freq_hz[ok]
+        half = 0.5 * self.resolution_hz
+        return float(np.sum(np.log10((f + half) / np.maximum(f - half, 0.5 * half))))
 
     def to_columns(self) -> dict[str, np.ndarray]:
         """Columns for a CSV file: ``freq_hz, magnitude_db, phase_deg, coherence``."""
@@ -119,25 +177,54 @@ def n_segments(n_samples: int, nperseg: int, noverlap: int) -> int:
     return (n_samples - nperseg) // (nperseg - noverlap) + 1
 
 
-def default_nperseg(n_samples: int, fs: float, *, min_averages: int = 8) -> int:
-    """Default Welch segment length: a power of two close to ``fs`` (about 1 Hz
-    resolution), halved until at least ``min_averages`` half-overlapping segments fit,
-    but not below 16 samples.
+def default_nperseg(
+    n_samples: int,
+    fs: float,
+    *,
+    band_hz: tuple[float, float] | None = None,
+    min_averages: int = MIN_AVERAGES,
+) -> int:
+    """Default Welch segment length, from the record's length and the band of interest.
+
+    The rule (powers of two throughout):
+
+    1. the longest segment that still gives ``min_averages`` half-overlapping averages
+       (the finest resolution the record can afford with a usable coherence);
+    2. with a band ``(lo, hi)``, no longer than needed for a resolution of
+       ``min(lo / 2, (hi − lo) / 32)`` (``(hi − lo) / 32`` when ``lo`` is 0): the shortest
+       segment reaching it, which leaves the rest of the record for more averages;
+    3. at least 16 samples when the record has them (8 otherwise).
+
+    The sample rate enters only through the band: a record at 1 Hz and one at 4 kHz of
+    the same length get the same segments unless a band says otherwise.
 
     Examples
     --------
-    >>> default_nperseg(20_000, 1000.0)
+    >>> default_nperseg(1000, 1.0)       # 14 averages of 128 samples
+    128
+    >>> default_nperseg(20_000, 1000.0)  # 8 averages, 0.24 Hz resolution
+    4096
+    >>> default_nperseg(20_000, 1000.0, band_hz=(2.0, 100.0))  # 1 Hz is enough
     1024
-    >>> default_nperseg(5_000, 1000.0)
-    1024
-    >>> default_nperseg(2_000, 1000.0)
-    256
     """
-    nperseg = 2 ** max(4, round(math.log2(max(fs, 1.0))))
-    while nperseg > 16 and (
-        nperseg > n_samples or n_segments(n_samples, nperseg, nperseg // 2) < min_averages
-    ):
+    n = operator.index(n_samples)
+    fs = check_fs(fs)
+    min_averages = operator.index(min_averages)
+    if min_averages < 1:
+        raise ParameterError(f"{min_averages=} must be >= 1")
+    floor = 16 if n >= 16 * (min_averages + 1) // 2 else 8
+    nperseg = 2 ** max(3, int(math.floor(math.log2(max(n, 8)))))
+    while nperseg > floor and n_segments(n, nperseg, nperseg // 2) < min_averages:
         nperseg //= 2
+    if band_hz is not None:
+        lo, hi = check_band(band_hz)
+        need_hz = (hi - lo) / 32.0
+        if lo > 0:
+            need_hz = min(need_hz, lo / 2.0)
+        if need_hz > 0:
+            # shortest power of two with fs / nperseg <= need_hz
+            n_need = 2 ** max(3, math.ceil(math.log2(fs / need_hz)))
+            nperseg = max(min(nperseg, n_need), min(floor, nperseg))
     return nperseg
 
 
@@ -150,6 +237,7 @@ def h1_estimate(
     noverlap: int | None = None,
     window: str | tuple = "hann",
     detrend: str | bool = "constant",
+    band_hz: tuple[float, float] | None = None,
 ) -> FrequencyResponse:
     """H1 frequency-response estimate and coherence from input ``u`` to output ``y``.
 
@@ -160,8 +248,8 @@ def h1_estimate(
     fs : float
         Sample rate in Hz.
     nperseg : int, optional
-        Segment length. Default :func:`default_nperseg`: a power of two giving about 1 Hz
-        resolution and at least 8 averages when the record allows it.
+        Segment length. Default :func:`default_nperseg` (from the record's length and
+        ``band_hz``): at least 8 averages, no finer resolution than the band needs.
     noverlap : int, optional
         Overlap between segments (default ``nperseg // 2``).
     window : str or tuple, default "hann"
@@ -169,6 +257,8 @@ def h1_estimate(
     detrend : {"constant", "linear", False}, default "constant"
         Detrending of each segment. When the segments are detrended the 0 Hz point carries
         no information and is left out.
+    band_hz : (float, float), optional
+        Band of interest, used only for the default ``nperseg``.
 
     Returns
     -------
@@ -201,17 +291,17 @@ def h1_estimate(
     >>> y = scipy.signal.lfilter([0.2], [1.0, -0.8], u)
     >>> frf = h1_estimate(u, y, fs=1000.0)
     >>> frf.nperseg, frf.n_averages
-    (1024, 38)
+    (4096, 8)
     """
     u, y = as_record(u, y)
     if u.size != y.size:
         raise DataError(f"u and y must have the same length, got {u.size} and {y.size}")
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     n = u.size
     if n < MIN_SAMPLES:
         raise DataError(f"too few samples for a frequency response: {n} < {MIN_SAMPLES}")
     if nperseg is None:
-        nperseg = default_nperseg(n, fs)
+        nperseg = default_nperseg(n, fs, band_hz=band_hz)
     else:
         nperseg = _as_int(nperseg, "nperseg")
         if nperseg < 4:
@@ -253,7 +343,166 @@ def h1_estimate(
         n_averages=n_segments(n, nperseg, noverlap),
         nperseg=nperseg,
         fs=fs,
+        input_power=s_uu.copy(),
     )
+
+
+def dft_estimate(
+    u,
+    y,
+    fs: float,
+    *,
+    n_average: int | None = None,
+    band_hz: tuple[float, float] | None = None,
+) -> FrequencyResponse:
+    """Frequency response from the DFTs of the whole record, averaged over adjacent bins.
+
+    The estimate for a swept sine (and any test that starts and ends at rest): a sweep
+    puts each frequency in the record only while it passes, so Welch segments see it in
+    one segment and noise in the others, and its coherence collapses, although the
+    record determines the response well. Here, as a sweep analyser does by tracking the
+    sweep, every frequency is measured over the whole time it was excited.
+
+    Parameters
+    ----------
+    u, y : array_like, shape (n_samples,)
+        Input and output, finite, same length; their means are removed.
+    fs : float
+        Sample rate in Hz.
+    n_average : int, optional
+        Adjacent DFT bins averaged per point, L (at least 2). Default: the record length
+        over :func:`default_nperseg` for ``band_hz``, at least :data:`MIN_AVERAGES`.
+    band_hz : (float, float), optional
+        Band of interest, used only for the default ``n_average``.
+
+    Returns
+    -------
+    FrequencyResponse
+        ``method="dft"``; one point per group of L bins (at the group's mean frequency,
+        the 0 Hz bin left out), ``n_averages = L``.
+
+    Notes
+    -----
+    With :math:`U_k, Y_k` the DFTs of the mean-removed, end-tapered record and
+    :math:`\\mathcal K` a group of L adjacent bins,
+
+    .. math:: \\hat H = \\frac{\\sum_{\\mathcal K} \\overline{U_k} Y_k}
+              {\\sum_{\\mathcal K} |U_k|^2}, \\qquad
+              \\hat\\gamma^2 = \\frac{|\\sum_{\\mathcal K} \\overline{U_k} Y_k|^2}
+              {\\sum_{\\mathcal K} |U_k|^2 \\sum_{\\mathcal K} |Y_k|^2},
+
+    the frequency-smoothed (Daniell) form of H1: unbiased by output noise, with L playing
+    the part of the number of averages. The ends of the record are tapered over 5 % of
+    its length each (Tukey window, :data:`TAPER_FRACTION`): a record cut from a longer
+    test then leaks little, and a slowly varying window scales the input and the output
+    alike as long as the impulse response is shorter than the taper.
+    """
+    u, y = as_record(u, y)
+    fs = check_fs(fs)
+    n = u.size
+    if n < MIN_SAMPLES:
+        raise DataError(f"too few samples for a frequency response: {n} < {MIN_SAMPLES}")
+    if not np.any(u != u[0]):
+        raise DataError("the input u is constant: it has no power to estimate a response")
+    n_bins = n // 2  # bins 1 .. n//2
+    if n_average is None:
+        n_average = max(MIN_AVERAGES, n // default_nperseg(n, fs, band_hz=band_hz))
+    else:
+        n_average = _as_int(n_average, "n_average")
+        if n_average < 2:
+            raise ParameterError(f"{n_average=} must be >= 2")
+    n_average = min(n_average, n_bins)
+    n_groups = n_bins // n_average
+    if n_groups < 1:
+        raise DataError(f"{n} samples hold fewer than {n_average} frequency bins")
+    # A short cosine taper (5 % of the record at each end) keeps a record that does not
+    # start or end at rest (the held-out end of a sweep) from leaking its cut into
+    # frequencies it never excited; a slow taper scales U and Y alike, not their ratio.
+    taper = scipy.signal.windows.tukey(n, TAPER_FRACTION)
+    uf = np.fft.rfft((u - u.mean()) * taper)
+    yf = np.fft.rfft((y - y.mean()) * taper)
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    sl = slice(1, 1 + n_groups * n_average)
+    shape = (n_groups, n_average)
+    # S_uy = Σ conj(U) Y, S_uu = Σ |U|², S_yy = Σ |Y|² over each group of L bins
+    s_uy = (np.conj(uf[sl]) * yf[sl]).reshape(shape).sum(axis=1)
+    s_uu = (np.abs(uf[sl]) ** 2).reshape(shape).sum(axis=1)
+    s_yy = (np.abs(yf[sl]) ** 2).reshape(shape).sum(axis=1)
+    freq = f[sl].reshape(shape).mean(axis=1)
+    response = np.zeros(n_groups, dtype=np.complex128)
+    coherence = np.zeros(n_groups, dtype=np.float64)
+    ok = s_uu > 0
+    # H = S_uy / S_uu
+    response[ok] = s_uy[ok] / s_uu[ok]
+    ok_y = ok & (s_yy > 0)
+    # γ² = |S_uy|² / (S_uu S_yy)
+    coherence[ok_y] = np.abs(s_uy[ok_y]) ** 2 / (s_uu[ok_y] * s_yy[ok_y])
+    np.clip(coherence, 0.0, 1.0, out=coherence)
+    return FrequencyResponse(freq_hz=freq, response=response, coherence=coherence,
+                             n_averages=n_average, nperseg=n // n_average, fs=fs,
+                             method="dft", input_power=s_uu)
+
+
+def frf_estimate(
+    u,
+    y,
+    fs: float,
+    *,
+    method: str = "auto",
+    nperseg: int | None = None,
+    band_hz: tuple[float, float] | None = None,
+    min_coherence: float = 0.9,
+) -> FrequencyResponse:
+    """Non-parametric frequency response by Welch averaging, whole-record DFTs, or
+    whichever of the two the record supports better.
+
+    Parameters
+    ----------
+    u, y : array_like, shape (n_samples,)
+    fs : float
+        Sample rate in Hz.
+    method : {"auto", "welch", "dft"}, default "auto"
+        ``"welch"``: :func:`h1_estimate`; ``"dft"``: :func:`dft_estimate`; ``"auto"``:
+        both, keeping the DFT estimate only when it is valid (coherent and excited) over a
+        quarter more of ``band_hz`` (of the whole axis without a band) than Welch's,
+        measured in decades (:meth:`FrequencyResponse.covered_decades`): random and
+        multisine tests keep Welch's estimate, fast sweeps get the DFT estimate.
+    nperseg : int, optional
+        Welch segment length (and, as ``n_samples // nperseg``, the DFT estimate's number
+        of averaged bins). Default: :func:`default_nperseg`.
+    band_hz : (float, float), optional
+        Band of interest (defaults and the ``"auto"`` choice).
+    min_coherence : float, default 0.9
+        Coherence counted as good by ``"auto"``.
+
+    Returns
+    -------
+    FrequencyResponse
+        Its ``method`` says which estimate it is.
+    """
+    if method not in FRF_METHODS:
+        raise ParameterError(f"method={method!r} must be one of {', '.join(FRF_METHODS)}")
+    if not 0.0 <= float(min_coherence) <= 1.0:
+        raise ParameterError(f"{min_coherence=} must be in [0, 1]")
+    welch = dft = None
+    if method in ("auto", "welch"):
+        welch = h1_estimate(u, y, fs, nperseg=nperseg, band_hz=band_hz)
+        if method == "welch":
+            return welch
+    n_average = None
+    if nperseg is not None:
+        n_u = np.shape(u)[0] if np.ndim(u) == 1 else 0
+        n_average = max(2, n_u // _as_int(nperseg, "nperseg")) if n_u else None
+    dft = dft_estimate(u, y, fs, n_average=n_average, band_hz=band_hz)
+    if method == "dft":
+        return dft
+    band = band_hz if band_hz is not None else (0.0, welch.fs / 2.0)
+    # the DFT estimate only when it validates over clearly more of the band (a quarter
+    # more): on stationary tests both cover the same and Welch's estimate is kept
+    if dft.covered_decades(band, min_coherence) > 1.25 * welch.covered_decades(
+            band, min_coherence):
+        return dft
+    return welch
 
 
 # ------------------------------------------------------------------------------- checks
@@ -266,7 +515,8 @@ def _as_int(x, name: str) -> int:
         raise ParameterError(f"{name}={x!r} must be an integer") from None
 
 
-def _check_fs(fs) -> float:
+def check_fs(fs) -> float:
+    """``fs`` as a positive finite sample rate in Hz, or a ParameterError."""
     try:
         fs = float(fs)
     except (TypeError, ValueError):
@@ -276,7 +526,8 @@ def _check_fs(fs) -> float:
     return fs
 
 
-def _check_band(band) -> tuple[float, float]:
+def check_band(band) -> tuple[float, float]:
+    """``band`` as ``(lo, hi)`` in Hz with 0 <= lo <= hi, or a ParameterError."""
     try:
         lo, hi = (float(v) for v in band)
     except (TypeError, ValueError):

@@ -21,6 +21,14 @@ Two presets exist:
 
 Parameter sets round-trip through TOML (:func:`load_params`, :func:`save_params`);
 variants are made with :func:`dataclasses.replace`.
+
+Every field is checked on construction: booleans must be ``True``/``False`` (a TOML
+``"no"`` is refused, not read as true), integers integers, and real numbers finite and
+inside the physically sensible range of :data:`RANGES`, which also bounds the work a
+simulation implies (integration at most at 1 MHz and :data:`MAX_SUBSTEPS` steps per
+control period). Wrong Python types raise TypeError and bad values ParameterError from the
+API; from a file, both become a ParameterError naming the file, ``section.key`` and what
+is accepted.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from ehss._checks import check_bool, check_int, check_real
 from ehss.errors import ParameterError
 
 __all__ = [
@@ -52,6 +61,9 @@ __all__ = [
     "params_to_dict",
     "params_from_dict",
     "describe_params",
+    "RANGES",
+    "MAX_PARAMS_FILE_BYTES",
+    "MAX_SUBSTEPS",
 ]
 
 GRAVITY_M_S2 = 9.80665
@@ -59,31 +71,121 @@ LITRE_PER_MIN_M3_S = 1e-3 / 60.0
 
 
 # --------------------------------------------------------------------------- checks
-def _finite(obj: Any, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not isinstance(value, (int, float)) or isinstance(value, bool):
-            raise ParameterError(
-                f"{type(obj).__name__}.{name}={value!r} must be a real number"
-            )
-        if not math.isfinite(value):
-            raise ParameterError(f"{type(obj).__name__}.{name}={value!r} must be finite")
+# Accepted range of every numeric field: (lo, hi, lo_open, hi_open), in the field's SI unit.
+# The ranges are physically sensible for a hydraulic servo channel with generous margins
+# (a valve of up to 60 000 L/min, a 10 m² piston, 10 000 t of moving mass) and bound the
+# work a simulation implies: the plant is integrated at timing.internal_rate_hz, so that
+# rate is capped at 1 MHz and at 1000 integration steps per control period.
+_OPEN = (True, False)  # (lo, hi]
+_CLOSED = (False, False)  # [lo, hi]
+RANGES: dict[str, dict[str, tuple[float, float, bool, bool]]] = {
+    "ValveParams": {
+        "rated_flow_m3_s": (0.0, 1.0, *_OPEN),
+        "rated_pressure_drop_pa": (1e4, 1e9, *_CLOSED),
+        "natural_freq_hz": (0.1, 1e6, *_CLOSED),
+        "damping": (0.0, 100.0, *_OPEN),
+        "null_leakage_m3_s_pa": (0.0, 1e-6, *_CLOSED),
+        "deadband": (0.0, 0.5, False, True),
+        "null_bias": (-0.5, 0.5, True, True),
+        "command_full_scale_v": (0.0, 1e3, *_OPEN),
+    },
+    "ActuatorParams": {
+        "piston_area_m2": (0.0, 10.0, *_OPEN),
+        "total_volume_m3": (0.0, 100.0, *_OPEN),
+        "bulk_modulus_pa": (1e6, 1e11, *_CLOSED),
+        "supply_pressure_pa": (1e4, 1e9, *_CLOSED),
+        "return_pressure_pa": (0.0, 1e9, *_CLOSED),
+        "internal_leakage_m3_s_pa": (0.0, 1e-6, *_CLOSED),
+        "external_leakage_m3_s_pa": (0.0, 1e-6, *_CLOSED),
+        "oil_density_kg_m3": (100.0, 1e4, *_CLOSED),
+        "stroke_m": (0.0, 100.0, *_OPEN),
+    },
+    "LoadParams": {
+        "mass_kg": (1e-3, 1e7, *_CLOSED),
+        "damping_n_s_m": (0.0, 1e12, *_CLOSED),
+        "stiffness_n_m": (0.0, 1e12, *_CLOSED),
+        "specimen_stiffness_n_m": (0.0, 1e12, *_CLOSED),
+        "coulomb_friction_n": (0.0, 1e9, *_CLOSED),
+        "stribeck_friction_n": (0.0, 1e9, *_CLOSED),
+        "stribeck_velocity_m_s": (1e-9, 100.0, *_CLOSED),
+        "clearance_m": (0.0, 1.0, *_CLOSED),
+    },
+    "SensorParams": {
+        "lvdt_range_m": (0.0, 100.0, *_OPEN),
+        "accel_range_m_s2": (0.0, 1e6, *_OPEN),
+        "force_range_n": (0.0, 1e9, *_OPEN),
+        "lvdt_noise_m": (0.0, 100.0, *_CLOSED),
+        "accel_noise_m_s2": (0.0, 1e6, *_CLOSED),
+        "force_noise_n": (0.0, 1e9, *_CLOSED),
+        "accel_highpass_hz": (0.0, 1e4, *_CLOSED),
+        "adc_bits": (2, 32, *_CLOSED),
+        "dac_bits": (2, 32, *_CLOSED),
+    },
+    "PositionPidParams": {
+        "kp_v_per_m": (0.0, 1e12, *_OPEN),
+        "ki_v_per_m_per_s": (0.0, 1e12, *_CLOSED),
+        "kd_v_s_per_m": (0.0, 1e12, *_CLOSED),
+        "derivative_filter_hz": (0.0, 1e6, *_OPEN),
+        "output_limit_v": (0.0, 1e3, *_OPEN),
+    },
+    "TvcParams": {
+        "kg": (0.0, 1e6, *_OPEN),
+        "generator_omega_rad_s": (0.0, 1e6, *_OPEN),
+        "generator_damping": (0.0, 100.0, *_OPEN),
+        "kdf_v_per_m": (-1e12, 1e12, *_CLOSED),
+        "kvf_v_per_m_s": (-1e12, 1e12, *_CLOSED),
+        "kaf_v_per_m_s2": (-1e12, 1e12, *_CLOSED),
+        "kdr": (-1e12, 1e12, *_CLOSED),
+        "kvr_s": (-1e12, 1e12, *_CLOSED),
+        "kar_s2": (-1e12, 1e12, *_CLOSED),
+        "velocity_crossover_hz": (0.0, 1e6, *_OPEN),
+        "output_limit_v": (0.0, 1e3, *_OPEN),
+    },
+    "ForcePidParams": {
+        "kp_v_per_n": (0.0, 1e12, *_OPEN),
+        "ki_v_per_n_per_s": (0.0, 1e12, *_CLOSED),
+        "kd_v_s_per_n": (0.0, 1e12, *_CLOSED),
+        "derivative_filter_hz": (0.0, 1e6, *_OPEN),
+        "output_limit_v": (0.0, 1e3, *_OPEN),
+    },
+    "TimingParams": {
+        "control_rate_hz": (1.0, 1e5, *_CLOSED),
+        "internal_rate_hz": (1.0, 1e6, *_CLOSED),
+        "delay_samples": (0, 100, *_CLOSED),
+    },
+    "RigLimits": {
+        "max_velocity_m_s": (0.0, 1e3, *_OPEN),
+        "max_acceleration_m_s2": (0.0, 1e5, *_OPEN),
+        "max_force_n": (0.0, 1e10, *_OPEN),
+    },
+}
+#: Most plant integration steps per control period (timing.internal_rate_hz / control_rate_hz).
+MAX_SUBSTEPS = 1000
 
 
-def _positive(obj: Any, *names: str) -> None:
-    _finite(obj, *names)
-    for name in names:
-        value = getattr(obj, name)
-        if value <= 0:
-            raise ParameterError(f"{type(obj).__name__}.{name}={value!r} must be > 0")
+def _validate_fields(obj: Any) -> None:
+    """Check every field of a parameter section against its type and :data:`RANGES`.
 
-
-def _non_negative(obj: Any, *names: str) -> None:
-    _finite(obj, *names)
-    for name in names:
-        value = getattr(obj, name)
-        if value < 0:
-            raise ParameterError(f"{type(obj).__name__}.{name}={value!r} must be >= 0")
+    Booleans must be ``True``/``False``, integers integers, and real numbers finite and in
+    range. Integers given for real fields are stored as floats. Wrong Python types raise
+    TypeError, bad values ParameterError (both name ``Section.field`` and the range).
+    """
+    cls = type(obj).__name__
+    ranges = RANGES[cls]
+    for f in fields(obj):
+        value = getattr(obj, f.name)
+        name = f"{cls}.{f.name}"
+        kind = type(f.default)
+        if kind is bool:
+            check_bool(value, name)
+        elif kind is int:
+            lo, hi, _, _ = ranges[f.name]
+            check_int(value, name, lo=int(lo), hi=int(hi))
+        else:
+            lo, hi, lo_open, hi_open = ranges[f.name]
+            x = check_real(value, name, lo=lo, hi=hi, lo_open=lo_open, hi_open=hi_open,
+                           unit=_unit(f.name).replace("-", ""))
+            object.__setattr__(obj, f.name, x)
 
 
 def _unit(name: str) -> str:
@@ -169,20 +271,7 @@ class ValveParams:
     saturate: bool = True
 
     def __post_init__(self) -> None:
-        _positive(
-            self,
-            "rated_flow_m3_s",
-            "rated_pressure_drop_pa",
-            "natural_freq_hz",
-            "damping",
-            "command_full_scale_v",
-        )
-        _non_negative(self, "null_leakage_m3_s_pa", "deadband")
-        _finite(self, "null_bias")
-        if self.deadband >= 0.5:
-            raise ParameterError(f"ValveParams.deadband={self.deadband!r} must be < 0.5")
-        if abs(self.null_bias) >= 0.5:
-            raise ParameterError(f"ValveParams.null_bias={self.null_bias!r} must be in (-0.5, 0.5)")
+        _validate_fields(self)
 
     @property
     def gain_per_v(self) -> float:
@@ -228,18 +317,7 @@ class ActuatorParams:
     stroke_m: float = 0.1
 
     def __post_init__(self) -> None:
-        _positive(
-            self,
-            "piston_area_m2",
-            "total_volume_m3",
-            "bulk_modulus_pa",
-            "supply_pressure_pa",
-            "oil_density_kg_m3",
-            "stroke_m",
-        )
-        _non_negative(
-            self, "return_pressure_pa", "internal_leakage_m3_s_pa", "external_leakage_m3_s_pa"
-        )
+        _validate_fields(self)
         if self.return_pressure_pa >= self.supply_pressure_pa:
             raise ParameterError(
                 f"ActuatorParams.return_pressure_pa={self.return_pressure_pa!r} must be below "
@@ -286,16 +364,7 @@ class LoadParams:
     clearance_m: float = 0.0
 
     def __post_init__(self) -> None:
-        _positive(self, "mass_kg", "stribeck_velocity_m_s")
-        _non_negative(
-            self,
-            "damping_n_s_m",
-            "stiffness_n_m",
-            "specimen_stiffness_n_m",
-            "coulomb_friction_n",
-            "stribeck_friction_n",
-            "clearance_m",
-        )
+        _validate_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -336,14 +405,15 @@ class SensorParams:
     quantize: bool = True
 
     def __post_init__(self) -> None:
-        _positive(self, "lvdt_range_m", "accel_range_m_s2", "force_range_n")
-        _non_negative(
-            self, "lvdt_noise_m", "accel_noise_m_s2", "force_noise_n", "accel_highpass_hz"
-        )
-        for name in ("adc_bits", "dac_bits"):
-            bits = getattr(self, name)
-            if not isinstance(bits, int) or isinstance(bits, bool) or not 2 <= bits <= 32:
-                raise ParameterError(f"SensorParams.{name}={bits!r} must be an integer in [2, 32]")
+        _validate_fields(self)
+        for noise, full in (("lvdt_noise_m", "lvdt_range_m"),
+                            ("accel_noise_m_s2", "accel_range_m_s2"),
+                            ("force_noise_n", "force_range_n")):
+            if getattr(self, noise) > getattr(self, full):
+                raise ParameterError(
+                    f"SensorParams.{noise}={getattr(self, noise)!r} must not exceed "
+                    f"{full}={getattr(self, full)!r} (noise larger than the sensor's range)"
+                )
 
 
 # --------------------------------------------------------------------------- control
@@ -368,8 +438,7 @@ class PositionPidParams:
     output_limit_v: float = 10.0
 
     def __post_init__(self) -> None:
-        _positive(self, "kp_v_per_m", "derivative_filter_hz", "output_limit_v")
-        _non_negative(self, "ki_v_per_m_per_s", "kd_v_s_per_m")
+        _validate_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -422,10 +491,7 @@ class TvcParams:
     output_limit_v: float = 10.0
 
     def __post_init__(self) -> None:
-        _positive(self, "kg", "generator_omega_rad_s", "generator_damping", "velocity_crossover_hz",
-                  "output_limit_v")
-        _finite(self, "kdf_v_per_m", "kvf_v_per_m_s", "kaf_v_per_m_s2", "kdr", "kvr_s",
-                "kar_s2")
+        _validate_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -445,8 +511,7 @@ class ForcePidParams:
     output_limit_v: float = 10.0
 
     def __post_init__(self) -> None:
-        _positive(self, "kp_v_per_n", "derivative_filter_hz", "output_limit_v")
-        _non_negative(self, "ki_v_per_n_per_s", "kd_v_s_per_n")
+        _validate_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -464,18 +529,18 @@ class TimingParams:
     delay_samples: int = 1
 
     def __post_init__(self) -> None:
-        _positive(self, "control_rate_hz", "internal_rate_hz")
+        _validate_fields(self)
         ratio = self.internal_rate_hz / self.control_rate_hz
         if ratio < 1 or abs(ratio - round(ratio)) > 1e-9:
             raise ParameterError(
                 f"TimingParams: internal_rate_hz={self.internal_rate_hz!r} must be an integer "
                 f"multiple of control_rate_hz={self.control_rate_hz!r}"
             )
-        if not isinstance(self.delay_samples, int) or isinstance(self.delay_samples, bool) or not (
-            0 <= self.delay_samples <= 100
-        ):
+        if round(ratio) > MAX_SUBSTEPS:
             raise ParameterError(
-                f"TimingParams.delay_samples={self.delay_samples!r} must be an integer in [0, 100]"
+                f"TimingParams: internal_rate_hz={self.internal_rate_hz!r} is "
+                f"{round(ratio)} times control_rate_hz={self.control_rate_hz!r}; at most "
+                f"{MAX_SUBSTEPS} plant steps per control period are accepted"
             )
 
     @property
@@ -498,7 +563,7 @@ class RigLimits:
     max_force_n: float = 1500.0 * GRAVITY_M_S2
 
     def __post_init__(self) -> None:
-        _positive(self, "max_velocity_m_s", "max_acceleration_m_s2", "max_force_n")
+        _validate_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -739,13 +804,18 @@ def params_from_dict(data: dict[str, Any], *, base: RigParams | None = None) -> 
     Raises
     ------
     ParameterError
-        For unknown sections or keys and for values that fail validation.
+        For unknown sections or keys and for values of the wrong type or out of range
+        (the message names ``section.key`` and what is accepted, see :data:`RANGES`).
     """
     if not isinstance(data, dict):
         raise ParameterError(f"parameters must be a table, got {type(data).__name__}")
     data = dict(data)
     if base is None:
-        base = preset(str(data.pop("preset", "default")))
+        name = data.pop("preset", "default")
+        if not isinstance(name, str):
+            raise ParameterError(f"preset={name!r} must be the name of a preset, one of "
+                                 f"{sorted(PRESETS)}")
+        base = preset(name)
     else:
         data.pop("preset", None)
     changes: dict[str, Any] = {}
@@ -754,10 +824,13 @@ def params_from_dict(data: dict[str, Any], *, base: RigParams | None = None) -> 
         if key not in sections:
             raise ParameterError(f"unknown parameter section {key!r}; known: {sorted(sections)}")
         if key == "name":
+            if not isinstance(value, str):
+                raise ParameterError(f"name={value!r} must be a string")
             changes["name"] = value
             continue
         if not isinstance(value, dict):
-            raise ParameterError(f"parameter section [{key}] must be a table")
+            raise ParameterError(f"parameter section [{key}] must be a table, "
+                                 f"got {type(value).__name__} {value!r}")
         current = getattr(base, key)
         known = {f.name: f for f in fields(current)}
         for sub in value:
@@ -765,48 +838,90 @@ def params_from_dict(data: dict[str, Any], *, base: RigParams | None = None) -> 
                 raise ParameterError(
                     f"unknown parameter {key}.{sub}; known: {sorted(known)}"
                 )
-        coerced = {}
-        for sub, v in value.items():
-            ref = getattr(current, sub)
-            # TOML writes 1.0 as 1.0 but users write 250 for 250.0: accept ints for floats.
-            if isinstance(ref, float) and isinstance(v, int) and not isinstance(v, bool):
-                v = float(v)
-            coerced[sub] = v
         try:
-            changes[key] = dataclasses.replace(current, **coerced)
-        except TypeError as exc:  # pragma: no cover - guarded by the key check above
-            raise ParameterError(f"[{key}]: {exc}") from None
+            changes[key] = dataclasses.replace(current, **value)
+        except (TypeError, ParameterError) as exc:
+            # Name the entry as it is written in the file: ``valve.saturate``.
+            text = str(exc).replace(f"{type(current).__name__}.", f"{key}.")
+            text = text.replace(f"{type(current).__name__}:", f"[{key}]")
+            raise ParameterError(text) from None
     return dataclasses.replace(base, **changes)
 
 
+#: Largest parameter file read (bytes); a full parameter set is about 2 kB.
+MAX_PARAMS_FILE_BYTES = 1 << 20
+
+
 def save_params(params: RigParams, path: str | Path) -> Path:
-    """Write a parameter set as TOML (written to a temporary file, then renamed)."""
+    """Write a parameter set as TOML, atomically (whole or not at all).
+
+    Raises
+    ------
+    DataError
+        If the folder does not exist, ``path`` is a folder, or an existing file there is
+        read-only or not a regular file.
+    """
     import tomli_w
 
+    from ehss._files import atomic_path
+    from ehss.errors import DataError
+
     path = Path(path)
+    if path.is_symlink():
+        raise DataError(f"cannot write {str(path)!r}: it is a symbolic link; write to another "
+                        "name (or to the file it points to)")
+    if path.exists():
+        if path.is_dir():
+            raise DataError(f"cannot write {str(path)!r}: it is a folder")
+        if not path.is_file():
+            raise DataError(f"cannot write {str(path)!r}: it is not a regular file")
+        if not path.stat().st_mode & 0o222:
+            raise DataError(f"cannot write {str(path)!r}: the file is read-only")
     text = tomli_w.dumps(params_to_dict(params))
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    try:
+        with atomic_path(path) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise DataError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
     return path
 
 
 def load_params(path: str | Path) -> RigParams:
-    """Read a (possibly partial) parameter set from TOML.
+    """Read a (possibly partial) parameter set from a UTF-8 TOML file.
 
     Raises
     ------
     ParameterError
-        If the file cannot be read or parsed, or holds unknown or invalid parameters.
+        If the file cannot be read, is not UTF-8 TOML, or holds unknown or invalid
+        parameters; the message starts with the file name.
     """
     path = Path(path)
+    where = f"parameter file {str(path)!r}"
     try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
+        if path.is_dir():
+            raise ParameterError(f"{where} is a folder")
+        if path.exists() and not path.is_file():
+            raise ParameterError(f"{where} is not a regular file (a pipe or a device?)")
+        size = path.stat().st_size
+        if size > MAX_PARAMS_FILE_BYTES:
+            raise ParameterError(f"{where} is {size} bytes; a parameter file is a few kB "
+                                 f"(at most {MAX_PARAMS_FILE_BYTES} bytes)")
+        raw = path.read_bytes()
     except FileNotFoundError:
-        raise ParameterError(f"parameter file {str(path)!r} does not exist") from None
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ParameterError(f"cannot read parameter file {str(path)!r}: {exc}") from None
+        raise ParameterError(f"{where} does not exist") from None
+    except OSError as exc:
+        raise ParameterError(f"cannot read {where}: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ParameterError(f"{where} is not UTF-8 text (byte {exc.start}: "
+                             f"{raw[exc.start:exc.start + 1]!r}); save it as UTF-8") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"{where} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ParameterError(f"{where} is nested too deeply to be a parameter file") from None
     try:
         return params_from_dict(data)
     except ParameterError as exc:

@@ -6,27 +6,43 @@ against the measured time response. Every function builds a
 :class:`matplotlib.figure.Figure` without pyplot (safe under any backend and in threads),
 returns it, accepts existing axes to draw into, and saves a PNG (dpi 120) atomically when
 ``path`` is given.
+
+Drawing time goes to layout and tick text, and to long lines. So the figures made here
+have fixed layouts (no layout engine, one draw per save), and every time series is drawn
+through :func:`plot_series`, which keeps per pixel column only the samples that set what
+the column shows (:func:`decimate_for_pixels`).
 """
 
 from __future__ import annotations
 
+import io
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from ehss._files import atomic_path
 from ehss.errors import DataError, ParameterError
 from ehss.frequency import FrequencyResponse
+
+if TYPE_CHECKING:
+    from ehss.simulation import SimulationResult
 
 __all__ = [
     "bode_compare",
     "time_compare",
     "theta_convergence",
     "residual_plot",
+    "plot_simulation",
+    "decimate_for_pixels",
+    "plot_series",
+    "fixed_layout",
+    "png_bytes",
     "save_figure",
     "DPI",
 ]
@@ -37,12 +53,135 @@ DPI = 120
 _MODEL_COLOURS = ("tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown", "tab:pink")
 
 
+# --------------------------------------------------------------------------- drawing fast
+def decimate_for_pixels(
+    x: np.ndarray, y: np.ndarray, n_columns: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The samples of a line that set what each of ``n_columns`` pixel columns shows.
+
+    The x range of the data is cut into ``n_columns`` equal columns; in each, the first,
+    lowest, highest and last samples are kept, in their order. The kept line has the
+    same lowest and highest value in every column as the full line, and joins its
+    neighbours through the same first and last samples, so that drawn at that width it
+    covers the same pixels.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Non-decreasing abscissa (time).
+    y : array_like, shape (n,)
+        Ordinate. A line with non-finite values is returned whole (its gaps matter).
+    n_columns : int
+        Pixel columns the x range covers.
+
+    Returns
+    -------
+    x, y : ndarray
+        The kept samples (the input itself when there is nothing to gain).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if x.shape != y.shape or x.ndim != 1:
+        raise DataError(f"x has shape {x.shape}, y has {y.shape}; both must be 1-D alike")
+    n_columns = int(n_columns)
+    if n_columns < 1:
+        raise ParameterError(f"n_columns={n_columns} must be at least 1")
+    if x.size <= 4 * n_columns or not np.all(np.isfinite(y)):
+        return x, y
+    if not np.all(np.diff(x) >= 0):
+        raise DataError("x must be finite and non-decreasing to be decimated")
+    span = x[-1] - x[0]
+    if not span > 0:
+        return x, y
+    col = np.minimum(((x - x[0]) * (n_columns / span)).astype(np.intp), n_columns - 1)
+    first = np.flatnonzero(np.diff(col, prepend=-1))
+    last = np.append(first[1:] - 1, x.size - 1)
+    # Within each column (col is sorted), order by y: the column's first entry is its
+    # lowest sample and its last entry its highest.
+    by_y = np.lexsort((y, col))
+    keep = np.unique(np.concatenate([first, last, by_y[first], by_y[last]]))
+    return x[keep], y[keep]
+
+
+def _pixel_columns(ax: Axes, dpi: float) -> int:
+    """Pixel columns of ``ax`` at ``dpi``: the axes' own width when the figure's layout is
+    fixed, the whole figure's when a layout engine may still widen the axes."""
+    fig = _root_figure(ax)
+    dpi = max(float(dpi), float(fig.dpi))
+    width_in = fig.get_figwidth()
+    if fig.get_layout_engine() is None:
+        width_in *= ax.get_position().width
+    return max(1, math.ceil(width_in * dpi))
+
+
+def _root_figure(ax: Axes) -> Figure:
+    fig = ax.figure
+    while not isinstance(fig, Figure):  # a SubFigure: its root
+        fig = fig.figure
+    return fig
+
+
+def plot_series(
+    ax: Axes, x: Any, y: Any, fmt: str | None = None, *, dpi: float = DPI, **kwargs: Any
+) -> list[Line2D]:
+    """``ax.plot(x, y, fmt, **kwargs)`` with the line decimated to the pixels it covers
+    (:func:`decimate_for_pixels`) when saved at up to ``dpi``."""
+    xd, yd = decimate_for_pixels(np.asarray(x), np.asarray(y), _pixel_columns(ax, dpi))
+    args = (xd, yd) if fmt is None else (xd, yd, fmt)
+    return ax.plot(*args, **kwargs)
+
+
+def fixed_layout(
+    fig: Figure, *, left: float, right: float, bottom: float, top: float,
+    wspace: float = 0.0, hspace: float = 0.0,
+) -> None:
+    """Place the subplots by margins in inches (no layout engine: one draw per save).
+
+    ``left``, ``right``, ``bottom`` and ``top`` are the margins from the figure's edges;
+    ``wspace`` and ``hspace`` the gaps between subplots, all in inches.
+    """
+    w, h = fig.get_size_inches()
+    fig.set_layout_engine(None)
+    n_rows, n_cols = 1, 1
+    for ax in fig.axes:
+        spec = ax.get_subplotspec()
+        if spec is not None:
+            n_rows, n_cols = spec.get_gridspec().get_geometry()
+            break
+    inner_w = w - left - right - (n_cols - 1) * wspace
+    inner_h = h - top - bottom - (n_rows - 1) * hspace
+    fig.subplots_adjust(
+        left=left / w, right=1.0 - right / w, bottom=bottom / h, top=1.0 - top / h,
+        wspace=wspace / (inner_w / n_cols), hspace=hspace / (inner_h / n_rows),
+    )
+
+
+def png_bytes(fig: Figure, *, dpi: int = DPI) -> bytes:
+    """The figure as PNG bytes, drawn once.
+
+    A figure that still has a layout engine (constrained layout) has it run once and
+    then fixed, so that saving does not lay it out and draw it twice.
+    """
+    buf = io.BytesIO()
+    _save_once(fig, buf, dpi=dpi, fmt="png")
+    return buf.getvalue()
+
+
+def _save_once(fig: Figure, target: Any, *, dpi: int, fmt: str) -> None:
+    engine = fig.get_layout_engine()
+    if engine is not None:
+        fig.set_dpi(dpi)  # lay out for the pixels it is saved at
+        engine.execute(fig)
+        fig.set_layout_engine(None)
+    fig.savefig(target, dpi=dpi, format=fmt)
+
+
 def save_figure(fig: Figure, path: str | Path, *, dpi: int = DPI) -> Path:
-    """Save ``fig`` to ``path`` atomically (format from the suffix, default PNG)."""
+    """Save ``fig`` to ``path`` atomically (format from the suffix, default PNG), drawn once."""
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format=fmt, bbox_inches="tight")
+        _save_once(fig, tmp, dpi=dpi, fmt=fmt)
     return path
 
 
@@ -93,17 +232,20 @@ def bode_compare(
     Figure
     """
     models = _as_models(models)
+    fig: Figure
     if axes is None:
-        fig = Figure(figsize=(8.0, 7.5), layout="constrained")
+        fig = Figure(figsize=(8.0, 7.5))
         ax_m, ax_p, ax_c = fig.subplots(
             3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 3, 1.3]}
         )
+        fixed_layout(fig, left=0.85, right=0.2, bottom=0.55, top=0.55 if title else 0.2,
+                     hspace=0.15)
     else:
         if len(axes) != 3:
             raise ParameterError(f"axes must be 3 Axes (magnitude, phase, coherence), "
                                  f"got {len(axes)}")
         ax_m, ax_p, ax_c = axes
-        fig = ax_m.figure
+        fig = _root_figure(ax_m)
     keep = frf.freq_hz > 0
     f = frf.freq_hz[keep]
     if f.size == 0:
@@ -115,7 +257,8 @@ def bode_compare(
     # Estimate: faint everywhere, solid where it is reliable.
     ax_m.semilogx(f, mag, color="0.75", lw=0.8)
     ax_p.semilogx(f, phase, color="0.75", lw=0.8)
-    label = f"H1 estimate (Hann, {frf.n_averages} averages)"
+    label = (f"H1 estimate (Hann, {frf.n_averages} averages)" if frf.method == "welch" else
+             f"H1 from the record's DFT ({frf.n_averages} bins averaged)")
     ax_m.semilogx(f, np.where(good, mag, np.nan), color="k", lw=1.2, label=label)
     ax_p.semilogx(f, np.where(good, phase, np.nan), color="k", lw=1.2)
     ref_idx = int(np.flatnonzero(good)[0]) if good.any() else 0
@@ -159,8 +302,8 @@ def bode_compare(
 
 
 def time_compare(
-    t,
-    measured,
+    t: Any,
+    measured: Any,
     simulated: Mapping[str, Any] | Any,
     *,
     window_s: tuple[float, float] | float | None = None,
@@ -205,24 +348,26 @@ def time_compare(
     if window_s is None:
         sel = slice(None)
     else:
-        if np.isscalar(window_s):
-            lo, hi = t[-1] - float(window_s), t[-1]
-        else:
+        if isinstance(window_s, tuple | list):
             lo, hi = (float(v) for v in window_s)
+        else:
+            lo, hi = t[-1] - float(window_s), t[-1]
         sel = (t >= lo) & (t <= hi)
         if not np.any(sel):
             raise ParameterError(f"window {window_s} s holds no samples "
                                  f"(record {t[0]:g}..{t[-1]:g} s)")
+    fig: Figure
     if ax is None:
-        fig = Figure(figsize=(8.0, 3.8), layout="constrained")
+        fig = Figure(figsize=(8.0, 3.8))
         ax = fig.subplots()
+        fixed_layout(fig, left=0.9, right=0.2, bottom=0.55, top=0.35)
     else:
-        fig = ax.figure
-    ax.plot(t[sel], measured[sel], color="k", lw=1.2, label="measured")
+        fig = _root_figure(ax)
+    plot_series(ax, t[sel], measured[sel], color="k", lw=1.2, label="measured")
     for i, (name, v) in enumerate(simulated.items()):
         v = np.asarray(v, dtype=np.float64)
-        ax.plot(t[sel], v[sel], color=_MODEL_COLOURS[i % len(_MODEL_COLOURS)], lw=1.0,
-                ls="--", label=name)
+        plot_series(ax, t[sel], v[sel], color=_MODEL_COLOURS[i % len(_MODEL_COLOURS)],
+                    lw=1.0, ls="--", label=name)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
     ax.grid(True, lw=0.3, alpha=0.6)
@@ -235,10 +380,10 @@ def time_compare(
 
 
 def theta_convergence(
-    history,
+    history: Any,
     names: Sequence[str] | None = None,
     *,
-    t=None,
+    t: Any = None,
     ax: Axes | None = None,
     path: str | Path | None = None,
     title: str | None = None,
@@ -267,13 +412,15 @@ def theta_convergence(
     x = np.arange(n) if t is None else np.asarray(t, dtype=np.float64)
     if x.shape != (n,):
         raise DataError(f"t has shape {x.shape}, history has {n} samples")
+    fig: Figure
     if ax is None:
-        fig = Figure(figsize=(8.0, 4.2), layout="constrained")
+        fig = Figure(figsize=(8.0, 4.2))
         ax = fig.subplots()
+        fixed_layout(fig, left=0.8, right=0.2, bottom=0.55, top=0.35)
     else:
-        fig = ax.figure
+        fig = _root_figure(ax)
     for j in range(p):
-        ax.plot(x, history[:, j], lw=1.0, label=names[j])
+        plot_series(ax, x, history[:, j], lw=1.0, label=names[j])
     ax.set_xlabel("sample" if t is None else "time (s)")
     ax.set_ylabel("estimate")
     ax.grid(True, lw=0.3, alpha=0.6)
@@ -300,14 +447,17 @@ def residual_plot(
     axes : sequence of 2 Axes, optional
         Axes to draw into.
     """
+    fig: Figure
     if axes is None:
-        fig = Figure(figsize=(8.0, 5.5), layout="constrained")
+        fig = Figure(figsize=(8.0, 5.5))
         ax_e, ax_x = fig.subplots(2, 1)
+        fixed_layout(fig, left=0.7, right=0.2, bottom=0.55, top=0.65 if title else 0.35,
+                     hspace=0.85)
     else:
         if len(axes) != 2:
             raise ParameterError(f"axes must be 2 Axes, got {len(axes)}")
         ax_e, ax_x = axes
-        fig = ax_e.figure
+        fig = _root_figure(ax_e)
     lags = tests.lags[1:]
     ax_e.stem(lags, tests.autocorrelation[1:], basefmt=" ")
     b = tests.autocorrelation_bound
@@ -329,4 +479,50 @@ def residual_plot(
         fig.suptitle(title)
     if path is not None:
         save_figure(fig, path)
+    return fig
+
+
+_SCALE = {"m": (1e3, "mm")}  # others are drawn in their own unit
+
+
+def plot_simulation(
+    result: SimulationResult, path: str | Path | None = None, *, title: str | None = None
+) -> Figure:
+    """Draw reference vs output, the drive and the chamber pressures of one simulated test.
+
+    Parameters
+    ----------
+    result : SimulationResult
+    path : str or Path, optional
+        If given, the figure is saved there (atomically, format from the suffix, dpi 110).
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+    """
+    fig = Figure(figsize=(9, 7))
+    ax_ref, ax_drive, ax_p = fig.subplots(3, 1, sharex=True)
+    fixed_layout(fig, left=0.85, right=0.2, bottom=0.55, top=0.45, hspace=0.15)
+    scale, unit = _SCALE.get(result.units["output"], (1.0, result.units["output"]))
+    t = result.t
+    plot_series(ax_ref, t, result.reference * scale, label="reference", lw=1.0)
+    plot_series(ax_ref, t, result.output * scale, label="measured output", lw=1.0)
+    ax_ref.set_ylabel(f"{result.loop} ({unit})")
+    ax_ref.legend(loc="best")
+    plot_series(ax_drive, t, result.signals["drive_v"], lw=0.8, color="C2")
+    ax_drive.set_ylabel(f"drive ({result.units['drive_v']})")
+    plot_series(ax_p, t, result.signals["p1_pa"] / 1e6, label="P1", lw=0.8)
+    plot_series(ax_p, t, result.signals["p2_pa"] / 1e6, label="P2", lw=0.8)
+    ax_p.set_ylabel("pressure (MPa)")
+    ax_p.set_xlabel("time (s)")
+    ax_p.legend(loc="best")
+    for ax in (ax_ref, ax_drive, ax_p):
+        ax.grid(True, alpha=0.3)
+    hits = result.limits_hit
+    note = ", ".join(f"{k} {v:.1%}" for k, v in hits.items())
+    fig.suptitle(title or f"ehss simulate: {result.loop} loop, fs = {result.fs:g} Hz"
+                 + (f" (limits: {note})" if note else ""))
+    if path is not None:
+        save_figure(fig, path, dpi=110)
     return fig

@@ -7,11 +7,16 @@ comparisons:
 - :func:`frf_error`: magnitude (dB) and phase (deg) error of the model against an H1
   estimate (:mod:`ehss.frequency`) over a band, where the coherence is high enough;
 - :func:`nrmse_fit`, :func:`simulation_fit`, :func:`prediction_fit`: the "fit" percentage
-  of MATLAB's System Identification Toolbox, for simulation and k-step prediction;
+  of MATLAB's System Identification Toolbox (``compare``), for the free-run simulation
+  (from a zero or a least-squares initial state, :func:`free_run`) and k-step prediction;
+  :func:`band_fit` scores the simulation over the band of interest only;
 - :func:`residual_tests`: whiteness of the one-step residuals (per-lag bounds and the
   Ljung–Box portmanteau test) and their independence from the input;
-- :func:`validate`: all of the above on held-out data, bundled in a
+- :func:`validate`: all of the above on held-out data or a separate record, bundled in a
   :class:`ValidationReport`.
+
+A fit below :data:`DIVERGED_FIT_PCT` (−100 %: the simulation is more than twice as far
+from the data as the data's mean) is reported as a diverging simulation, not as a number.
 
 The model is any object with the :class:`~ehss.identification.model.ArmaxModel` methods
 ``frequency_response(freq_hz)``, ``simulate(u)``, ``predict(u, y, horizon)``,
@@ -29,9 +34,9 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from ehss._checks import as_record
+from ehss._checks import as_record, as_signal
 from ehss.errors import DataError, ParameterError
-from ehss.frequency import FrequencyResponse, _check_band, h1_estimate
+from ehss.frequency import FrequencyResponse, check_band, frf_estimate
 
 __all__ = [
     "FrfError",
@@ -39,12 +44,25 @@ __all__ = [
     "ValidationReport",
     "frf_error",
     "nrmse_fit",
+    "free_run",
     "simulation_fit",
+    "band_fit",
+    "fit_text",
+    "DIVERGED_FIT_PCT",
+    "INITIAL_STATES",
     "prediction_fit",
     "residual_tests",
     "ljung_box",
     "validate",
 ]
+
+
+#: Fits below this (percent) are reported as a diverging simulation.
+DIVERGED_FIT_PCT = -100.0
+
+#: How :func:`free_run` starts the simulation: from rest, or from the initial state that
+#: fits the data best (MATLAB ``compare``'s ``InitialCondition`` ``'z'`` and ``'e'``).
+INITIAL_STATES = ("zero", "estimate")
 
 
 class _Model(Protocol):  # the part of ArmaxModel used here
@@ -54,11 +72,15 @@ class _Model(Protocol):  # the part of ArmaxModel used here
     def is_stable(self) -> bool: ...
     def poles(self) -> np.ndarray: ...
 
+    a: np.ndarray
+    b: np.ndarray
+    delay: int
+
 
 # ------------------------------------------------------------------------------ FRF error
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class FrfError:
     """Error of a model's frequency response against an H1 estimate.
 
@@ -79,6 +101,11 @@ class FrfError:
         RMS magnitude error weighted by the coherence.
     max_phase_deg, rms_phase_deg : float
         Largest and RMS absolute phase error in degrees, each wrapped to ±180°.
+    freq_hz, magnitude_error_db, phase_error_deg : ndarray, shape (n_points,)
+        The compared frequencies and the signed errors there.
+    sigma_magnitude_db, sigma_phase_deg : ndarray, shape (n_points,)
+        Standard error of the estimate itself at each point, from its coherence and
+        number of averages (see :func:`frf_error`): how well it can confirm a model.
     """
 
     band_hz: tuple[float, float]
@@ -90,6 +117,21 @@ class FrfError:
     weighted_rms_magnitude_db: float
     max_phase_deg: float
     rms_phase_deg: float
+    freq_hz: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    magnitude_error_db: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    phase_error_deg: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    sigma_magnitude_db: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    sigma_phase_deg: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    def beyond_uncertainty(self, n_sigma: float) -> tuple[float, float]:
+        """Largest magnitude (dB) and phase (deg) errors left after subtracting
+        ``n_sigma`` standard errors of the estimate at each point (0 where the error is
+        within them; NaN when nothing was compared)."""
+        if self.n_points == 0:
+            return math.nan, math.nan
+        mag = np.abs(self.magnitude_error_db) - n_sigma * self.sigma_magnitude_db
+        ph = np.abs(self.phase_error_deg) - n_sigma * self.sigma_phase_deg
+        return float(max(0.0, np.max(mag))), float(max(0.0, np.max(ph)))
 
     def summary(self) -> dict[str, Any]:
         """Plain floats/ints for JSON."""
@@ -124,7 +166,8 @@ def frf_error(
     band_hz : (float, float)
         Frequencies ``lo <= f <= hi`` (Hz) to compare.
     min_coherence : float, default 0.9
-        Points whose coherence is below this are unreliable and left out.
+        Points whose coherence is below this are unreliable and left out, and so are
+        points the input did not excite (:meth:`FrequencyResponse.valid`).
 
     Returns
     -------
@@ -139,12 +182,17 @@ def frf_error(
               e_{\\varphi} = \\arg(G\\,\\overline{H}) \\in (-180°, 180°],
 
     so the phase error needs no unwrapping. The weighted RMS uses :math:`\\gamma^2` as the
-    weight of each point.
+    weight of each point. Each point also carries the estimate's own standard error,
+    :math:`\\varepsilon = \\sqrt{1-\\gamma^2} / (|\\gamma|\\sqrt{2 n_d})` relative for
+    :math:`|H|` and in radians for its phase, with :math:`n_d` the averages (Bendat &
+    Piersol, *Random Data*, eqs 9.90 and 9.92): at :math:`\\gamma^2 = 0.9` and 8
+    averages it is already 0.7 dB and 4.8°.
     """
-    lo, hi = _check_band(band_hz)
+    lo, hi = check_band(band_hz)
     if not 0.0 <= float(min_coherence) <= 1.0:
         raise ParameterError(f"{min_coherence=} must be in [0, 1]")
-    mask = (frf.freq_hz >= lo) & (frf.freq_hz <= hi) & (frf.coherence >= min_coherence)
+    # in the band, excited by the input and coherent (FrequencyResponse.valid)
+    mask = frf.valid((lo, hi), float(min_coherence))
     mask &= np.abs(frf.response) > 0
     n = int(mask.sum())
     if n == 0:
@@ -164,6 +212,12 @@ def frf_error(
         e_db = 20.0 * np.log10(np.abs(g)) - 20.0 * np.log10(np.abs(h))
     # e_phi = arg(G conj(H)), wrapped to (-180, 180] by construction
     e_ph = np.degrees(np.angle(g * np.conj(h)))
+    # standard error of the estimate: eps = sqrt(1 - g2) / (|g| sqrt(2 n_d)) for |H| and,
+    # in radians, for its phase (Bendat & Piersol, eqs 9.90 and 9.92)
+    n_d = max(int(frf.n_averages), 1)
+    eps = np.sqrt(np.maximum(1.0 - w, 0.0) / (np.maximum(w, 1e-12) * 2.0 * n_d))
+    sig_db = 20.0 / math.log(10.0) * eps
+    sig_deg = np.degrees(eps)
     return FrfError(
         band_hz=(lo, hi),
         min_coherence=float(min_coherence),
@@ -174,6 +228,11 @@ def frf_error(
         weighted_rms_magnitude_db=float(np.sqrt(np.sum(w * e_db**2) / np.sum(w))),
         max_phase_deg=float(np.max(np.abs(e_ph))),
         rms_phase_deg=float(np.sqrt(np.mean(e_ph**2))),
+        freq_hz=f,
+        magnitude_error_db=e_db,
+        phase_error_deg=e_ph,
+        sigma_magnitude_db=sig_db,
+        sigma_phase_deg=sig_deg,
     )
 
 
@@ -211,18 +270,99 @@ def nrmse_fit(y, yhat) -> float:
     return float(100.0 * (1.0 - num / den)) if math.isfinite(num) else -math.inf
 
 
-def simulation_fit(model: _Model, u, y, *, start: int = 0) -> float:
+def free_run(model: _Model, u, y=None, *, initial: str = "zero") -> np.ndarray:
+    """Free-run simulation ``B/A u`` of the model, from rest or from a fitted initial state.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+    u : array_like, shape (n_samples,)
+    y : array_like, shape (n_samples,), optional
+        Measured output; needed for ``initial="estimate"``.
+    initial : {"zero", "estimate"}, default "zero"
+        ``"estimate"``: add the free response of the model that best fits ``y`` in least
+        squares (as MATLAB ``compare`` does by default). An unstable model is simulated
+        from rest: a growing free response fitted to data would hide its divergence.
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+
+    Notes
+    -----
+    With :math:`m = \\max(n_a, n_b + d)` past values, every free response of the model
+    is a combination of the responses :math:`h(k - j)` of :math:`1/A` to unit impulses at
+    :math:`j = 0 .. m-1`; the weights solve
+    :math:`\\min_x \\lVert y - y_0 - \\Phi x\\rVert` with :math:`y_0` the response
+    from rest. The free response of a stable model dies out, so in effect the first
+    samples decide it.
+    """
+    if initial not in INITIAL_STATES:
+        raise ParameterError(f"initial={initial!r} must be one of {INITIAL_STATES}")
+    u = as_signal(u, "u")
+    with np.errstate(over="ignore", invalid="ignore"):
+        y0 = np.asarray(model.simulate(u), dtype=np.float64)
+    if initial == "zero":
+        return y0
+    if y is None:
+        raise ParameterError("initial='estimate' needs the measured output y")
+    _, y = as_record(u, y)
+    if not model.is_stable() or not np.all(np.isfinite(y0)):
+        return y0
+    n = u.size
+    a = np.asarray(model.a, dtype=np.float64)
+    m = min(n, max(a.size - 1, np.asarray(model.b).size - 1 + int(model.delay), 1))
+    impulse = np.zeros(n)
+    impulse[0] = 1.0
+    h = scipy.signal.lfilter([1.0], a, impulse)
+    phi = np.zeros((n, m))
+    for j in range(m):  # Φ[:, j] = h(k − j)
+        phi[j:, j] = h[: n - j]
+    x, *_ = np.linalg.lstsq(phi, y - y0, rcond=None)
+    return y0 + phi @ x
+
+
+def simulation_fit(model: _Model, u, y, *, start: int = 0, initial: str = "zero") -> float:
     """Fit (percent, :func:`nrmse_fit`) of the noise-free simulation ``B/A u`` to ``y``.
 
-    The model is simulated over the whole record from rest and scored from sample
-    ``start`` on, so a held-out part starts from the state the earlier part left.
-    An unstable model's simulation diverges and scores ``-inf``.
+    The model is simulated over the whole record (:func:`free_run`, from rest or from the
+    least-squares initial state) and scored from sample ``start`` on, so a held-out part
+    starts from the state the earlier part left. An unstable model's simulation diverges
+    and scores ``-inf`` or far below :data:`DIVERGED_FIT_PCT`.
     """
     u, y = as_record(u, y)
     start = _check_start(start, y.size)
-    with np.errstate(over="ignore", invalid="ignore"):
-        yhat = np.asarray(model.simulate(u), dtype=np.float64)
+    yhat = free_run(model, u, y, initial=initial)
     return nrmse_fit(y[start:], yhat[start:])
+
+
+def band_fit(y, yhat, *, fs: float, band_hz: tuple[float, float]) -> float:
+    """Fit (percent) of ``yhat`` to ``y`` with both low-passed to the band of interest.
+
+    Both go through the same zero-phase 4th-order Butterworth low-pass at
+    ``min(1.5 hi, 0.45 fs)``: output noise above the band (sensor noise, which the model
+    is not meant to reproduce) no longer counts against the model. Returns the plain
+    :func:`nrmse_fit` when the band reaches that close to Nyquist already.
+    """
+    y = as_signal(y, "y")
+    lo, hi = check_band(band_hz)
+    cut = min(1.5 * hi, 0.45 * float(fs))
+    yhat = np.asarray(yhat, dtype=np.float64)
+    if cut >= 0.45 * float(fs) or not np.all(np.isfinite(yhat)) or y.size < 30:
+        return nrmse_fit(y, yhat)
+    sos = scipy.signal.butter(4, cut, fs=float(fs), output="sos")
+    with np.errstate(over="ignore", invalid="ignore"):
+        yf = scipy.signal.sosfiltfilt(sos, yhat)
+    return nrmse_fit(scipy.signal.sosfiltfilt(sos, y), yf)
+
+
+def fit_text(v: float | None) -> str:
+    """A fit for people: ``"93.21 %"``, or ``"diverges"`` below :data:`DIVERGED_FIT_PCT`."""
+    if v is None:
+        return "-"
+    if not math.isfinite(v) or v < DIVERGED_FIT_PCT:
+        return f"diverges (fit below {DIVERGED_FIT_PCT:g} %)"
+    return f"{v:.2f} %"
 
 
 def prediction_fit(model: _Model, u, y, horizon: int = 1, *, start: int = 0) -> float:
@@ -434,25 +574,34 @@ class ValidationReport:
     Attributes
     ----------
     n_estimation, n_validation : int
-        Samples before / in the held-out part.
+        Samples before / in the held-out part (``n_estimation`` is 0 for a separate
+        validation record).
     fs : float
         Sample rate, Hz.
     stable : bool
         All poles strictly inside the unit circle.
     max_pole_radius : float
         Largest pole modulus.
+    initial_state : {"zero", "estimate", "warm"}
+        How the simulation started: from rest, from the least-squares initial state
+        (:func:`free_run`), or from rest at the start of the whole record with the
+        held-out part scored (``"warm"``).
     simulation_fit_pct : float
-        :func:`simulation_fit` on the held-out part (``-inf`` if the simulation diverges).
+        :func:`nrmse_fit` of the simulation on the validation part (``-inf`` if it
+        diverges to overflow).
+    band_fit_pct : float or None
+        The same after the zero-phase low-pass of :func:`band_fit` at 1.5 times the band's
+        upper edge (None without a band, or when that is above 0.45 fs).
     prediction_fit_pct : dict of int to float
-        :func:`prediction_fit` on the held-out part, by horizon.
+        :func:`prediction_fit` on the validation part, by horizon.
     frf : FrequencyResponse
-        H1 estimate from the held-out part.
+        Non-parametric estimate from the validation part (:func:`ehss.frequency.frf_estimate`).
     frf_error : FrfError or None
         Model against ``frf`` (None when no band was given).
     residuals : ResidualTests
-        Tests of the one-step residuals on the held-out part.
+        Tests of the one-step residuals on the validation part.
     simulated : ndarray, shape (n_samples,)
-        The model's simulated output over the whole record (for plots).
+        The model's simulated output over the record given (for plots).
     """
 
     n_estimation: int
@@ -460,26 +609,50 @@ class ValidationReport:
     fs: float
     stable: bool
     max_pole_radius: float
+    initial_state: str = "zero"
     simulation_fit_pct: float
+    band_fit_pct: float | None = None
     prediction_fit_pct: dict[int, float]
     frf: FrequencyResponse = field(repr=False)
     frf_error: FrfError | None
     residuals: ResidualTests = field(repr=False)
     simulated: np.ndarray = field(repr=False)
 
+    @property
+    def diverged(self) -> bool:
+        """The free-run simulation diverges (fit below :data:`DIVERGED_FIT_PCT`)."""
+        v = self.simulation_fit_pct
+        return not math.isfinite(v) or v < DIVERGED_FIT_PCT
+
+    @property
+    def fit_pct(self) -> float:
+        """The fit that judges the model: :attr:`band_fit_pct` if there is one, else
+        :attr:`simulation_fit_pct`."""
+        return self.simulation_fit_pct if self.band_fit_pct is None else self.band_fit_pct
+
     def summary(self) -> dict[str, Any]:
-        """Plain floats, ints and bools for JSON (non-finite fits become None on write)."""
+        """Plain floats, ints and bools for JSON; a diverging fit is None with
+        ``"diverged": true``."""
+
+        def fit(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) or v < DIVERGED_FIT_PCT \
+                else float(v)
+
         return {
             "n_estimation": int(self.n_estimation),
             "n_validation": int(self.n_validation),
             "fs_hz": float(self.fs),
             "stable": bool(self.stable),
             "max_pole_radius": float(self.max_pole_radius),
-            "simulation_fit_pct": float(self.simulation_fit_pct),
-            "prediction_fit_pct": {str(k): float(v) for k, v in
+            "initial_state": self.initial_state,
+            "diverged": self.diverged,
+            "simulation_fit_pct": fit(self.simulation_fit_pct),
+            "band_fit_pct": fit(self.band_fit_pct),
+            "prediction_fit_pct": {str(k): fit(v) for k, v in
                                    self.prediction_fit_pct.items()},
             "frf_error": None if self.frf_error is None else self.frf_error.summary(),
-            "frf": {"nperseg": int(self.frf.nperseg), "n_averages": int(self.frf.n_averages),
+            "frf": {"method": self.frf.method, "nperseg": int(self.frf.nperseg),
+                    "n_averages": int(self.frf.n_averages),
                     "resolution_hz": float(self.frf.resolution_hz)},
             "residuals": self.residuals.summary(),
         }
@@ -487,30 +660,41 @@ class ValidationReport:
     def format(self) -> str:
         """A few lines for the terminal."""
         r = self.residuals
+        start = {"zero": "from rest", "estimate": "from the least-squares initial state",
+                 "warm": "from rest at the record's start"}[self.initial_state]
+        where = (f"{self.n_validation} held-out samples ({self.n_validation / self.fs:.3g} s; "
+                 f"estimation used {self.n_estimation})" if self.n_estimation else
+                 f"a separate record of {self.n_validation} samples "
+                 f"({self.n_validation / self.fs:.3g} s)")
         lines = [
-            f"validation on {self.n_validation} held-out samples "
-            f"({self.n_validation / self.fs:.3g} s; estimation used {self.n_estimation})",
+            f"validation on {where}",
             f"  stable: {'yes' if self.stable else 'NO'} "
             f"(max pole radius {self.max_pole_radius:.6f})",
-            f"  simulation fit: {_pct(self.simulation_fit_pct)}",
+            f"  simulation fit ({start}): {fit_text(self.simulation_fit_pct)}",
         ]
+        if self.band_fit_pct is not None and self.frf_error is not None:
+            lo, hi = self.frf_error.band_hz
+            lines.append(f"  simulation fit in the band (both low-passed at {1.5 * hi:g} Hz): "
+                         f"{fit_text(self.band_fit_pct)}")
         for k, v in self.prediction_fit_pct.items():
-            lines.append(f"  {k}-step prediction fit: {_pct(v)}")
+            lines.append(f"  {k}-step prediction fit: {fit_text(v)}")
         e = self.frf_error
+        how = (f"{self.frf.method} estimate, resolution {self.frf.resolution_hz:.3g} Hz, "
+               f"{self.frf.n_averages} averages")
         if e is not None:
             lo, hi = e.band_hz
             if e.n_points:
                 f0, f1 = e.compared_hz
                 lines.append(
                     f"  frequency response {lo:g}-{hi:g} Hz ({e.n_points} points with "
-                    f"coherence >= {e.min_coherence:g}, {f0:.4g}-{f1:.4g} Hz): magnitude "
-                    "error max "
+                    f"coherence >= {e.min_coherence:g}, {f0:.4g}-{f1:.4g} Hz; {how}): "
+                    "magnitude error max "
                     f"{e.max_magnitude_db:.3f} dB, rms {e.rms_magnitude_db:.3f} dB; "
                     f"phase error max {e.max_phase_deg:.2f} deg, rms {e.rms_phase_deg:.2f} deg"
                 )
             else:
                 lines.append(f"  frequency response {lo:g}-{hi:g} Hz: no point with "
-                             f"coherence >= {e.min_coherence:g}")
+                             f"coherence >= {e.min_coherence:g} ({how})")
         lines.append(
             f"  residuals white: {'yes' if r.white else 'no'} (Ljung-Box Q={r.ljung_box_q:.4g}, "
             f"p={r.ljung_box_p:.3g}); independent of input: "
@@ -532,19 +716,22 @@ def validate(
     max_lag: int = 25,
     alpha: float = 0.01,
     nperseg: int | None = None,
+    initial: str | None = None,
+    frf_method: str = "auto",
 ) -> ValidationReport:
-    """Validate ``model`` on the held-out end of a record.
+    """Validate ``model`` on the held-out end of a record, or on a separate record.
 
     Parameters
     ----------
     model : ArmaxModel
         The identified model (estimated on the first ``1 - holdout`` of the record).
     u, y : array_like, shape (n_samples,)
-        The whole record: input and measured output.
+        The whole record (or the separate validation record): input and measured output,
+        about the same operating point as the estimation data.
     fs : float
         Sample rate, Hz.
     band_hz : (float, float), optional
-        Band for :func:`frf_error`; None skips the frequency-response error.
+        Band for :func:`frf_error` and :func:`band_fit`; None skips both.
     holdout : float or None, default 0.3
         Fraction of the record at its end used for validation. None (or 0) validates on
         the whole record, for data kept apart from the estimation.
@@ -555,7 +742,12 @@ def validate(
     max_lag, alpha : int, float
         Passed to :func:`residual_tests`.
     nperseg : int, optional
-        Passed to :func:`ehss.frequency.h1_estimate`.
+        Passed to :func:`ehss.frequency.frf_estimate`.
+    initial : {"zero", "estimate", "warm"}, optional
+        Start of the simulation (see :class:`ValidationReport`). Default ``"warm"`` with a
+        holdout, ``"estimate"`` for a separate record.
+    frf_method : {"auto", "welch", "dft"}, default "auto"
+        Passed to :func:`ehss.frequency.frf_estimate`.
 
     Returns
     -------
@@ -564,7 +756,7 @@ def validate(
     Raises
     ------
     DataError
-        If the held-out part is too short to validate.
+        If the validation part is too short to validate.
     """
     u, y = as_record(u, y)
     if holdout is None or holdout == 0:
@@ -574,17 +766,30 @@ def validate(
         if not 0.0 < holdout < 1.0:
             raise ParameterError(f"{holdout=} must be in (0, 1)")
         start = int(round(y.size * (1.0 - holdout)))
+    if initial is None:
+        initial = "warm" if start else "estimate"
+    if initial not in ("zero", "estimate", "warm"):
+        raise ParameterError(f"initial={initial!r} must be 'zero', 'estimate' or 'warm'")
     n_val = y.size - start
     if n_val < 64:
-        raise DataError(f"the held-out part has {n_val} samples; at least 64 are needed "
+        raise DataError(f"the validation part has {n_val} samples; at least 64 are needed "
                         "(use a longer record or a larger holdout)")
     poles = np.asarray(model.poles())
     max_radius = float(np.max(np.abs(poles))) if poles.size else 0.0
-    with np.errstate(over="ignore", invalid="ignore"):
-        simulated = np.asarray(model.simulate(u), dtype=np.float64)
+    if initial == "warm":
+        simulated = free_run(model, u, initial="zero")
+    else:
+        simulated = np.concatenate([
+            np.asarray(model.simulate(u[:start]), dtype=np.float64) if start else np.zeros(0),
+            free_run(model, u[start:], y[start:], initial=initial),
+        ])
     sim_fit = nrmse_fit(y[start:], simulated[start:])
+    bfit = None
+    if band_hz is not None and 1.5 * float(band_hz[1]) < 0.45 * float(fs):
+        bfit = band_fit(y[start:], simulated[start:], fs=fs, band_hz=band_hz)
     pred = {int(h): prediction_fit(model, u, y, int(h), start=start) for h in horizons}
-    frf = h1_estimate(u[start:], y[start:], fs, nperseg=nperseg)
+    frf = frf_estimate(u[start:], y[start:], fs, method=frf_method, nperseg=nperseg,
+                       band_hz=band_hz, min_coherence=min_coherence)
     err = None
     if band_hz is not None:
         err = frf_error(model, frf, band_hz=band_hz, min_coherence=min_coherence)
@@ -595,7 +800,9 @@ def validate(
         fs=float(fs),
         stable=bool(model.is_stable()),
         max_pole_radius=max_radius,
+        initial_state=initial,
         simulation_fit_pct=sim_fit,
+        band_fit_pct=bfit,
         prediction_fit_pct=pred,
         frf=frf,
         frf_error=err,
@@ -605,10 +812,6 @@ def validate(
 
 
 # -------------------------------------------------------------------------------- helpers
-
-
-def _pct(v: float) -> str:
-    return f"{v:.2f} %" if math.isfinite(v) else "diverges (unstable model)"
 
 
 def _autocorr(x0: np.ndarray, max_lag: int) -> np.ndarray:

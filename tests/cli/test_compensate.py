@@ -13,11 +13,13 @@ from ehss.cli import main
 from ehss.io import read_columns, write_csv
 
 DT = 1e-3
+BAND = [0.0, 100.0]
 
 
-def _write_model(path, *, a=(1.0, -1.5, 0.7), b=(0.1, 0.05), delay=2, dt=DT, **extra):
+def _write_model(path, *, a=(1.0, -1.5, 0.7), b=(0.1, 0.05), delay=2, dt=DT, band=BAND,
+                 **extra):
     path.write_text(json.dumps({"a": list(a), "b": list(b), "c": [1.0], "delay": delay,
-                                "dt": dt, **extra}))
+                                "dt": dt, "band_hz": band, **extra}))
     return path
 
 
@@ -26,11 +28,19 @@ def _write_reference(path, r, fs=1 / DT, name="reference"):
     return path
 
 
+def _plant(u, gain=1.0):
+    """The file model q^-2 (0.1 + 0.05 q^-1)/(1 - 1.5 q^-1 + 0.7 q^-2), from rest."""
+    return gain * scipy.signal.lfilter([0.0, 0.0, 0.1, 0.05], [1.0, -1.5, 0.7], u)
+
+
 @pytest.fixture
-def reference(rng):
-    r = scipy.signal.lfilter([0.05], [1, -0.95], rng.standard_normal(1000))
-    r[:20] = 0.0
-    return r
+def reference():
+    # Tones at 5-31 Hz under a Gaussian envelope: at rest at both ends (1e-30) and in the
+    # model's 0-100 Hz band to rounding, so the band limit is unity on it.
+    t = np.arange(2000) * DT
+    tones = np.sin(2 * np.pi * 5 * t) + 0.5 * np.sin(2 * np.pi * 13 * t + 1.0) + 0.3 * np.sin(
+        2 * np.pi * 31 * t + 2.0)
+    return 0.01 * tones * np.exp(-(((t - 1.0) / 0.2) ** 2))
 
 
 def test_compensate_writes_drive_that_inverts_the_model(tmp_path, reference):
@@ -41,35 +51,90 @@ def test_compensate_writes_drive_that_inverts_the_model(tmp_path, reference):
     table = read_columns(out, ["t", "reference", "drive"])
     assert list(table.columns) == ["t", "reference", "drive"]
     assert_allclose(table["reference"], reference, rtol=0, atol=0)  # repr round trip
-    y = scipy.signal.lfilter([0.0, 0.0, 0.1, 0.05], [1.0, -1.5, 0.7], table["drive"])
-    # Minimum-phase model (zero at -0.5): exact inverse up to rounding.
-    assert_allclose(y, reference, rtol=0, atol=1e-10)
+    # Stable inversion in the model's band: exact up to rounding (FFT band limit, short
+    # recursions; measured ~1e-17 on a peak of 0.01).
+    assert_allclose(_plant(table["drive"]), reference, rtol=0, atol=1e-12)
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["method"] == "stable" and side["band_hz"] == BAND
+    assert side["band_from"] == "model band_hz"
+    assert side["checks"]["figures"]["rms_gain"] < 3.0
 
 
 def test_compensate_uses_the_operating_point_of_the_model(tmp_path, reference):
     # identified about (u0, y0) = (2, 1.5): y − y0 = G (u − u0), G(1) = 0.15/0.2 = 0.75
     model = _write_model(tmp_path / "m.json", offsets={"input": 2.0, "output": 1.5})
-    r = 1.5 + 0.4 * (np.arange(reference.size) > 100) + reference  # static part and a step
+    r = 1.5 + reference  # at rest about the operating point
     ref = _write_reference(tmp_path / "r.csv", r)
     out = tmp_path / "drive.csv"
     assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 0
     drive = read_columns(out, ["drive"])["drive"]
-    y = 1.5 + scipy.signal.lfilter([0.0, 0.0, 0.1, 0.05], [1.0, -1.5, 0.7], drive - 2.0)
-    assert_allclose(y, r, rtol=0, atol=1e-10)
+    assert_allclose(1.5 + _plant(drive - 2.0), r, rtol=0, atol=1e-12)
     assert_allclose(drive[:10], 2.0, rtol=0, atol=1e-12)  # at the operating point: u0
     sidecar = json.loads(out.with_suffix(".json").read_text())
     assert sidecar["offsets_applied"] == {"input": 2.0, "output": 1.5}
-    # --ignore-offsets: the inverse of the reference as it is (the earlier behaviour)
-    out2 = tmp_path / "plain.csv"
-    assert main(["compensate", str(model), str(ref), "--out", str(out2),
-                 "--ignore-offsets"]) == 0
-    plain = read_columns(out2, ["drive"])["drive"]
-    from ehss.compensation import compensate
-    from ehss.identification.model import ArmaxModel
 
-    assert_allclose(plain, compensate(ArmaxModel.load_json(model), r), rtol=0, atol=1e-12)
-    assert np.max(np.abs(plain - drive)) > 0.1  # r's static part starts it off rest
-    assert json.loads(out2.with_suffix(".json").read_text())["offsets_applied"] is None
+
+def test_reference_not_at_rest_needs_a_fade(tmp_path, reference, capsys):
+    model = _write_model(tmp_path / "m.json")
+    ref = _write_reference(tmp_path / "r.csv", 0.005 + reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "starts at 0.005" in err and "--fade" in err and not out.exists()
+    assert main(["compensate", str(model), str(ref), "--out", str(out), "--fade", "0.2"]) == 0
+    table = read_columns(out, ["reference", "drive"])
+    assert table["reference"][0] == 0.0
+    # the band limit's ringing of the faded start, not a jump
+    assert abs(table["drive"][0]) < 1e-3 * np.max(np.abs(table["drive"]))
+    assert json.loads(out.with_suffix(".json").read_text())["fade_s"] == 0.2
+
+
+def test_model_without_a_band_needs_one(tmp_path, reference, capsys):
+    model = _write_model(tmp_path / "m.json", band=None)
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "carries no validated band" in err and "--band" in err and "\n" not in err
+    assert not out.exists()
+    assert main(["compensate", str(model), str(ref), "--out", str(out), "--band", "0",
+                 "100"]) == 0
+    assert json.loads(out.with_suffix(".json").read_text())["band_from"] == "--band"
+
+
+def test_drive_far_beyond_the_reference_is_refused(tmp_path, reference, capsys):
+    # A loop with gain 0.15 in the band: the exact drive is ~6× the reference.
+    model = _write_model(tmp_path / "m.json", b=(0.02, 0.01))
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "× the reference's (bound 3×)" in err and "nothing written" in err
+    assert not out.exists() and not out.with_suffix(".json").exists()
+    assert main(["compensate", str(model), str(ref), "--out", str(out), "--max-gain",
+                 "10"]) == 0
+    out2 = tmp_path / "forced.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out2), "--force"]) == 0
+    assert json.loads(out2.with_suffix(".json").read_text())["checks"]["forced"] is True
+
+
+def test_drive_breaking_the_rig_limits_is_refused(tmp_path, capsys):
+    # A position drive whose inverse needs 0.5 m/s where the rig allows 0.2 m/s (Table 2):
+    # 20 mm at 4 Hz under an envelope.
+    model = _write_model(tmp_path / "m.json")
+    t = np.arange(2000) * DT
+    r = 0.02 * np.sin(2 * np.pi * 4 * t) * np.exp(-(((t - 1.0) / 0.2) ** 2))
+    ref = _write_reference(tmp_path / "r.csv", r)
+    out = tmp_path / "drive.csv"
+    args = ["compensate", str(model), str(ref), "--out", str(out)]
+    assert main([*args, "--loop", "position", "--preset", "default"]) == 2
+    err = capsys.readouterr().err
+    assert "peak velocity" in err and "0.2 m/s" in err and not out.exists()
+    assert main([*args, "--max-velocity", "0.2"]) == 2
+    assert "peak rate" in capsys.readouterr().err and not out.exists()
+    assert main([*args, "--loop", "position"]) == 2
+    assert "--params or --preset" in capsys.readouterr().err
+    assert main([*args, "--max-velocity", "1.0", "--max-stroke", "0.05"]) == 0
 
 
 @pytest.mark.parametrize("offsets", [{"input": 1.0}, {"input": "x", "output": 0.0}, [1, 2],
@@ -89,9 +154,9 @@ def test_bad_offsets_exit_2(tmp_path, reference, capsys, offsets):
 
 
 def test_compensate_options(tmp_path, reference):
-    model = _write_model(tmp_path / "m.json", b=(0.1, 0.25))  # zero at -2.5
+    model = _write_model(tmp_path / "m.json", b=(0.1, 0.25))  # zero at -2.5, G(1) = 1.75
     ref = _write_reference(tmp_path / "r.csv", reference, name="acc")
-    for method in ("zpetc", "zmetc"):
+    for method in ("stable", "zpetc", "zmetc"):
         out = tmp_path / f"{method}.csv"
         code = main(["compensate", str(model), str(ref), "--out", str(out), "--column", "acc",
                      "--method", method, "--band", "0", "100"])
@@ -144,7 +209,8 @@ def test_missing_model_file(tmp_path, reference, capsys):
 def test_model_with_known_factors_needs_band_and_inverts_them(tmp_path, capsys):
     # A model identified behind the acceleration loop's known factors (compose): the
     # factors travel in its JSON, and the drive inverts rest and factors.
-    from ehss.identification.known import compose, known_factors
+    from ehss.control.known import known_factors
+    from ehss.identification.known import compose
     from ehss.identification.model import ArmaxModel
     from ehss.params import preset
 
@@ -168,33 +234,57 @@ def test_model_with_known_factors_needs_band_and_inverts_them(tmp_path, capsys):
 
 
 def test_drive_file_iteration_from_a_run(tmp_path, reference, capsys):
-    """u+ = u + L F (r − y): with a plant 10 % weaker than the model, the correction after
-    one run is exactly L F (r − y) (checked sample by sample), and for L = 1 the next
-    run's error is 10 % of the previous one (the plant is the model scaled by 0.9)."""
+    """u+ = u + L F (r − y): with a plant 10 % weaker than the model the default gain is
+    1 (|1 − 0.9| = 0.1 contracts), and the next run's error is 10 % of the previous one.
+    A run whose error grew is refused: the next drive backs off to half the gain."""
     model = _write_model(tmp_path / "m.json")
     ref = _write_reference(tmp_path / "r.csv", reference)
     d0 = tmp_path / "d0.csv"
     assert main(["compensate", str(model), str(ref), "--out", str(d0)]) == 0
     u0 = read_columns(d0)["drive"]
-    a, b = [1.0, -1.5, 0.7], [0.0, 0.0, 0.1, 0.05]  # delay 2 as leading zeros
-
-    def plant(u):
-        return 0.9 * scipy.signal.lfilter(b, a, u)
-
-    y0 = plant(u0)
-    run = tmp_path / "run0.csv"
-    write_csv(run, {"t": np.arange(u0.size) * DT, "reference": u0, "output": y0})
+    y0 = _plant(u0, 0.9)
+    run0 = tmp_path / "run0.csv"
+    write_csv(run0, {"t": np.arange(u0.size) * DT, "reference": u0, "output": y0})
     d1 = tmp_path / "d1.csv"
-    assert main(["compensate", str(model), str(ref), "--update", str(run), "--out",
-                 str(d1)]) == 0
-    assert "RMS tracking error" in capsys.readouterr().out
-    u1 = read_columns(d1)["drive"]
-    e0 = reference - y0
-    e1 = reference - plant(u1)
-    # Linear plant, exact inverse: the error contracts by |1 − 0.9| = 0.1 (rounding only).
-    assert_allclose(e1[50:-50], 0.1 * e0[50:-50], rtol=0, atol=1e-9 * np.max(np.abs(e0)))
+    assert main(["compensate", str(model), str(ref), "--update", str(run0), "--previous",
+                 str(d0), "--out", str(d1)]) == 0
+    assert "run 1: RMS error" in capsys.readouterr().out
+    t1 = read_columns(d1)
+    u1 = t1["drive"]
+    e0, e1 = reference - y0, reference - _plant(u1, 0.9)
+    # Linear plant, exact inverse in the band: the error contracts by 0.1 (rounding only).
+    assert_allclose(e1, 0.1 * e0, rtol=0, atol=1e-9 * np.max(np.abs(e0)))
+    assert_allclose(t1["base_drive"] + t1["correction"], u1, rtol=0, atol=1e-15)
     side = json.loads(d1.with_suffix(".json").read_text())
-    assert side["update"]["gain"] == 1.0
+    assert side["iteration"]["gain"] == 1.0 and len(side["iteration"]["log"]) == 1
+    assert side["iteration"]["log"][0]["nrmse_percent"] == pytest.approx(10.0, rel=1e-6)
+    # A second run that went wrong (a disturbance doubled the error): refused, halved.
+    run1 = tmp_path / "run1.csv"
+    write_csv(run1, {"t": np.arange(u1.size) * DT, "reference": u1,
+                     "output": reference - 3.0 * e0})
+    d2 = tmp_path / "d2.csv"
+    assert main(["compensate", str(model), str(ref), "--update", str(run1), "--previous",
+                 str(d1), "--out", str(d2)]) == 0
+    assert "update refused, gain halved to 0.5" in capsys.readouterr().out
+    u2 = read_columns(d2)["drive"]
+    assert_allclose(u2, t1["base_drive"] + 0.5 * t1["correction"], rtol=0, atol=1e-15)
+    it = json.loads(d2.with_suffix(".json").read_text())["iteration"]
+    assert it["halvings"] == 1 and [e["accepted"] for e in it["log"]] == [True, False]
+    # The run must have played the previous drive file.
+    assert main(["compensate", str(model), str(ref), "--update", str(run0), "--previous",
+                 str(d1), "--out", str(tmp_path / "d3.csv")]) == 2
+    assert "did not play" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra", [["--method", "frf"], ["--previous", "d0.csv"],
+                                   ["--gain", "0.5"], ["--reidentify"]])
+def test_iteration_options_need_a_run(tmp_path, reference, capsys, extra):
+    model = _write_model(tmp_path / "m.json")
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "d.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert "--update" in err and len(err.strip().splitlines()) == 1 and not out.exists()
 
 
 def test_drive_file_iteration_rejects_other_rates(tmp_path, reference, capsys):

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+import re
+import shlex
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -35,25 +40,32 @@ def test_order_table_and_best(tmp_path, data_csv, capsys):
     assert "best by mdl: --na 2 --nb 1 --nc 0 --delay 1" in captured.out
     table = read_columns(out)
     assert list(table) == ["na", "nb", "nc", "delay", "n_params", "loss", "aic", "fpe",
-                           "mdl", "fit_pct"]
+                           "mdl", "fit_pct", "simulation_fit_pct", "stable",
+                           "max_pole_radius", "accepted"]
     assert table.n_rows == 6
     best = int(np.argmin(table["mdl"]))
     assert (table["na"][best], table["nb"][best]) == (2, 1)
     assert table["fit_pct"][best] > 95  # held-out simulation fit of the true structure
 
 
-def test_order_without_holdout(tmp_path, data_csv, capsys):
-    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "2",
-                 "--nb", "1", "--nc", "0", "--holdout", "0"])
+def test_order_by_aic_keeps_the_fit_column(tmp_path, data_csv, capsys):
+    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1,2",
+                 "--nb", "1", "--nc", "0", "--criterion", "aic"])
+    out = capsys.readouterr().out
     assert code == 0
-    assert "best by aic" in capsys.readouterr().out
+    assert "best by aic: --na 2 --nb 1 --nc 0 --delay 1" in out
 
 
 @pytest.mark.parametrize(
     "extra,match",
     [
-        (["--criterion", "fit", "--holdout", "0"], "--criterion fit needs --holdout > 0"),
-        (["--holdout", "-0.1"], "--holdout -0.1 must be in [0, 1)"),
+        (["--holdout", "0"], "--holdout 0.0 must be in (0, 1)"),
+        (["--holdout", "-0.1"], "--holdout -0.1 must be in (0, 1)"),
+        (["--band", "5", "1"], "--band 5 1 must satisfy 0 <= LO < HI"),
+        (["--band", "1", "600"], "--band upper edge 600 Hz is above fs/2 = 500 Hz"),
+        (["--decimate", "fast"], "--decimate 'fast' must be auto, none or an integer >= 1"),
+        (["--decimate", "0"], "--decimate 0 must be auto, none or an integer >= 1"),
+        (["--na", "0"], "--na 0 must be >= 1"),
         (["--nc", "0-40", "--na", "1-20"], "500 or fewer"),
     ],
 )
@@ -103,3 +115,119 @@ def test_int_list():
     assert int_list("2-4,7") == [2, 3, 4, 7]
     assert int_list("1:3") == [1, 2, 3]
     assert int_list("3,3") == [3]
+
+
+def test_order_prints_the_identify_command_of_its_pick(tmp_path, data_csv, capsys):
+    out = tmp_path / "orders.csv"
+    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1-3",
+                 "--nb", "1", "--nc", "1", "--method", "armax", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    # default criterion with a held-out part: the validation fit; the true na = 2 wins
+    assert "best by fit: --na 2 --nb 1 --nc 1 --delay 1 (method armax" in captured.out
+    cmd = (f"ehss identify {data_csv} --input u --output y --na 2 --nb 1 --nc 1 --delay 1 "
+           "--method armax --holdout 0.3 --detrend mean --decimate auto --out MODEL.json")
+    assert cmd in captured.out
+    sidecar = json.loads(out.with_suffix(".json").read_text())
+    assert sidecar["identify_command"] == cmd and sidecar["criterion"] == "fit"
+
+
+@pytest.mark.parametrize("method", ["arx", "oe", "rml"])
+def test_order_methods(data_csv, capsys, method):
+    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "2",
+                 "--nb", "1", "--nc", "2", "--method", method])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert f"--method {method}" in captured.out
+    # the start of the recursive estimators changes their model: the command carries it
+    assert ("--init batch" in captured.out) == (method == "rml")
+
+
+def test_order_validates_on_a_separate_file(tmp_path, data_csv, rng, capsys):
+    m = ArmaxModel(a=[1.0, -1.5, 0.7], b=[0.1, 0.1], c=[1.0], delay=1, dt=1 / FS)
+    u = rng.standard_normal(2000)
+    other = tmp_path / "other.csv"
+    write_csv(other, {"t": np.arange(2000) / FS, "u": u + 3.0,
+                      "y": m.simulate(u) + 5.0 + 0.005 * rng.standard_normal(2000)})
+    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1-3",
+                 "--nb", "1", "--nc", "0", "--method", "arx", "--validate", str(other)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "validated on other.csv" in captured.out
+    assert (f"--method arx --validate {other} --detrend mean --decimate auto --out "
+            "MODEL.json") in captured.out
+    # the separate record is offset (3, 5): its own operating point is removed, so the
+    # true structure still validates near perfectly
+    row = [ln for ln in captured.out.splitlines() if "★" in ln][0]
+    assert float(row.split("│")[11]) > 95
+
+
+@pytest.mark.parametrize(
+    "extra,match",
+    [
+        (["--validate", "missing.csv"], "missing.csv"),
+        (["--validate", "SELF", "--holdout", "0.2"],
+         "give either --holdout or --validate, not both"),
+    ],
+)
+def test_order_bad_new_options(tmp_path, data_csv, capsys, extra, match):
+    extra = [str(data_csv) if a == "SELF" else a for a in extra]
+    if "missing.csv" in extra:
+        extra = ["--validate", str(tmp_path / "missing.csv")]
+    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1",
+                 "--nb", "0", "--nc", "0", *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and match in err, err
+
+
+def test_order_validation_file_at_another_rate(tmp_path, data_csv, rng, capsys):
+    other = tmp_path / "slow.csv"
+    write_csv(other, {"t": np.arange(500) / 100.0, "u": rng.standard_normal(500),
+                      "y": rng.standard_normal(500)})
+    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1",
+                 "--nb", "0", "--nc", "0", "--validate", str(other)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "must match" in err, err
+
+
+@pytest.mark.parametrize("extra", [["--method", "els"], ["--init", "warm"],
+                                   ["--detrend", "cubic"], ["--initial", "guess"],
+                                   ["--band", "1"]])
+def test_order_bad_choices_exit_2(data_csv, capsys, extra):
+    with pytest.raises(SystemExit) as exc:
+        main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1",
+              "--nb", "0", "--nc", "0", *extra])
+    assert exc.value.code == 2
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+#: public record → small grid (--na, --nb, --nc, --delay) around its known orders
+PUBLIC = {
+    "daisy_dryer.csv": ("2-4", "1-3", "1,2", "1,3"),
+    "daisy_robot_arm.csv": ("2,4,6", "3,5", "2", "1"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PUBLIC))
+def test_the_printed_identify_command_reports_the_fit_of_the_pick(tmp_path, capsys, name):
+    data = Path(__file__).resolve().parents[1] / "data" / name
+    na, nb, nc, delay = PUBLIC[name]
+    code = main(["order", str(data), "--input", "u", "--output", "y", "--na", na, "--nb", nb,
+                 "--nc", nc, "--delay", delay])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    lines = captured.out.splitlines()
+    best = next(ln for ln in lines if ln.startswith("best by fit:"))
+    order_fit = re.search(r"simulation fit (-?\d+\.\d\d) %", best).group(1)
+    command = shlex.split(lines[lines.index("refit and validate it with:") + 1])
+    assert command[:2] == ["ehss", "identify"] and command[-2:] == ["--out", "MODEL.json"]
+    model_path = tmp_path / "model.json"
+    code = main([*command[1:-1], str(model_path)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    reported = re.search(r"simulation fit \(from the least-squares initial state\): "
+                         r"(-?\d+\.\d\d) %", captured.out).group(1)
+    # the same prepared data, estimator and validation: the same digits
+    assert reported == order_fit
+    model = ArmaxModel.from_dict(json.loads(model_path.read_text()))
+    assert model.is_stable()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ehss.cli import main
-from ehss.compensation import demonstrate, plot_demo
+from ehss.experiments.compensation_demo import demonstrate, plot_demo
 from ehss.simulation import simulate
 
 

@@ -1,8 +1,7 @@
-"""Inverse-model design: exact inversion, ZPETC/ZMETC analytic responses, band limit, errors."""
+"""Inverse-model design: exact (stable) inversion, ZPETC/ZMETC analytic responses, band
+limit, errors."""
 
 from __future__ import annotations
-
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,13 +17,16 @@ from ehss.compensation import (
     zpetc_magnitude,
 )
 from ehss.errors import DataError, ParameterError
+from ehss.identification.model import ArmaxModel
+from ehss.signals import Signal
 
 DT = 1e-3
 FREQ = np.linspace(0.0, 499.0, 400)
 
 
-def _model(b, a, delay, dt=DT):
-    return SimpleNamespace(b=np.asarray(b, float), a=np.asarray(a, float), delay=delay, dt=dt)
+def _model(b, a, delay, dt=DT, **kw):
+    return ArmaxModel(b=np.asarray(b, float), a=np.asarray(a, float), c=[1.0], delay=delay,
+                      dt=dt, **kw)
 
 
 def _simulate(model, u):
@@ -60,7 +62,7 @@ def non_min_phase():
 
 def test_min_phase_inverse_is_identity_with_preview(min_phase, rng):
     r = _at_rest_reference(rng)
-    for method in ("zpetc", "zmetc"):
+    for method in ("stable", "zpetc", "zmetc"):
         inv = design_inverse(min_phase, method=method)
         assert inv.preview == min_phase.delay
         y = _simulate(min_phase, inv.apply(r))
@@ -117,7 +119,7 @@ def test_tiny_b0_is_a_delay_not_a_blow_up(rng):
     a = np.real(np.poly([0.9, 0.6]))
     m = _model([1e-9, 0.1, 0.05], a, delay=1)
     r = _at_rest_reference(rng)
-    for method in ("zpetc", "zmetc"):
+    for method in ("stable", "zpetc", "zmetc"):
         inv = design_inverse(m, method=method)
         assert inv.preview == 2
         y = _simulate(m, inv.apply(r))
@@ -157,34 +159,46 @@ def test_unstable_poles_named():
 
 def test_b_all_zero():
     with pytest.raises(ParameterError, match="all zero"):
-        design_inverse(_model([0.0, 0.0], [1.0, -0.5], delay=1))
+        design_inverse_tf([0.0, 0.0], [1.0, -0.5], delay=1, dt=DT)
 
 
 def test_non_finite_coefficients():
     with pytest.raises(ParameterError, match="finite"):
-        design_inverse(_model([np.nan], [1.0, -0.5], delay=1))
+        design_inverse_tf([np.nan], [1.0, -0.5], delay=1, dt=DT)
 
 
-def test_zero_on_unit_circle():
+@pytest.mark.parametrize("method", ["stable", "zpetc", "zmetc"])
+def test_zero_on_unit_circle(method):
     with pytest.raises(ParameterError, match="unit circle"):
-        design_inverse(_model([1.0, -1.0], [1.0, -0.5], delay=1))
+        design_inverse(_model([1.0, -1.0], [1.0, -0.5], delay=1), method=method)
+
+
+def test_model_type_is_checked():
+    from types import SimpleNamespace
+
+    with pytest.raises(TypeError, match="ArmaxModel"):
+        design_inverse(SimpleNamespace(a=[1.0], b=[1.0], delay=1, dt=DT))
 
 
 @pytest.mark.parametrize("bad", [[], [np.nan, 1.0], [[1.0, 2.0]], [0.0, np.inf]])
 def test_bad_reference(bad):
-    m = _model([0.5], [1.0, -0.5], delay=1)
+    m = _model([0.5], [1.0, -0.5], delay=1, band_hz=(0.0, 100.0))
     with pytest.raises(DataError):
-        compensate(m, np.asarray(bad, dtype=float))
+        compensate(m, np.asarray(bad, dtype=float), fs=1 / DT)
 
 
 def test_sample_rate_mismatch():
-    m = _model([0.5], [1.0, -0.5], delay=1)
+    m = _model([0.5], [1.0, -0.5], delay=1, band_hz=(0.0, 100.0))
+    r = np.sin(np.pi * np.arange(10) / 9) ** 2
     with pytest.raises(DataError, match="500 Hz but the model at 1000 Hz"):
-        compensate(m, np.zeros(10), fs=500.0)
-    signal = SimpleNamespace(values=np.zeros(10), fs=2000.0)
+        compensate(m, r, fs=500.0)
     with pytest.raises(DataError, match="2000 Hz"):
-        compensate(m, signal)
-    assert compensate(m, SimpleNamespace(values=np.ones(3), fs=1000.0)).shape == (3,)
+        compensate(m, Signal(values=r, fs=2000.0, kind="test"))
+    with pytest.raises(ParameterError, match="differs from the Signal"):
+        compensate(m, Signal(values=r, fs=1000.0, kind="test"), fs=2000.0)
+    with pytest.raises(ParameterError, match="fs must be given"):
+        compensate(m, r)
+    assert compensate(m, Signal(values=r, fs=1000.0, kind="test")).shape == (10,)
 
 
 @pytest.mark.parametrize(
@@ -203,15 +217,19 @@ def test_bad_design_options(kwargs, match):
 def test_reduced_preview_lags():
     m = _model([0.5], [1.0, -0.5], delay=3)
     r = np.r_[np.zeros(10), np.ones(20)]
-    y = _simulate(m, compensate(m, r, preview=1))
+    inv = design_inverse(m, method="zpetc")
+    y = _simulate(m, inv.apply(r, preview=1))
     assert_allclose(y[2:], r[:-2], atol=1e-12)  # lags by 3 - 1 samples
     with pytest.raises(ParameterError, match="preview"):
-        compensate(m, r, preview=-1)
+        inv.apply(r, preview=-1)
+    # stable inversion runs anti-causally: it needs the whole reference
+    with pytest.raises(ParameterError, match="whole reference"):
+        design_inverse(m).apply(r, preview=1)
 
 
 # --------------------------------------------------------------------------- known factors
 def _acceleration_known():
-    from ehss.identification.known import known_factors
+    from ehss.control.known import known_factors
     from ehss.params import preset
 
     return known_factors("acceleration", preset("default"))
@@ -240,7 +258,7 @@ def test_known_factor_drive_tracks_in_time(min_phase):
     t = np.arange(8000) * DT
     r = (np.sin(2 * np.pi * 3.0 * t) + 0.5 * np.sin(2 * np.pi * 17.0 * t + 1.0)) * np.exp(
         -(((t - 4.0) / 0.7) ** 2))
-    drive = compensate(min_phase, r, band_hz=(1.0, 50.0), known=(num, den))
+    drive = compensate(min_phase, r, fs=1 / DT, band_hz=(1.0, 50.0), known=(num, den))
     y = scipy.signal.lfilter(num, den, _simulate(min_phase, drive))
     assert_allclose(y, r, rtol=0, atol=1e-8 * np.max(np.abs(r)))
 
@@ -252,7 +270,7 @@ def test_band_limited_drive_starts_without_a_jump(min_phase):
     # a steady peak of 0.4).
     t = np.arange(2000) * DT
     r = np.cos(2 * np.pi * 5.0 * t)
-    drive = compensate(min_phase, r, band_hz=(1.0, 50.0))
+    drive = design_inverse(min_phase, band_hz=(1.0, 50.0)).apply(r)
     steady = np.max(np.abs(drive[500:1500]))
     assert np.max(np.abs(drive[:50])) < 1.5 * steady
 
@@ -275,7 +293,7 @@ def test_bad_known_factor(min_phase, kwargs, match):
 
 def test_composed_model_with_foreign_known_factor(min_phase):
     num, den = _acceleration_known()
-    m = SimpleNamespace(b=min_phase.b, a=min_phase.a, delay=2, dt=DT,
-                        meta={"known_factors": {"num": num.tolist(), "den": den.tolist()}})
+    m = _model(min_phase.b, min_phase.a, delay=2,
+               meta={"known_factors": {"num": num.tolist(), "den": den.tolist()}})
     with pytest.raises(ParameterError, match="not a multiple"):
         design_inverse(m, band_hz=(1.0, 50.0))

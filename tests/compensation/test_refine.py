@@ -14,9 +14,11 @@ import pytest
 import scipy.signal
 from numpy.testing import assert_allclose
 
-from ehss.compensation import design_inverse, refine
+from ehss.compensation import design_inverse
+from ehss.control.known import accelerometer_filter
 from ehss.errors import ParameterError
-from ehss.identification.known import accelerometer_filter, compose
+from ehss.experiments.refinement import refine
+from ehss.identification.known import compose
 from ehss.identification.model import ArmaxModel
 from ehss.params import preset
 
@@ -66,9 +68,14 @@ def test_reidentification_of_a_noise_free_plant_converges(model, reference):
     a_true = np.real(np.poly([0.94, 0.86 + 0.21j, 0.86 - 0.21j]))
     true = ArmaxModel(a=a_true, b=0.011 * np.poly([0.4]), c=[1.0], delay=1, dt=1 / FS)
     res = refine(lambda u: true.simulate(u), reference, model=model, iterations=3,
-                 band_hz=BAND)
-    assert np.all(np.diff(res.rms_error) < 0)
-    # Measured: 13 % of the reference RMS one-shot, 3e-5 after one update.
+                 band_hz=BAND, reidentify=True)
+    e = res.rms_error
+    # Each run is better than the last until the error reaches the rounding floor of an
+    # exact re-identification (float64 filtering of a 1e-1 signal: ~1e-11 relative),
+    # where it only wanders.
+    assert np.all((np.diff(e) < 0) | (e[1:] < 1e-9 * e[0]))
+    # Measured: 13 % of the reference RMS one-shot, 3e-5 (zero start) or the rounding
+    # floor (batch start) after one update.
     assert res.rms_error[1] < 1e-3 * res.rms_error[0]
     assert len(res.models) == 4
 
@@ -93,7 +100,7 @@ def test_known_factor_is_inverted_and_kept_in_reidentification(model, reference)
     res2 = refine(loop, reference, model=full, iterations=0, band_hz=BAND)
     assert_allclose(res2.drive, res.drives[0], rtol=0, atol=1e-9 * np.max(np.abs(res.drive)))
     # Re-identification behind F (noise-free: exact) with the rest's orders.
-    res3 = refine(loop, reference, model=full, iterations=1, band_hz=BAND)
+    res3 = refine(loop, reference, model=full, iterations=1, band_hz=BAND, reidentify=True)
     assert (res3.models[1].na, res3.models[1].nb) == (model.na, model.nb)
     assert res3.rms_error[1] < 1e-2 * res3.rms_error[0]
 
@@ -101,7 +108,7 @@ def test_known_factor_is_inverted_and_kept_in_reidentification(model, reference)
 def test_loop_function_checked(model, reference):
     with pytest.raises(ParameterError, match="shape"):
         refine(lambda u: u[:-1], reference, model=model, band_hz=BAND)
-    with pytest.raises(ParameterError, match="learning_gain"):
+    with pytest.raises(ParameterError, match="gain"):
         refine(_plant(model, 1.0), reference, model=model, learning_gain=2.0)
     with pytest.raises(ParameterError, match="iterations"):
         refine(_plant(model, 1.0), reference, model=model, iterations=-1)

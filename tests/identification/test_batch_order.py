@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
+from scipy.signal import lfilter
 
-from ehss.errors import DataError, ParameterError
+from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification.batch import armax_els, arx_ls
 from ehss.identification.order import select_order
+from ehss.validation import simulation_fit
 
 from .systems import DT_S, armax_data, system
 
@@ -34,12 +36,17 @@ def test_armax_els_recovers_c_and_noise_variance(rng):
     assert m.covariance.shape == (5, 5)
 
 
+def _fit_on(uv, yv):
+    """The validation fit the workflow scores with: free run from the fitted state."""
+    return lambda m: simulation_fit(m, uv, yv, initial="estimate")
+
+
 def test_select_order_prefers_true_order(rng):
     a, b, c = system(2)
     u, y, _ = armax_data(rng, a, b, c, 6000, snr_db=30.0)
     uv, yv, _ = armax_data(rng, a, b, c, 3000, snr_db=30.0)
     sel = select_order(u, y, na=[1, 2, 3], nb=[0, 1], nc=[1], delay=1, dt=DT_S,
-                       criterion="mdl", validation=(uv, yv))
+                       criterion="mdl", score=_fit_on(uv, yv))
     assert len(sel.table) == 6
     assert (sel.best.na, sel.best.nb) in {(2, 1), (2, 0)}
     assert sel.best.fit > 90.0
@@ -52,9 +59,35 @@ def test_select_order_with_rels(rng):
     a, b, c = system(4)
     u, y, _ = armax_data(rng, a, b, c, 8000, snr_db=30.0)
     sel = select_order(u, y, na=[2, 4], nb=[1, 2], nc=[2], delay=1, dt=DT_S,
-                       criterion="aic", method="rels", p0=1e10, p0_c=1e2)
+                       criterion="aic", method="rels", init="zero", p0=1e10, p0_c=1e2)
     assert (sel.best.na, sel.best.nb) == (4, 2)
     assert sel.model.meta["p0_c"] == 1e2
+    assert sel.method == "rels"
+
+
+def test_select_order_defaults_to_validation_fit_with_the_armax_estimator(rng):
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=30.0)
+    uv, yv, _ = armax_data(rng, a, b, c, 2000, snr_db=30.0)
+    sel = select_order(u, y, na=[1, 2, 3], nb=[1], nc=[1], delay=1, dt=DT_S,
+                       score=_fit_on(uv, yv))
+    assert sel.criterion == "fit" and sel.method == "armax"
+    assert sel.model.meta["method"] == "armax_pem"
+    # the pick is the smallest candidate within 0.1 point of the highest validation fit
+    assert sel.best.fit >= max(r.fit for r in sel.table) - 0.1
+    assert all(r.stable and r.max_pole_radius < 1 for r in sel.table)
+    assert (sel.best.na, sel.best.nb) == (2, 1)
+
+
+def test_select_order_never_recommends_an_unstable_model(rng):
+    # a diverging plant: every least-squares candidate is unstable, so none is picked
+    u = rng.standard_normal(400)
+    y = lfilter([0.0, 1.0], [1.0, -1.02], u)
+    uv = rng.standard_normal(200)
+    yv = lfilter([0.0, 1.0], [1.0, -1.02], uv)
+    with pytest.raises(IdentificationError, match="none of the 2 candidate orders gives a "
+                       "stable model with method 'arx'"):
+        select_order(u, y, na=[1, 2], nb=[0], nc=[0], method="arx", score=_fit_on(uv, yv))
 
 
 def test_select_order_with_rml(rng):
@@ -71,12 +104,19 @@ def test_select_order_with_rml(rng):
 
 def test_select_order_errors(rng):
     u = rng.standard_normal(300)
-    with pytest.raises(ParameterError, match="method='pem' must be 'els', 'rels' or 'rml'"):
+    with pytest.raises(ParameterError, match="method='pem' must be one of arx, armax, oe, "
+                       "rels, rml"):
         select_order(u, u, na=[1], nb=[0], nc=[0], method="pem")
+    with pytest.raises(ParameterError, match=r"fit_tolerance=-1 must be a number >= 0"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], fit_tolerance=-1)
+    with pytest.raises(ParameterError, match="init='warm' must be one of batch, zero"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], method="rml", init="warm")
     with pytest.raises(ParameterError, match="criterion='bic' must be one of"):
         select_order(u, u, na=[1], nb=[0], nc=[0], criterion="bic")
-    with pytest.raises(ParameterError, match="criterion='fit' needs validation"):
+    with pytest.raises(ParameterError, match="criterion='fit' needs a score"):
         select_order(u, u, na=[1], nb=[0], nc=[0], criterion="fit")
+    with pytest.raises(TypeError, match="score must be callable"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], score=50.0)
     with pytest.raises(ParameterError, match=r"na=\[0\] must hold integers >= 1"):
         select_order(u, u, na=[0], nb=[0], nc=[0])
     with pytest.raises(DataError, match=r"y\[3\]=nan is not finite"):

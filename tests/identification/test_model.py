@@ -48,7 +48,7 @@ def test_json_nan_noise_variance_and_bad_files(tmp_path):
     (tmp_path / "bad.json").write_text("{")
     with pytest.raises(DataError, match="is not valid JSON"):
         ArmaxModel.load_json(tmp_path / "bad.json")
-    with pytest.raises(DataError, match="lacks b, delay"):
+    with pytest.raises(DataError, match="lacks the fields b, delay"):
         ArmaxModel.from_dict({"a": [1.0], "dt": 1.0})
 
 
@@ -135,8 +135,9 @@ def test_rounding_to_four_digits_destabilises_lightly_damped_model():
         (dict(c=[0.5]), r"must start with 1"),
         (dict(b=[]), r"must have at least one coefficient"),
         (dict(a=[1.0, np.nan]), r"must be finite"),
-        (dict(delay=-1), r"delay=-1 must be an integer >= 0"),
-        (dict(dt=0.0), r"dt=0.0 must be a finite number > 0"),
+        (dict(delay=-1), r"delay=-1 must be an integer in \[0, inf\)"),
+        (dict(dt=0.0), r"dt=0.0 must be in \(0, inf\) s"),
+        (dict(dt=float("inf")), r"dt=inf must be finite"),
         (dict(covariance=np.eye(2)), r"covariance shape \(2, 2\) must be \(3, 3\)"),
     ],
 )
@@ -144,3 +145,118 @@ def test_bad_model_fields(kwargs, message):
     base = dict(a=[1.0, -0.5], b=[1.0], c=[1.0, 0.2], delay=1, dt=1e-3)
     with pytest.raises(ParameterError, match=message):
         ArmaxModel(**{**base, **kwargs})
+
+
+# ----------------------------------------------------------------- model files on load
+_GOOD = {"a": [1.0, -0.5], "b": [0.5, 0.1], "c": [1.0, 0.2], "delay": 1, "dt": 0.001}
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"a": "1, -0.5"}, r"field 'a' = '1, -0.5' must be a list of numbers, not a string"),
+        ({"a": [[1.0, -0.5]]}, r"field 'a' must be a flat list .* entry 0 is a list"),
+        ({"b": [0.5, [0.1, 0.2]]}, r"field 'b' must be a flat list .* entry 1"),
+        ({"b": ["0.5"]}, r"field 'b\[0\]' = '0.5' must be a number, not a string"),
+        ({"b": [True]}, r"field 'b\[0\]' = True must be a number"),
+        ({"b": [0.0, 0.0]}, r"field 'b' is all zeros"),
+        ({"b": []}, r"field 'b' is empty"),
+        ({"a": [2.0, 1.0]}, r"field 'a' must start with 1"),
+        ({"c": [1.0, float("nan")]}, r"field 'c\[1\]' = nan must be finite"),
+        ({"a": [1.0, 10**400]}, r"field 'a\[1\]' = .* is too large"),
+        ({"a": [1.0] + [0.0] * 2000}, r"field 'a' has 2001 entries; at most 1001"),
+        ({"delay": 1.5}, r"field 'delay' = 1.5 must be a whole number"),
+        ({"delay": "1"}, r"field 'delay' = '1' must be a whole number"),
+        ({"delay": 10**12}, r"field 'delay' = 1000000000000 must be in \[0, 100000\]"),
+        ({"delay": -1}, r"field 'delay' = -1 must be in \[0, 100000\]"),
+        ({"dt": "0.001"}, r"field 'dt' = '0.001' must be a number"),
+        ({"dt": 0.0}, r"field 'dt' = 0.0 s must be a sample period in \[1e-09, 1e\+09\] s"),
+        ({"dt": 1e-310}, r"field 'dt'"),
+        ({"noise_variance": -1.0}, r"field 'noise_variance' = -1.0 must be >= 0"),
+        ({"covariance": [[1.0]]}, r"field 'covariance' must be a list of 4 rows of 4"),
+        ({"covariance": [[1.0] * 4] * 3 + [[1.0] * 3]}, r"field 'covariance' must be a list of 4"),
+        ({"meta": [1]}, r"field 'meta' must be an object, not a list"),
+        ({"offsets": [0.0, 1.0]}, r"field 'offsets' must be an object"),
+        ({"offsets": {"input": "0", "output": 1.0}}, r"field 'offsets.input' = '0'"),
+        ({"band_hz": [10.0, 1.0]}, r"field 'band_hz' = \[10.0, 1.0\] must satisfy"),
+        ({"band_hz": [1.0, 600.0]}, r"field 'band_hz' = \[1.0, 600.0\] must .* fs/2 = 500 Hz"),
+        ({"band_hz": "1-10"}, r"field 'band_hz' = '1-10' must be a list"),
+        ({"meta": {"known_factors": [1.0]}}, r"field 'meta.known_factors' must be an object"),
+        ({"meta": {"known_factors": {"num": ["x"], "den": [1.0]}}},
+         r"field 'meta.known_factors.num\[0\]' = 'x' must be a number"),
+        ({"meta": {"known_factors": {"num": [1.0], "den": [1.0, -2.0]}}},
+         r"field 'meta.known_factors': den has a pole on or outside the unit circle"),
+        ({"meta": {"known_factors": {"num": [1.0, -0.3], "den": [1.0]}}},
+         r"field 'meta.known_factors': num does not divide the model's 'b'"),
+        ({"meta": {"known_factors": {"num": [1.0, 1.0, 1.0], "den": [1.0]}}},
+         r"field 'meta.known_factors': num is longer than the model's 'b'"),
+    ],
+)
+def test_malformed_model_fields_name_file_and_field(tmp_path, change, message):
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps({**_GOOD, **change}))
+    with pytest.raises(DataError, match=r"model file '.*m.json': " + message):
+        ArmaxModel.load_json(path)
+
+
+def test_known_factors_that_divide_the_model_are_accepted(tmp_path):
+    from ehss.identification.known import compose
+
+    rest = ArmaxModel(a=[1.0, -0.5], b=[0.5, 0.1], dt=0.001)
+    full = compose(rest, np.array([1.0, -0.9]), np.array([1.0, -0.2]))
+    path = tmp_path / "m.json"
+    full.save_json(path)
+    back = ArmaxModel.load_json(path)
+    assert back.meta["known_factors"] == {"num": [1.0, -0.9], "den": [1.0, -0.2]}
+    assert_allclose(back.b, full.b, rtol=0, atol=0)
+
+
+def test_integral_float_delay_and_extra_keys_are_accepted(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps({**_GOOD, "delay": 2.0, "validation": {"fit": 90}}))
+    assert ArmaxModel.load_json(path).delay == 2
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"", "is empty"),
+        (b"  \n", "is empty"),
+        (b'{"a": [1.0], "b": [1.0], "delay": 1, "dt": 1.0, "x": "\xff"}', "not UTF-8"),
+        (b"[" * 100_000 + b"]" * 100_000, "nested too deeply"),
+        (b"[1, 2]", "does not hold a JSON object"),
+        (b"{", "is not valid JSON"),
+    ],
+)
+def test_unreadable_model_files(tmp_path, content, message):
+    path = tmp_path / "m.json"
+    path.write_bytes(content)
+    with pytest.raises(DataError, match=message):
+        ArmaxModel.load_json(path)
+
+
+def test_model_file_folder_and_path_under_a_file(tmp_path):
+    with pytest.raises(DataError, match="is a folder"):
+        ArmaxModel.load_json(tmp_path)
+    (tmp_path / "f").write_text("x")
+    # a path through a regular file cannot be opened, as an unreadable file cannot (the
+    # tests may run as root, for whom permission bits do not stop reading)
+    with pytest.raises(DataError, match="cannot read model file"):
+        ArmaxModel.load_json(tmp_path / "f" / "m.json")
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    (dict(delay=1.0), r"delay=1.0 must be an integer, not float"),
+    (dict(delay="1"), r"delay='1' must be an integer, not str"),
+    (dict(delay=True), r"delay=True must be an integer"),
+    (dict(dt="0.001"), r"dt='0.001' must be a real number, not str"),
+])
+def test_wrong_python_types_are_type_errors(kwargs, message):
+    with pytest.raises(TypeError, match=message):
+        ArmaxModel(**{"a": [1.0, -0.5], "b": [1.0], **kwargs})
+
+
+def test_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(_GOOD).encode())
+    assert ArmaxModel.load_json(path).delay == 1

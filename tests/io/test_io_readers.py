@@ -222,10 +222,12 @@ def test_empty_files(tmp_path):
         read_columns(npz, ["u"])
 
 
-def test_header_missing(tmp_path):
+def test_name_asked_of_a_headerless_file(tmp_path):
     path = tmp_path / "run.csv"
     path.write_text("1,2\n3,4\n")
-    with pytest.raises(DataError, match=r"first row holds numbers"):
+    with pytest.raises(DataError, match=r"no column named 'u': the file has no header row "
+                       r"\(its first row holds numbers\), so its 2 columns are known by "
+                       r"number only, 1 to 2"):
         read_columns(path, ["u"])
 
 
@@ -267,10 +269,123 @@ def test_uneven_time_names_row(tmp_path):
 
 
 def test_time_not_increasing():
-    with pytest.raises(DataError, match=r"not increasing"):
+    with pytest.raises(DataError, match=r"repeats the time 0.0 s at data rows 1 and 2; .* "
+                       r"\(it is constant\)"):
         sample_rate(np.zeros(5))
+    with pytest.raises(DataError, match=r"goes backwards from 0.003 s at data row 4 to "
+                       r"0.002 s at row 5"):
+        sample_rate([0.0, 0.001, 0.002, 0.003, 0.002, 0.005])
 
 
 def test_bad_fs_value():
     with pytest.raises(DataError, match=r"fs=-1.0"):
         sample_rate(None, -1)
+
+
+# ------------------------------------------------------------ headerless text, numbers
+
+
+def _daisy_like(path, columns):
+    """Whitespace-separated, right-aligned, no header: the layout of DaISy .dat files."""
+    rows = np.column_stack(columns)
+    path.write_text("".join("".join(f"{x:17.7e}" for x in row) + "\n" for row in rows))
+
+
+def test_headerless_whitespace_file_by_number(tmp_path, rng):
+    u, y = rng.standard_normal(50), rng.standard_normal(50)
+    path = tmp_path / "dryer.dat"
+    _daisy_like(path, [np.arange(50) * 0.08, u, y])
+    table = read_columns(path, ["2", "3"], time_column="1")
+    # 8 significant digits are written (%.7e): the read values are those decimals.
+    assert_array_equal(table["2"], [float(f"{x:.7e}") for x in u])
+    assert_array_equal(table["3"], [float(f"{x:.7e}") for x in y])
+    assert table.time_column == "1" and table.label("2") == "column 2"
+    assert sample_rate(table) == pytest.approx(12.5, rel=1e-12)
+    everything = read_columns(path)
+    assert list(everything) == ["1", "2", "3"]
+
+
+def test_column_numbers_in_a_file_with_header(tmp_path, record):
+    path = tmp_path / "run.csv"
+    write_csv(path, record)
+    table = read_columns(path, ["2", "y"])
+    assert_array_equal(table["2"], record["u"])
+    assert table.label("2") == "column 'u'"  # named by its header name in messages
+    assert table.time_column == "t"
+
+
+@pytest.mark.parametrize(
+    ("spec", "match"),
+    [
+        ("0", r"there is no column 0; columns are numbered from 1 \(the first\) to 3"),
+        ("4", r"no column 4; the file has 3 columns"),
+        ("u", r"no column named 'u': the file has no header row"),
+    ],
+)
+def test_bad_column_numbers(tmp_path, spec, match):
+    path = tmp_path / "r.dat"
+    _daisy_like(path, [np.arange(5.0), np.ones(5), np.zeros(5)])
+    with pytest.raises(DataError, match=match):
+        read_columns(path, [spec])
+
+
+def test_column_number_in_a_binary_file_says_so(tmp_path, record):
+    path = tmp_path / "run.npz"
+    np.savez(path, **record)
+    with pytest.raises(DataError, match=r"column numbers select columns of text files only"):
+        read_columns(path, ["2"])
+
+
+def test_semicolons_win_over_decimal_commas(tmp_path):
+    path = tmp_path / "eu.csv"
+    path.write_text("u;y\n1,5;2,5\n")
+    with pytest.raises(DataError, match=r"column 'u', data row 1: '1,5' is not a number"):
+        read_columns(path, ["u", "y"])
+
+
+@pytest.mark.parametrize("sep", [",", " "])
+@pytest.mark.parametrize("where", [1, 15_000, 29_999])
+def test_field_count_checked_on_every_row(tmp_path, sep, where):
+    # 30 000 rows: more than the first and last hundred, anywhere in the file.
+    rows = [sep.join(["1", "2", "3"])] * 30_000
+    rows[where - 1] = sep.join(["1", "2", "3", "4"])
+    path = tmp_path / "big.csv"
+    path.write_text(sep.join(["a", "b", "c"]) + "\n" + "\n".join(rows) + "\n")
+    with pytest.raises(DataError, match=rf"data row {where} has 4 fields, the header has 3"):
+        read_columns(path, ["a", "b"])
+
+
+# ------------------------------------------------------------- degenerate time columns
+
+
+@pytest.mark.parametrize(
+    ("t", "match"),
+    [
+        (np.arange(10) * 1e-310, r"typical step of 1e-310 s, .* accepted rates are 1e-09 to "
+                                 r"1e\+09 Hz"),
+        (np.arange(10) * 1e300, r"typical step of 1e\+300 s, a sample rate of 1e-300 Hz"),
+        (1e15 + np.arange(1000) * 1e-3, r"where a float resolves only 0.125 s.* subtract the "
+                                      r"start time"),
+        (np.array([0.0]), r"needs at least 2 samples"),
+        (np.array([0.0, 1.0, 1.0, 2.0]), r"repeats the time 1.0 s at data rows 2 and 3"),
+    ],
+)
+def test_degenerate_time_columns(t, match):
+    with pytest.raises(DataError, match=match):
+        sample_rate(t)
+
+
+@pytest.mark.parametrize("fs", [0.0, -1.0, float("nan"), float("inf"), 1e10, 1e-10])
+def test_fs_outside_the_accepted_rates(fs):
+    with pytest.raises(DataError, match=r"must be in \[1e-09, 1e\+09\] Hz"):
+        sample_rate(None, fs)
+
+
+def test_columns_must_be_strings(tmp_path, record):
+    path = tmp_path / "run.csv"
+    write_csv(path, record)
+    with pytest.raises(TypeError, match=r"written as strings \('2' for the second column\), "
+                       r"not int 2"):
+        read_columns(path, [2])
+    with pytest.raises(TypeError, match="time_column"):
+        read_columns(path, ["u"], time_column=1)

@@ -3,23 +3,43 @@
 Each subcommand lives in its own module with a ``register(subparsers)`` function that
 adds its parser and sets ``func``. Errors raised on purpose (:class:`~ehss.errors.EhssError`)
 become one line on stderr and exit code 2 for bad input or parameters, 1 otherwise;
-argument errors also exit with 2.
+argument errors also exit with 2. Every file argument is checked before the command
+runs (:mod:`ehss.cli._outputs`), so no output replaces an input or another file.
+
+Ctrl-C prints one line and exits with 130, also while the libraries are still being
+imported; SIGTERM is turned into an exception, so temporary files and folders are
+removed on the way out, and exits with 143.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
+# Only light modules here: the console script imports this package before main() can
+# catch Ctrl-C, so argparse and everything heavier are imported inside main().
+import contextlib
+import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
-from ehss.errors import DataError, EhssError, ParameterError
+TYPE_CHECKING = False  # typing itself imports re: not here
+if TYPE_CHECKING:
+    import argparse
 
-__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_BAD_INPUT"]
+__all__ = [
+    "main",
+    "entry",
+    "build_parser",
+    "EXIT_OK",
+    "EXIT_FAILURE",
+    "EXIT_BAD_INPUT",
+    "EXIT_INTERRUPTED",
+    "EXIT_TERMINATED",
+]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 128 + int(signal.SIGINT)
+EXIT_TERMINATED = 128 + int(signal.SIGTERM)
 
 # Subcommand modules, in the order they are listed by `ehss --help`.
 _COMMANDS = (
@@ -30,19 +50,23 @@ _COMMANDS = (
     "order",
     "compensate",
     "reproduce",
+    "live",
+    "stream",
 )
-
-
-class _Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line on stderr and exit code 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``ehss`` parser with every available subcommand registered."""
+    import argparse
+    import importlib
+
     from ehss import __version__
+
+    class _Parser(argparse.ArgumentParser):
+        """ArgumentParser whose errors are one line on stderr and exit code 2."""
+
+        def error(self, message: str) -> None:  # type: ignore[override]
+            self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
     parser = _Parser(
         prog="ehss",
@@ -62,30 +86,74 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that ``finally`` clauses clean up."""
+
+
+@contextlib.contextmanager
+def _sigterm_as_exception() -> Iterator[None]:
+    """Raise :class:`_Terminated` on SIGTERM while the command runs.
+
+    Later SIGTERMs are ignored while the clean-up runs; the previous handler is restored
+    on the way out.
+    """
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise _Terminated
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``ehss`` command line; returns the exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "func", None) is None:
-        parser.print_help(sys.stderr)
-        return EXIT_BAD_INPUT
+    command = "ehss"
     try:
+        with _sigterm_as_exception():
+            parser = build_parser()  # imports the commands, and with them numpy, scipy...
+            args = parser.parse_args(argv)
+            if getattr(args, "func", None) is None:
+                parser.print_help(sys.stderr)
+                return EXIT_BAD_INPUT
+            command = f"ehss {args.command}"
+            return _run(command, args)
+    except KeyboardInterrupt:
+        print(f"{command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except _Terminated:
+        print(f"{command}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
+
+
+def _run(command: str, args: argparse.Namespace) -> int:
+    from ehss.cli._outputs import check_paths
+    from ehss.errors import DataError, EhssError, ParameterError
+
+    try:
+        check_paths(args)
         code = args.func(args)
     except (DataError, ParameterError) as exc:
-        print(f"ehss {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except EhssError as exc:
-        print(f"ehss {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{command}: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     except MemoryError:
-        print(f"ehss {args.command}: error: not enough memory for this job (shorten the "
+        print(f"{command}: error: not enough memory for this job (shorten the "
               "record or lower the sample rate)", file=sys.stderr)
         return EXIT_FAILURE
-    except KeyboardInterrupt:
-        print(f"ehss {args.command}: interrupted", file=sys.stderr)
-        return 130
     return EXIT_OK if code is None else int(code)
 
 
-def _entry() -> None:  # pragma: no cover - console-script shim
+def entry() -> None:  # pragma: no cover - console-script shim
+    """The `ehss` console script and `python -m ehss`: run :func:`main` and exit."""
     sys.exit(main())

@@ -1,56 +1,109 @@
-"""``ehss compensate`` and ``ehss compensate-demo``: inverse-model feed-forward drives."""
+"""``ehss compensate`` and ``ehss compensate-demo``: checked inverse-model drive files."""
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from ehss.errors import DataError
+from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
+from ehss.errors import DataError, ParameterError
 
 __all__ = ["register"]
 
+_DRIVE_LOOPS = ("position", "acceleration", "force", "valve")
+
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ehss.compensation import DEFAULT_MAX_GAIN
+    from ehss.params import PRESETS
+
     p = sub.add_parser(
         "compensate",
-        help="compute a compensated drive from an identified closed-loop model",
-        description="Design the inverse (ZPETC or ZMETC, delay by preview) of an identified "
-        "closed-loop model and apply it to a reference file. Writes columns t, reference, "
-        "drive; replay with `ehss simulate --loop L --reference DRIVE.csv --column drive`.",
+        help="compute a checked, compensated drive from an identified closed-loop model",
+        description="Invert an identified closed-loop model inside the band it was validated "
+        "over (exact stable inversion by default) and apply it to a reference file, or "
+        "correct the drive of a previous run. The drive is checked before anything is "
+        "written: its gain against the reference's and, with a parameter set or limits, the "
+        "rig's limits. Writes columns t, reference, drive (and a JSON sidecar with the "
+        "checks and the per-run log); replay with `ehss simulate --loop L --reference "
+        "DRIVE.csv --column drive`.",
     )
-    p.add_argument("model", metavar="MODEL.json", help="identified model (ArmaxModel JSON)")
-    p.add_argument("reference", metavar="REFERENCE.csv", help="reference history file")
-    p.add_argument("--out", required=True, metavar="DRIVE.csv", help="output CSV file")
+    p.add_argument("model", metavar="MODEL.json", type=InputFile,
+                   help="identified model (ArmaxModel JSON)")
+    p.add_argument("reference", metavar="REFERENCE.csv", type=InputFile,
+                   help="reference history file")
+    p.add_argument("--out", required=True, metavar="DRIVE.csv", type=OutputTable,
+                   help="drive table: .csv (with a .json sidecar), .parquet, .h5, .npz or "
+                   ".mat")
     p.add_argument("--column", default="reference",
                    help="reference column name (default: %(default)s)")
-    p.add_argument("--method", default="zpetc", choices=("zpetc", "zmetc"),
-                   help="inverse design (default: %(default)s)")
+    p.add_argument("--method", default="stable", choices=("stable", "zpetc", "zmetc", "frf"),
+                   help="inverse: exact stable inversion (default), ZPETC, ZMETC, or, to "
+                   "correct a run (--update), the measured frequency response of that run")
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="zero-phase band limit of the drive in Hz (default: none; required "
-                   "for models identified behind known factors, e.g. the acceleration loop)")
+                   help="band limit of the inverse and of every update, Hz (default: the "
+                   "band the model was validated over, `band_hz` in its file)")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate if the file has no time column t")
+    p.add_argument("--fade", type=float, metavar="S",
+                   help="fade the reference in and out over S seconds (raised cosine) when it "
+                   "does not start or end at rest")
     p.add_argument("--ignore-offsets", action="store_true",
                    help="apply the inverse to the reference as it is, even if the model file "
                    "holds the operating point it was identified about (`offsets`, written by "
                    "`ehss identify`); by default drive = u0 + F (r - y0)")
+    ck = p.add_argument_group(
+        "drive checks",
+        "A drive whose RMS or peak exceeds --max-gain times the reference's, or that breaks "
+        "the rig's limits, is an error (exit 2) and nothing is written.",
+    )
+    ck.add_argument("--max-gain", type=float, default=DEFAULT_MAX_GAIN, metavar="G",
+                    help="bound on the drive/reference RMS and peak ratios (default: "
+                    "%(default)s)")
+    ck.add_argument("--force", action="store_true",
+                    help="write the drive even if it fails the checks (recorded in the "
+                    "sidecar)")
+    ck.add_argument("--loop", choices=_DRIVE_LOOPS,
+                    help="loop the drive is played into, whose limits it must respect "
+                    "(with --params or --preset)")
+    par = ck.add_mutually_exclusive_group()
+    par.add_argument("--params", metavar="FILE.toml", type=InputFile,
+                     help="(partial) TOML parameter file")
+    par.add_argument("--preset", choices=sorted(PRESETS), help="named parameter set")
+    ck.add_argument("--max-stroke", type=float, metavar="X",
+                    help="bound on |drive| (e.g. m of stroke)")
+    ck.add_argument("--max-command", type=float, metavar="V",
+                    help="bound on |drive| for a valve-command drive (V)")
+    ck.add_argument("--max-velocity", type=float, metavar="X_PER_S",
+                    help="bound on |d drive/dt|")
+    ck.add_argument("--max-acceleration", type=float, metavar="X_PER_S2",
+                    help="bound on |d² drive/dt²|")
     it = p.add_argument_group(
         "drive-file iteration",
-        "Correct the drive of a previous run from what the rig did: "
-        "u+ = u + L F (r - y), F the inverse of the model (re-identified from the run "
-        "with --reidentify). A run file from `ehss simulate --reference DRIVE.csv --column "
-        "drive` has the played drive in `reference` and the measurement in `output`.",
+        "Correct the drive of a previous run from what the rig did: u+ = u + L Q F (r - y), "
+        "Q the band limit, F the model's inverse (or, with --method frf, the inverse of the "
+        "run's H1 estimate, weighted by its coherence). A run file from `ehss simulate "
+        "--reference DRIVE.csv --column drive` has the played drive in `reference` and the "
+        "measurement in `output`. With --previous (the drive file that was played), the run "
+        "is compared with the one before: when its error grew the update is refused and the "
+        "gain halved; after three refusals the iteration stops and the best drive is "
+        "written back.",
     )
-    it.add_argument("--update", metavar="RUN.csv",
+    it.add_argument("--update", metavar="RUN.csv", type=InputFile,
                     help="record of the previous run (played drive and measured output)")
+    it.add_argument("--previous", metavar="DRIVE.csv", type=InputFile,
+                    help="the drive file (written by this command) that was played")
     it.add_argument("--drive-column", default="reference",
                     help="played drive column in RUN.csv (default: %(default)s)")
     it.add_argument("--output-column", default="output",
                     help="measured output column in RUN.csv (default: %(default)s)")
-    it.add_argument("--gain", type=float, default=1.0, metavar="L",
-                    help="learning gain L in (0, 2) (default: %(default)s)")
+    it.add_argument("--gain", type=float, metavar="L",
+                    help="learning gain L in (0, 2) (default: the largest of 1, 1/2, 1/4, 1/8 "
+                    "that the run shows to contract the error)")
     it.add_argument("--reidentify", action="store_true",
                     help="re-identify the loop from the run before inverting it")
     p.set_defaults(func=run)
@@ -58,60 +111,122 @@ def register(sub: argparse._SubParsersAction) -> None:
     d = sub.add_parser(
         "compensate-demo",
         help="demonstrate inverse-model compensation on the simulated rig",
-        description="Identify a closed loop on a random test, design its inverse, and "
-        "compare tracking without and with compensation (random and earthquake-like "
-        "references). Writes CSV/JSON figures and PNG plots to --out.",
+        description="Identify a closed loop on a random test, invert it in its working band "
+        "(stable inversion by default), iterate the drive file, and compare tracking "
+        "without and with compensation (random and earthquake-like references). Writes "
+        "CSV/JSON figures and PNG plots to --out.",
     )
     d.add_argument("--loop", required=True, choices=("position", "acceleration"))
-    d.add_argument("--out", default="compensation", metavar="DIR",
+    d.add_argument("--out", default=OutputFolder("compensation"), metavar="DIR",
+                   type=OutputFolder,
                    help="output folder (default: %(default)s)")
     d.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     d.add_argument("--duration", type=float, default=None, metavar="S",
                    help="length of each test record in seconds")
-    d.add_argument("--method", default="zpetc", choices=("zpetc", "zmetc"))
+    d.add_argument("--method", default="stable", choices=("stable", "zpetc", "zmetc"))
     d.set_defaults(func=run_demo)
 
 
+def _limits(args: argparse.Namespace) -> Any:
+    from ehss.compensation import DriveLimits
+
+    if args.max_stroke is not None and args.max_command is not None:
+        raise ParameterError("give --max-stroke or --max-command, not both (both bound |drive|)")
+    bound = args.max_stroke if args.max_stroke is not None else args.max_command
+    if bound is None and args.max_velocity is None and args.max_acceleration is None:
+        return None
+    return DriveLimits(max_abs=bound, max_rate=args.max_velocity,
+                       max_rate2=args.max_acceleration)
+
+
+def _rig(args: argparse.Namespace) -> tuple[str | None, Any]:
+    from ehss.params import load_params, preset
+
+    given = args.params is not None or args.preset is not None
+    if given and args.loop is None:
+        raise ParameterError("--params/--preset need --loop: the loop the drive is played into")
+    if args.loop is not None and not given:
+        raise ParameterError("--loop needs --params or --preset (whose limits to respect)")
+    if not given:
+        return None, None
+    return args.loop, load_params(args.params) if args.params else preset(args.preset)
+
+
+def _band(args: argparse.Namespace, model: Any) -> tuple[float, float]:
+    if args.band is not None:
+        return float(args.band[0]), float(args.band[1])
+    if model.band_hz is None:
+        raise ParameterError(
+            f"model {args.model!r} carries no validated band (band_hz): pass --band LO HI, "
+            "e.g. the band where its validation's coherence was high; without a band limit "
+            "the inverse amplifies everything the model never saw")
+    return model.band_hz
+
+
 def run(args: argparse.Namespace) -> int:
-    from ehss._files import check_writable
     from ehss._provenance import versions
     from ehss.cli._dataargs import write_outputs
-    from ehss.compensation import compensate
+    from ehss.compensation import check_at_rest, check_drive, design_inverse, fade_to_rest
     from ehss.identification.model import ArmaxModel
-    from ehss.io import read_columns, sample_rate, write_csv, write_json
+    from ehss.io import read_columns, sample_rate, table_writers
 
-    check_writable(args.out)
+    if args.update is None:
+        for flag, given in (("--previous", args.previous is not None),
+                            ("--gain", args.gain is not None), ("--reidentify", args.reidentify)):
+            if given:
+                raise ParameterError(f"{flag} belongs to a drive-file iteration: give "
+                                     "--update RUN.csv")
+    if args.reidentify and args.method == "frf":
+        raise ParameterError("--reidentify re-identifies the model of a model-based update; "
+                             "--method frf uses no model")
     model = ArmaxModel.load_json(args.model)
-    offsets = None if args.ignore_offsets else _offsets(args.model)
+    band = _band(args, model)
+    limits = _limits(args)
+    loop, params = _rig(args)
+    offsets = None if args.ignore_offsets else model.offsets
+    u0, y0 = offsets if offsets is not None else (0.0, 0.0)
     table = read_columns(args.reference, [args.column])
     fs = sample_rate(table, args.fs)
-    r = table[args.column]
-    band = None if args.band is None else tuple(args.band)
-    extra = {}
+    if abs(fs * model.dt - 1.0) > 1e-6:
+        raise DataError(f"reference is sampled at {fs:g} Hz but the model at "
+                        f"{1.0 / model.dt:g} Hz; resample the reference or identify at its rate")
+    r = np.asarray(table[args.column], dtype=float)
+    r_dev = r - y0
+    if args.fade is not None:
+        r_dev = fade_to_rest(r_dev, fs, args.fade)
+        r = r_dev + y0
+    check_at_rest(r_dev)
+    max_gain = None if args.force else args.max_gain
+    extra: dict[str, Any] = {}
+    columns: dict[str, np.ndarray] = {}
     if args.update is None:
+        if args.method == "frf":
+            raise ParameterError(
+                "--method frf corrects a measured run: give --update RUN.csv (play the "
+                "reference itself, or a model-based drive, first)")
+        inverse = design_inverse(model, method=args.method, band_hz=band)
         # the model maps deviations from the operating point (u0, y0) it was identified
         # about: y − y0 = G (u − u0), so the drive for r is u0 + G⁻¹ (r − y0)
-        u0, y0 = offsets if offsets is not None else (0.0, 0.0)
-        drive = u0 + compensate(model, r - y0, method=args.method, band_hz=band, fs=fs)
-    else:  # corrections of the error r − y: the operating point cancels
-        from ehss.compensation import update_drive
-
-        run_table = read_columns(args.update, [args.drive_column, args.output_column])
-        run_fs = sample_rate(run_table, args.fs)
-        if abs(run_fs - fs) > 1e-9 * fs:
-            raise DataError(f"{args.update!r} is sampled at {run_fs:g} Hz, the reference at "
-                            f"{fs:g} Hz")
-        step = update_drive(model, r, run_table[args.drive_column],
-                            run_table[args.output_column], method=args.method, band_hz=band,
-                            learning_gain=args.gain, reidentify=args.reidentify)
-        drive = step.drive
-        extra = {"update": {"run": str(args.update), "gain": args.gain,
-                            "reidentify": args.reidentify,
-                            "rms_error_of_run": step.rms_error}}
-        print(f"previous run: RMS tracking error {step.rms_error:.6g}")
-    t = table.time if table.time is not None else np.arange(r.size) / fs
-    if not np.all(np.isfinite(drive)):
+        drive_dev = inverse.apply(r_dev)
+        extra["iteration"] = {"log": [], "gain": None}
+    else:
+        drive_dev, columns, extra = _update(args, model, r_dev, fs, band, u0, y0)
+        if extra["iteration"].get("stopped"):
+            max_gain = None  # the best drive so far was already played and checked
+    if not np.all(np.isfinite(drive_dev)):
         raise DataError("the compensated drive is not finite (badly conditioned model?)")
+    try:
+        checked = check_drive(drive_dev, r_dev, fs, max_gain=max_gain, limits=limits,
+                              loop=loop, params=params, drive_offset=u0)
+    except ParameterError as exc:
+        if args.force:
+            checked = None
+            print(f"ehss compensate: warning: --force: {exc}")
+        else:
+            raise ParameterError(f"{exc} (nothing written; --max-gain or --force to override)"
+                                 ) from None
+    drive = u0 + drive_dev
+    t = table.time if table.time is not None else np.arange(r.size) / fs
     out = Path(args.out)
     sidecar = {
         "what": f"{args.method} inverse-model drive",
@@ -119,20 +234,101 @@ def run(args: argparse.Namespace) -> int:
         "reference": str(args.reference),
         "column": args.column,
         "fs_hz": fs,
-        "band_hz": None if args.band is None else list(args.band),
-        "offsets_applied": (None if offsets is None or args.update is not None
+        "method": args.method,
+        "band_hz": list(band),
+        "band_from": "--band" if args.band is not None else "model band_hz",
+        "fade_s": args.fade,
+        "offsets_applied": (None if offsets is None
                             else {"input": offsets[0], "output": offsets[1]}),
-        "units": "drive and reference in the units of the model's input",
+        "checks": {"forced": bool(args.force),
+                   "figures": None if checked is None else checked.to_dict(),
+                   "limits": None if limits is None else {
+                       "max_abs": limits.max_abs, "max_rate": limits.max_rate,
+                       "max_rate2": limits.max_rate2},
+                   "loop": loop},
+        "units": "drive and reference in the units of the model's input and output",
         "versions": versions(),
         **extra,
     }
-    write_outputs({out: lambda tmp: write_csv(tmp, {"t": t, "reference": r, "drive": drive}),
-                   out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})
+    cols = {"t": t, "reference": r, "drive": drive, **columns}
+    write_outputs(table_writers(out, cols, sidecar))
     return 0
 
 
+def _update(args: argparse.Namespace, model: Any, r_dev: np.ndarray, fs: float,
+            band: tuple[float, float], u0: float, y0: float
+            ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
+    """Drive-file iteration from a run: (drive deviation, extra columns, sidecar part)."""
+    from ehss.compensation import update_drive
+    from ehss.io import read_columns, sample_rate
+
+    run_table = read_columns(args.update, [args.drive_column, args.output_column])
+    run_fs = sample_rate(run_table, args.fs)
+    if abs(run_fs - fs) > 1e-9 * fs:
+        raise DataError(f"{args.update!r} is sampled at {run_fs:g} Hz, the reference at "
+                        f"{fs:g} Hz")
+    u = np.asarray(run_table[args.drive_column], dtype=float)
+    y = np.asarray(run_table[args.output_column], dtype=float)
+    if u.size != r_dev.size or y.size != r_dev.size:
+        raise DataError(f"{args.update!r} has {u.size} samples, the reference {r_dev.size}")
+    state, log = None, []
+    if args.previous is not None:
+        state, log = _previous(args.previous, u, u0)
+    method = "frf" if args.method == "frf" else "model"
+    step = update_drive(r_dev, u - u0, y - y0, fs=fs, model=model, method=method,
+                        inverse_method="stable" if method == "frf" else args.method,
+                        band_hz=band, gain=args.gain, state=state,
+                        reidentify=args.reidentify)
+    entry = {"run": str(args.update), **step.record.to_dict(), "accepted": step.accepted,
+             "gain_next": step.gain, "decision": step.message}
+    log = [*log, entry]
+    print(f"run {len(log)}: RMS error {step.record.rms_error:.6g} "
+          f"({step.record.nrmse_percent:.3g} %), lag {step.record.lag_samples:.2f} samples; "
+          f"{step.message}")
+    st = step.state
+    extra = {"iteration": {
+        "log": log, "gain": step.gain, "base_rms_error": st.base_rms_error,
+        "halvings": st.halvings, "stopped": step.stopped, "method": method,
+        "reidentify": bool(args.reidentify), "previous": args.previous,
+    }, "update": {"run": str(args.update), "gain": step.gain,
+                  "rms_error_of_run": step.record.rms_error}}
+    if step.stopped:
+        return step.drive, {}, extra
+    columns = {"base_drive": u0 + st.base_drive, "correction": st.correction}
+    return step.drive, columns, extra
+
+
+def _previous(path: str, played: np.ndarray, u0: float) -> tuple[Any, list]:
+    """Iteration state of a drive file written by this command, checked against the run."""
+    from ehss.compensation import IterationState
+    from ehss.io import read_columns
+
+    table = read_columns(path)
+    if "drive" not in table.columns:
+        raise DataError(f"{path!r} has no column 'drive': not a drive file of this command")
+    drive = np.asarray(table["drive"], dtype=float)
+    if drive.size != played.size or not np.allclose(drive, played, rtol=1e-9,
+                                                     atol=1e-12 * np.max(np.abs(drive))):
+        raise DataError(f"the run did not play {path!r}: its drive differs from the file's")
+    side = Path(path).with_suffix(".json")
+    try:
+        doc = json.loads(side.read_text())
+        it = doc.get("iteration") or {}
+        log = list(it.get("log") or [])
+    except (OSError, ValueError, AttributeError):
+        raise DataError(f"cannot read the sidecar {str(side)!r} of the previous drive "
+                        "file") from None
+    if "base_drive" not in table.columns or it.get("gain") is None:
+        return None, log  # a one-shot drive: nothing to compare with yet
+    state = IterationState(base_drive=np.asarray(table["base_drive"], float) - u0,
+                           correction=np.asarray(table["correction"], float),
+                           gain=float(it["gain"]), base_rms_error=float(it["base_rms_error"]),
+                           halvings=int(it.get("halvings", 0)))
+    return state, log
+
+
 def run_demo(args: argparse.Namespace) -> int:
-    from ehss.compensation.demo import demonstrate, write_demo_report
+    from ehss.experiments.compensation_demo import demonstrate, write_demo_report
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -145,23 +341,3 @@ def run_demo(args: argparse.Namespace) -> int:
     for p in paths:
         print(f"wrote {p}")
     return 0
-
-
-def _offsets(path: str) -> tuple[float, float] | None:
-    """(u0, y0) of the model file's ``offsets``, or None if it has none (already read as
-    a valid model by :meth:`ArmaxModel.load_json`)."""
-    import json
-    import math
-
-    doc = json.loads(Path(path).read_text())
-    off = doc.get("offsets")
-    if off is None:
-        return None
-    try:
-        u0, y0 = float(off["input"]), float(off["output"])
-    except (TypeError, KeyError, ValueError):
-        raise DataError(f"model file {path!r}: offsets must be an object with numbers "
-                        "'input' and 'output'") from None
-    if not (math.isfinite(u0) and math.isfinite(y0)):
-        raise DataError(f"model file {path!r}: offsets must be finite")
-    return u0, y0

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import sys
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ehss.cli._outputs import InputFile
 from ehss.errors import ParameterError
 
 __all__ = [
@@ -23,23 +23,31 @@ __all__ = [
     "check_outputs",
     "write_outputs",
     "report_warnings",
-    "holdout_fraction",
 ]
+
+
+#: How columns are chosen, shown in --help.
+COLUMN_HELP = ("by header name or, in text files, by number counted from 1 (1 is the first "
+               "column, as in MATLAB and awk); text files without a header row, such as "
+               "DaISy .dat records, are read by number")
 
 
 def add_record_arguments(p: argparse.ArgumentParser) -> None:
     """DATA, --input, --output, --fs, --time-column."""
-    p.add_argument("data", metavar="DATA",
-                   help="record file: .csv, .mat (v5 or v7.3), .h5/.hdf5 or .npz")
+    p.add_argument("data", metavar="DATA", type=InputFile,
+                   help="record file: text (.csv/.txt/.dat/.tsv; comma, semicolon, tab or "
+                   "whitespace separated; header row optional), .mat (v5 or v7.3), "
+                   ".h5/.hdf5, .npz or .parquet")
     p.add_argument("--input", required=True, metavar="COL",
-                   help="input column (e.g. the loop's reference)")
+                   help="input column (e.g. the loop's reference), " + COLUMN_HELP)
     p.add_argument("--output", required=True, metavar="COL",
-                   help="output column (the measured controlled variable)")
+                   help="output column (the measured controlled variable): name, or number "
+                   "from 1")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate in Hz (needed when the file has no time column)")
     p.add_argument("--time-column", default="t", metavar="COL",
-                   help="time column in seconds, used for the sample rate if present "
-                   "(default: %(default)s)")
+                   help="time column in seconds (name, or number from 1), used for the "
+                   "sample rate if present (default: %(default)s)")
 
 
 @dataclass(frozen=True)
@@ -54,14 +62,37 @@ class Record:
 
 
 def load_record(args: argparse.Namespace) -> Record:
-    """Read ``--input``/``--output`` from DATA and find the sample rate."""
+    """Read ``--input``/``--output`` from DATA, find the sample rate and check the scale.
+
+    Raises
+    ------
+    ParameterError
+        If --input, --output and --time-column do not name three different columns.
+    DataError
+        If the file cannot be read (see :func:`ehss.io.read_columns`), the sample rate
+        cannot be found (:func:`ehss.io.sample_rate`), or a column is constant or beyond
+        the magnitudes ehss computes with (:func:`ehss._checks.check_scale`); the message
+        names the file and the column.
+    """
+    from ehss._checks import check_scale
     from ehss.io import read_columns, sample_rate
 
     if args.input == args.output:
         raise ParameterError(f"--input and --output are the same column {args.input!r}")
     table = read_columns(args.data, [args.input, args.output], time_column=args.time_column)
+    where = f"{str(table.path)!r}"
+    if table.label(args.input) == table.label(args.output):
+        raise ParameterError(f"--input {args.input} and --output {args.output} are the same "
+                             f"{table.label(args.input)} of {where}")
+    if table.time_column is not None:
+        for option, key in (("--input", args.input), ("--output", args.output)):
+            if table.label(table.time_column) == table.label(key):
+                raise ParameterError(f"--time-column {table.time_column} and {option} {key} "
+                                     f"are the same {table.label(key)} of {where}")
     fs = sample_rate(table, args.fs)
     u, y = table[args.input], table[args.output]
+    check_scale(u, f"{where}: {table.label(args.input)} (--input)")
+    check_scale(y, f"{where}: {table.label(args.output)} (--output)")
     t = table.time if table.time is not None else np.arange(u.size) / fs
     return Record(path=Path(args.data), t=t, u=u, y=y, fs=fs)
 
@@ -92,30 +123,22 @@ def int_list(text: str) -> list[int]:
     return list(dict.fromkeys(out))
 
 
-def holdout_fraction(value: float | None) -> float:
-    """Check ``--holdout`` (0 allowed: no held-out part)."""
-    if value is None:
-        return 0.0
-    if not (math.isfinite(value) and 0.0 <= value < 1.0):
-        raise ParameterError(f"--holdout {value} must be in [0, 1)")
-    return float(value)
+def check_outputs(*paths: str | Path | None, inputs: Sequence[str | Path] = ()) -> list[Path]:
+    """Check before any work that every output can be written without losing a file.
 
+    The command line already checks every declared file argument before a command runs
+    (:func:`ehss.cli._outputs.check_paths`); this is for outputs known only later.
+    """
+    from ehss._files import check_outputs as check
 
-def check_outputs(*paths: str | Path | None) -> list[Path]:
-    """Check before any work that every output can be written, and that none repeats."""
-    from ehss._files import check_writable
-
-    out = [check_writable(p) for p in paths if p is not None]
-    resolved = [p.resolve() for p in out]
-    if len(set(resolved)) != len(resolved):
-        raise ParameterError("two outputs would be written to the same file")
-    return out
+    return check([p for p in paths if p is not None], inputs=inputs)
 
 
 def write_outputs(writers: dict[Path, Callable[[Path], None]]) -> None:
     """Write every output to a temporary file first; rename them only when all succeeded.
 
-    ``writers`` maps each final path to a function writing the content to a given path.
+    ``writers`` maps each final path to a function writing the content to a given path
+    (for a table and its sidecar: :func:`ehss.io.table_writers`).
     """
     from ehss._files import atomic_path
 

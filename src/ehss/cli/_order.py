@@ -1,37 +1,59 @@
-"""``ehss order``: compare ARMAX orders with AIC, FPE or MDL (and held-out fit)."""
+"""``ehss order``: compare model orders the way ``ehss identify`` validates one.
+
+A thin adapter over :func:`ehss.workflow.select_orders`: the record is prepared once as
+``ehss identify`` prepares it (held-out end or ``--validate FILE``, ``--detrend``,
+``--decimate``, ``--band``), every candidate is fitted with the estimator ``identify``
+uses (same ``--method`` vocabulary) and validated as ``identify`` validates, ranked by that
+fit (AIC, FPE and MDL are columns; the verdict too), never recommending an unstable model;
+the exact ``ehss identify`` command that refits the pick is printed, and running it
+reports the same fit.
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
+import shlex
 from pathlib import Path
 
 import numpy as np
 
 from ehss.cli._dataargs import (
     add_record_arguments,
-    check_outputs,
-    holdout_fraction,
     int_list,
     load_record,
     report_warnings,
     write_outputs,
 )
+from ehss.cli._identify import _decimate_arg
+from ehss.cli._outputs import InputFile, OutputTable
 from ehss.errors import ParameterError
 
-__all__ = ["register", "run"]
+__all__ = ["register", "run", "identify_command"]
 
-_COLUMNS = ("na", "nb", "nc", "delay", "n_params", "loss", "aic", "fpe", "mdl", "fit_pct")
+_COLUMNS = ("na", "nb", "nc", "delay", "n_params", "loss", "aic", "fpe", "mdl", "fit_pct",
+            "simulation_fit_pct", "stable", "max_pole_radius", "accepted")
+_DEFAULT_HOLDOUT = 0.3
+_METHOD_HELP = ("arx: least squares; armax: prediction-error minimisation from extended "
+                "least squares; oe: output error by prediction-error minimisation (nc is "
+                "ignored); rels: the paper's recursive extended least squares; rml: recursive "
+                "maximum likelihood")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ehss.identification import INITS, METHODS
+    from ehss.workflow import DEFAULT_METHOD
+
     p = sub.add_parser(
         "order",
-        help="order-selection table (AIC, FPE, MDL, held-out fit) over a grid of ARMAX orders",
-        description="Fit every combination of the candidate orders to the first part of the "
-        "record, score each by AIC, FPE and MDL on its one-step prediction errors and by "
-        "the simulation fit on the held-out end, and print the table and the best. Lists "
-        "are like 2,3,4 or 2-6.",
+        help="order-selection table (validation fit, AIC, FPE, MDL, verdict) over a grid",
+        description="Prepare the record as ehss identify does (held-out end or --validate "
+        "FILE, detrend, decimation), fit every combination of the candidate orders with "
+        "the estimator identify will use, validate each as identify does (free-run fit on "
+        "the validation data; AIC, FPE and MDL on the one-step prediction errors of the "
+        "estimation data; the verdict), print the table, the best stable candidate and the "
+        "ehss identify command that refits it with the same fit. Lists are like 2,3,4 or "
+        "2-6.",
     )
     add_record_arguments(p)
     p.add_argument("--na", type=int_list, required=True, metavar="LIST",
@@ -41,87 +63,213 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--nc", type=int_list, required=True, metavar="LIST",
                    help="candidate orders of C")
     p.add_argument("--delay", type=int_list, default=[1], metavar="LIST",
-                   help="candidate input delays in samples (default: 1)")
-    p.add_argument("--criterion", default="aic", choices=("aic", "fpe", "mdl", "fit"),
-                   help="how the best is chosen (default: %(default)s; fit = held-out "
-                   "simulation fit)")
-    p.add_argument("--method", default="els", choices=("els", "rels"),
-                   help="estimator for each candidate: batch extended least squares or "
-                   "RELS (default: %(default)s)")
-    p.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
-                   help="fraction at the end kept for the fit column; 0 uses all data "
-                   "for estimation and leaves fit empty (default: %(default)s)")
-    p.add_argument("--out", metavar="TABLE.csv", help="also write the table as CSV")
+                   help="candidate input delays in samples of the record (default: 1)")
+    p.add_argument("--criterion", choices=("fit", "aic", "fpe", "mdl"), default="fit",
+                   help="how the best is chosen: the free-run fit on the validation data "
+                   "(the one identify reports), or an information criterion on the "
+                   "estimation data (default: %(default)s)")
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
+                   help=f"estimator for each candidate, as in identify: {_METHOD_HELP} "
+                   "(default: %(default)s)")
+    p.add_argument("--init", default="batch", choices=INITS,
+                   help="start of rels/rml: from the batch estimate or the paper's zero "
+                   "start (default: %(default)s)")
+    p.add_argument("--holdout", type=float, metavar="FRACTION",
+                   help="fraction at the end of the record kept for validation (default: "
+                   f"{_DEFAULT_HOLDOUT}, or none with --validate)")
+    p.add_argument("--validate", metavar="FILE", type=InputFile,
+                   help="validate on this separate record (same column options and sample "
+                   "rate) instead of the held-out end; the whole DATA is then estimation data")
+    p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="band of interest (Hz), as in identify: the fit is scored there and "
+                   "the decimation aims at it (default: up to 0.45 fs)")
+    p.add_argument("--detrend", choices=("mean", "linear", "none"), default="mean",
+                   help="remove the mean (operating point) or a straight line from the "
+                   "estimation and the validation data (default: %(default)s)")
+    p.add_argument("--decimate", default="auto", metavar="auto|none|N",
+                   help="decimate an oversampled record by N before fitting, as identify "
+                   "does (default: %(default)s)")
+    p.add_argument("--initial", choices=("estimate", "zero"), default="estimate",
+                   help="initial state of the validation simulation: least-squares "
+                   "estimate or rest (default: %(default)s)")
+    p.add_argument("--out", metavar="TABLE.csv", type=OutputTable,
+                   help="also write the table: .csv (with a .json sidecar), .parquet, .h5, "
+                   ".npz or .mat")
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from ehss.identification.order import select_order
-
-    holdout = holdout_fraction(args.holdout)
-    if args.criterion == "fit" and holdout == 0.0:
-        raise ParameterError("--criterion fit needs --holdout > 0")
+def _check_args(args: argparse.Namespace) -> dict:
+    if args.validate is not None and args.holdout is not None:
+        raise ParameterError("give either --holdout or --validate, not both: the separate "
+                             "record is the validation data")
+    holdout = _DEFAULT_HOLDOUT if args.holdout is None else args.holdout
+    if args.validate is None and not (math.isfinite(holdout) and 0.0 < holdout < 1.0):
+        raise ParameterError(f"--holdout {holdout} must be in (0, 1): orders are compared "
+                             "on held-out data (or give --validate FILE)")
+    band = None
+    if args.band is not None:
+        lo, hi = args.band
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+            raise ParameterError(f"--band {lo:g} {hi:g} must satisfy 0 <= LO < HI")
+        band = (lo, hi)
+    for name in ("na", "nb", "nc", "delay"):
+        low = 1 if name == "na" else 0
+        bad = [v for v in getattr(args, name) if v < low]
+        if bad:
+            raise ParameterError(f"--{name} {bad[0]} must be >= {low}")
     n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay)
     if n_grid > 500:
         raise ParameterError(f"the grid has {n_grid} candidates; keep it to 500 or fewer")
-    check_outputs(args.out)
+    return {"holdout": None if args.validate is not None else holdout, "band": band,
+            "decimate": _decimate_arg(args.decimate),
+            "detrend": None if args.detrend == "none" else args.detrend}
+
+
+def run(args: argparse.Namespace) -> int:
+    from ehss.workflow import select_orders
+
+    opts = _check_args(args)
     rec = load_record(args)
-    n = rec.u.size
-    n_est = int(round(n * (1.0 - holdout)))
-    u_mean = float(np.mean(rec.u[:n_est]))
-    y_mean = float(np.mean(rec.y[:n_est]))
-    u, y = rec.u - u_mean, rec.y - y_mean
-    validation = None if holdout == 0.0 else (u[n_est:], y[n_est:])
+    validation = opts["holdout"]
+    if args.validate is not None:
+        val = load_record(argparse.Namespace(**{**vars(args), "data": args.validate}))
+        if not math.isclose(val.fs, rec.fs, rel_tol=1e-6):
+            raise ParameterError(f"--validate {args.validate} is sampled at {val.fs:g} Hz, "
+                                 f"DATA at {rec.fs:g} Hz: they must match")
+        validation = (val.u, val.y)
+    if opts["band"] is not None and opts["band"][1] > rec.fs / 2:
+        raise ParameterError(f"--band upper edge {opts['band'][1]:g} Hz is above fs/2 = "
+                             f"{rec.fs / 2:g} Hz")
     with report_warnings("order"):
-        sel = select_order(
-            u[:n_est], y[:n_est], na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
-            dt=1.0 / rec.fs, criterion=args.criterion, validation=validation,
-            method=args.method,
+        search = select_orders(
+            rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
+            method=args.method, init=args.init, validation=validation,
+            band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
+            initial=args.initial, criterion=args.criterion,
         )
-    _print_table(sel, rec, args, n_est)
+    command = identify_command(args, search)
+    _print_table(search, rec, args)
+    print(f"refit and validate it with:\n  {command}")
     if args.out is not None:
-        from ehss.io import write_csv
-
-        cols = {c: np.array([_value(r, c) for r in sel.table], dtype=np.float64)
-                for c in _COLUMNS}
+        cols = {c: np.array([_value(search, i, c) for i in range(len(search.table))],
+                            dtype=np.float64) for c in _COLUMNS}
         from ehss._provenance import versions
-        from ehss.io import write_json
+        from ehss.io import table_writers
 
+        p = search.prepared
+        na, nb, nc, d = search.best_orders
         sidecar = {
             "what": f"order selection {args.input} -> {args.output}",
             "data": str(rec.path),
+            "validate": args.validate,
+            "holdout": opts["holdout"],
             "method": args.method,
+            "init": args.init,
             "criterion": args.criterion,
-            "n_estimation_samples": n_est,
-            "best": {"na": sel.best.na, "nb": sel.best.nb, "nc": sel.best.nc,
-                     "delay": sel.best.delay},
+            "detrend": opts["detrend"],
+            "decimation": p.decimation,
+            "fs_data_hz": p.fs,
+            "fs_model_hz": p.fs_model,
+            "band_hz": None if opts["band"] is None else list(opts["band"]),
+            "initial_state": args.initial,
+            "n_estimation_samples": int(p.u.size),
+            "n_validation_samples": int(p.u_val.size),
+            "delay_column": "samples of the record",
+            "best": {"na": na, "nb": nb, "nc": nc, "delay": d},
+            "identify_command": command,
             "versions": versions(),
         }
-        out = Path(args.out)
-        write_outputs({out: lambda tmp: write_csv(tmp, cols),
-                       out.with_suffix(".json"): lambda tmp: write_json(tmp, sidecar)})
+        write_outputs(table_writers(Path(args.out), cols, sidecar))
     return 0
 
 
-def _value(row, column: str) -> float:
-    return float(row.fit if column == "fit_pct" else getattr(row, column))
+def identify_command(args: argparse.Namespace, search) -> str:
+    """The ``ehss identify`` command line that refits the pick of ``search`` (the result
+    of :func:`ehss.workflow.select_orders` for ``args``) with every setting that affects
+    the model and its fit."""
+    na, nb, nc, d = search.best_orders
+    cmd = ["ehss", "identify", str(args.data), "--input", args.input, "--output", args.output]
+    if args.fs is not None:
+        cmd += ["--fs", repr(args.fs)]
+    if args.time_column != "t":
+        cmd += ["--time-column", args.time_column]
+    cmd += ["--na", str(na), "--nb", str(nb), "--nc", str(nc), "--delay", str(d),
+            "--method", args.method]
+    if args.method in ("rels", "rml"):
+        cmd += ["--init", args.init]
+    if args.validate is not None:
+        cmd += ["--validate", str(args.validate)]
+    else:
+        cmd += ["--holdout", repr(_DEFAULT_HOLDOUT if args.holdout is None else args.holdout)]
+    cmd += ["--detrend", args.detrend, "--decimate", str(args.decimate).strip().lower()]
+    if args.band is not None:
+        cmd += ["--band", repr(args.band[0]), repr(args.band[1])]
+    if args.initial != "estimate":
+        cmd += ["--initial", args.initial]
+    cmd += ["--out", "MODEL.json"]
+    return shlex.join(cmd)
 
 
-def _print_table(sel, rec, args, n_est: int) -> None:
+def _value(search, i: int, column: str) -> float:
+    row = search.table[i]
+    rep, verdict = search.reports[i], search.verdicts[i]
+    if column == "delay":
+        return float(search.delays[i])
+    if column == "fit_pct":
+        return float(row.fit)
+    if column == "simulation_fit_pct":
+        return math.nan if rep is None else float(rep.simulation_fit_pct)
+    if column == "accepted":
+        return math.nan if verdict is None else float(verdict.accepted)
+    return float(getattr(row, column))
+
+
+def _fit_text(fit: float | None) -> str:
+    from ehss.validation import DIVERGED_FIT_PCT
+
+    if fit is None or math.isnan(fit):
+        return ""
+    return "diverges" if not math.isfinite(fit) or fit < DIVERGED_FIT_PCT else f"{fit:.2f}"
+
+
+def _print_table(search, rec, args) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"ARMAX orders for {args.input} → {args.output} ({rec.path.name}, "
-                  f"{n_est} estimation samples, {args.method})")
-    for c in ("", "na", "nb", "nc", "delay", "params", "loss", "AIC", "FPE", "MDL", "fit %"):
+    from ehss.validation import fit_text
+
+    p = search.prepared
+    where = (f"validated on {Path(args.validate).name}" if args.validate is not None
+             else f"validated on the held-out {p.holdout:g}")
+    rate = (f", decimated by {p.decimation} to {p.fs_model:g} Hz" if p.decimation > 1
+            else "")
+    table = Table(title=f"Orders for {args.input} → {args.output} ({rec.path.name}, "
+                  f"{p.u.size} estimation samples{rate}, {args.method}, {where})")
+    band = p.band_hz is not None and any(r is not None and r.band_fit_pct is not None
+                                         for r in search.reports)
+    heads = ["", "na", "nb", "nc", "delay", "params", "loss", "AIC", "FPE", "MDL", "fit %"]
+    heads += ["band fit %"] if band else []
+    heads += ["max |pole|", "verdict"]
+    for c in heads:
         table.add_column(c, justify="right")
-    for r in sel.table:
-        mark = "★" if r is sel.best else ""
-        fit = "" if math.isnan(r.fit) else f"{r.fit:.2f}"
-        table.add_row(mark, str(r.na), str(r.nb), str(r.nc), str(r.delay), str(r.n_params),
-                      f"{r.loss:.6g}", f"{r.aic:.6g}", f"{r.fpe:.6g}", f"{r.mdl:.6g}", fit)
-    console = Console(width=120, highlight=False)
+    for i, r in enumerate(search.table):
+        rep, verdict = search.reports[i], search.verdicts[i]
+        mark = "★" if r is search.best else ("unstable" if not r.stable else "")
+        cells = [mark, str(r.na), str(r.nb), str(r.nc), str(search.delays[i]),
+                 str(r.n_params), f"{r.loss:.6g}", f"{r.aic:.6g}", f"{r.fpe:.6g}",
+                 f"{r.mdl:.6g}", _fit_text(None if rep is None else rep.simulation_fit_pct)]
+        if band:
+            cells.append(_fit_text(None if rep is None else rep.band_fit_pct))
+        cells += [f"{r.max_pole_radius:.4f}",
+                  "" if verdict is None else ("accepted" if verdict.accepted else "no")]
+        table.add_row(*cells)
+    console = Console(width=150, highlight=False)
     console.print(table)
-    b = sel.best
-    console.print(f"best by {args.criterion}: --na {b.na} --nb {b.nb} --nc {b.nc} "
-                  f"--delay {b.delay}")
+    na, nb, nc, d = search.best_orders
+    rep = search.reports[search.best_index]
+    fit = f"simulation fit {fit_text(rep.simulation_fit_pct)}"
+    if rep.band_fit_pct is not None:
+        fit += f", in the band {fit_text(rep.band_fit_pct)}"
+    console.print(f"best by {search.selection.criterion}: --na {na} --nb {nb} --nc {nc} "
+                  f"--delay {d} (method {search.method}; {fit}; unstable candidates are "
+                  "never recommended)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from ehss.cli._outputs import InputFile, OutputFile
 from ehss.params import PRESETS, describe_params, load_params, preset, save_params
 
 __all__ = ["register"]
@@ -19,8 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--preset", default="default", choices=sorted(PRESETS),
                      help="named parameter set (default: %(default)s)")
-    src.add_argument("--params", metavar="FILE.toml", help="read a (partial) TOML parameter file")
-    p.add_argument("--save", metavar="FILE.toml", help="write the parameter set as TOML")
+    src.add_argument("--params", metavar="FILE.toml", type=InputFile,
+                     help="read a (partial) TOML parameter file")
+    p.add_argument("--save", metavar="FILE.toml", type=OutputFile,
+                   help="write the parameter set as TOML")
     p.set_defaults(func=run)
 
 

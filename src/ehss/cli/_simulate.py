@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss.cli._outputs import InputFile, OutputFile, OutputTable
 from ehss.errors import ParameterError
 from ehss.params import GRAVITY_M_S2, PRESETS, RigParams, load_params, params_to_dict, preset
 
@@ -41,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--loop", required=True, choices=("position", "acceleration", "force"))
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--signal", choices=SIGNALS, help="generated reference signal")
-    src.add_argument("--reference", metavar="FILE", help="read the reference from a file")
+    src.add_argument("--reference", metavar="FILE", type=InputFile,
+                     help="read the reference from a file")
     p.add_argument("--column", default="reference",
                    help="reference column in --reference FILE (default: %(default)s)")
     p.add_argument("--amplitude", type=float,
@@ -61,11 +63,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the signal and the sensor noise (default: %(default)s)")
     par = p.add_mutually_exclusive_group()
-    par.add_argument("--params", metavar="FILE.toml", help="(partial) TOML parameter file")
+    par.add_argument("--params", metavar="FILE.toml", type=InputFile,
+                     help="(partial) TOML parameter file")
     par.add_argument("--preset", choices=sorted(PRESETS), default="default",
                      help="named parameter set (default: %(default)s)")
-    p.add_argument("--out", required=True, metavar="run.csv", help="output CSV")
-    p.add_argument("--plot", metavar="run.png", help="also draw the record")
+    p.add_argument("--out", required=True, metavar="run.csv", type=OutputTable,
+                   help="record to write: .csv (with a .json sidecar), .parquet, .h5, .npz "
+                   "or .mat")
+    p.add_argument("--plot", metavar="run.png", type=OutputFile, help="also draw the record")
     p.set_defaults(func=run)
 
 
@@ -96,17 +101,10 @@ def _load_params(args: argparse.Namespace) -> RigParams:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ehss._files import atomic_path, check_writable
-    from ehss.io import read_columns, sample_rate, write_csv, write_json
+    from ehss.cli._dataargs import write_outputs
+    from ehss.io import read_columns, sample_rate, table_writers
 
     out = Path(args.out)
-    sidecar = out.with_suffix(".json")
-    if sidecar == out:
-        raise ParameterError(f"--out {str(out)!r} must not end in .json (that is the sidecar)")
-    check_writable(out)
-    check_writable(sidecar)
-    if args.plot:
-        check_writable(args.plot)
     if args.duration is not None and not args.duration > 0:
         raise ParameterError(f"--duration {args.duration!r} must be > 0")
 
@@ -135,16 +133,13 @@ def run(args: argparse.Namespace) -> int:
         result = simulate(args.loop, values, params=params, fs=fs, seed=args.seed)
 
     meta = _metadata(result, kind, settings)
-    with contextlib.ExitStack() as stack:
-        tmp_csv = stack.enter_context(atomic_path(out))
-        tmp_json = stack.enter_context(atomic_path(sidecar))
-        write_csv(tmp_csv, result.to_columns())
-        write_json(tmp_json, meta)
-        if args.plot:
-            from ehss.simulation.plot import plot_simulation
+    writers = table_writers(out, result.to_columns(), meta)
+    if args.plot:
+        from ehss.plots import plot_simulation
 
-            # the temporary file keeps the plot's suffix, which picks the format
-            plot_simulation(result, stack.enter_context(atomic_path(args.plot)))
+        # the temporary file keeps the plot's suffix, which picks the format
+        writers[Path(args.plot)] = lambda tmp: plot_simulation(result, tmp)
+    write_outputs(writers)
     hits = result.limits_hit
     if hits:
         import sys

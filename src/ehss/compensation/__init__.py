@@ -1,10 +1,29 @@
-"""Feed-forward inverse-model compensation of identified closed loops (ZPETC, ZMETC)."""
+"""Feed-forward inverse-model compensation of identified closed loops.
+
+:mod:`~ehss.compensation.inverse` designs the inverse (exact stable inversion by default,
+ZPETC and ZMETC as options) inside the band the model was validated over, and
+:mod:`~ehss.compensation.inverse_model` holds it and applies it to a reference;
+:mod:`~ehss.compensation.apply` computes a drive file from it; :mod:`~ehss.compensation.checks`
+refuses drives that would exceed a sane gain or the rig's limits; and
+:mod:`~ehss.compensation.iteration` corrects a drive from a measured run (model-based or
+from the measured frequency response), refusing updates that make the error grow.
+Experiments on the simulated rig live in :mod:`ehss.experiments`.
+"""
 
 from __future__ import annotations
 
-from ehss.compensation.apply import compensate, reference_rate
-from ehss.compensation.demo import CompensationDemo, demonstrate, plot_demo, write_demo_report
+from ehss.compensation.apply import as_reference, compensate
+from ehss.compensation.checks import (
+    DEFAULT_MAX_GAIN,
+    REST_TOLERANCE,
+    DriveCheck,
+    DriveLimits,
+    check_at_rest,
+    check_drive,
+    fade_to_rest,
+)
 from ehss.compensation.inverse import (
+    CIRCLE_MARGIN,
     METHODS,
     InverseModel,
     band_taper,
@@ -13,19 +32,28 @@ from ehss.compensation.inverse import (
     zmetc_phase,
     zpetc_magnitude,
 )
-from ehss.compensation.refine import DriveUpdate, RefineResult, refine, update_drive
+from ehss.compensation.iteration import (
+    UPDATE_METHODS,
+    DriveUpdate,
+    IterationState,
+    RunRecord,
+    lag_samples,
+    learning_gain,
+    run_record,
+    update_drive,
+)
 
 __all__ = [
     "compensate",
-    "CompensationDemo",
-    "demonstrate",
-    "plot_demo",
-    "write_demo_report",
-    "RefineResult",
-    "refine",
-    "DriveUpdate",
-    "update_drive",
-    "reference_rate",
+    "as_reference",
+    "DEFAULT_MAX_GAIN",
+    "REST_TOLERANCE",
+    "DriveCheck",
+    "DriveLimits",
+    "check_at_rest",
+    "check_drive",
+    "fade_to_rest",
+    "CIRCLE_MARGIN",
     "METHODS",
     "InverseModel",
     "band_taper",
@@ -33,4 +61,12 @@ __all__ = [
     "design_inverse_tf",
     "zmetc_phase",
     "zpetc_magnitude",
+    "UPDATE_METHODS",
+    "DriveUpdate",
+    "IterationState",
+    "RunRecord",
+    "lag_samples",
+    "learning_gain",
+    "run_record",
+    "update_drive",
 ]

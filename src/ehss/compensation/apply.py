@@ -1,4 +1,4 @@
-"""Compensate a reference with the inverse of an identified closed-loop model."""
+"""Compensate a reference with the inverse of an identified closed-loop model, safely."""
 
 from __future__ import annotations
 
@@ -7,62 +7,98 @@ from typing import Any
 
 import numpy as np
 
-from ehss.compensation.inverse import InverseModel, _as_reference, design_inverse
-from ehss.errors import DataError
+from ehss._checks import as_signal
+from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_at_rest, check_drive
+from ehss.compensation.inverse import InverseModel, design_inverse
+from ehss.errors import DataError, ParameterError
+from ehss.identification.model import ArmaxModel
 
-__all__ = ["compensate", "reference_rate"]
+__all__ = ["compensate", "as_reference"]
 
 #: Relative mismatch allowed between the model's sample rate and the reference's.
 _RATE_RTOL = 1e-6
 
 
-def reference_rate(reference: Any) -> float | None:
-    """Sample rate (Hz) carried by a reference object, or ``None`` for a bare array."""
-    for name in ("fs", "fs_hz", "sample_rate_hz"):
-        fs = getattr(reference, name, None)
-        if fs is not None:
-            return float(fs)
-    return None
+def as_reference(reference: Any, fs: float | None) -> tuple[np.ndarray, float]:
+    """A reference and its rate from the one accepted form: a Signal, or an array and fs.
 
+    Parameters
+    ----------
+    reference : ehss.signals.Signal or array_like, shape (n_samples,)
+    fs : float or None
+        Sample rate (Hz) of an array; for a Signal it must be None or agree with it.
 
-def _signal_values(reference: Any) -> Any:
-    for name in ("values", "data", "x", "y", "samples"):
-        v = getattr(reference, name, None)
-        if isinstance(v, np.ndarray):
-            return v
-    return reference
+    Returns
+    -------
+    values : ndarray, shape (n_samples,)
+    fs : float
+
+    Raises
+    ------
+    ParameterError
+        No rate for an array, a non-positive rate, or a rate different from the Signal's.
+    DataError
+        Bad samples.
+    """
+    from ehss.signals import Signal
+
+    if isinstance(reference, Signal):
+        if fs is not None and not math.isclose(float(fs), reference.fs, rel_tol=_RATE_RTOL):
+            raise ParameterError(f"fs={fs!r} differs from the Signal's {reference.fs:g} Hz")
+        return as_signal(reference.values, "reference"), reference.fs
+    if fs is None:
+        raise ParameterError("fs must be given with an array reference (or pass an "
+                             "ehss.signals.Signal, which carries its rate)")
+    if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)):
+        raise TypeError(f"fs={fs!r} must be a number (Hz)")
+    if not (math.isfinite(fs) and fs > 0):
+        raise ParameterError(f"fs={fs!r} must be a finite number > 0 (Hz)")
+    return as_signal(reference, "reference"), float(fs)
 
 
 def compensate(
-    model: Any,
+    model: ArmaxModel | InverseModel,
     reference: Any,
     *,
-    method: str = "zpetc",
+    fs: float | None = None,
+    method: str = "stable",
     band_hz: tuple[float, float] | None = None,
     preview: int | None = None,
-    fs: float | None = None,
-    **options: Any,
+    known: tuple[Any, Any] | None = None,
+    max_gain: float | None = DEFAULT_MAX_GAIN,
+    limits: DriveLimits | None = None,
+    loop: str | None = None,
+    params: Any = None,
+    require_rest: bool = True,
 ) -> np.ndarray:
-    """Drive that makes the identified closed loop follow ``reference``.
+    """Drive that makes the identified closed loop follow ``reference``, checked.
 
     Parameters
     ----------
     model : ArmaxModel or InverseModel
         The identified closed loop (reference → measured output), or an already designed
         inverse.
-    reference : array_like, shape (n_samples,), or Signal
-        Desired output history, sampled at ``model.fs``. A ``Signal`` (anything with an
-        ``fs`` attribute) has its rate checked.
-    method : {"zpetc", "zmetc"}
-        Inverse design (see :mod:`ehss.compensation.inverse`).
-    band_hz : (lo, hi), optional
-        Zero-phase band limit of the drive (Hz).
-    preview : int, optional
-        Future samples usable; ``None`` = the whole file is known.
+    reference : ehss.signals.Signal, or array_like of shape (n_samples,) with ``fs``
+        Desired output history about the model's operating point, at the model's rate.
     fs : float, optional
-        Sample rate of a bare-array reference, checked against the model's.
-    **options
-        Passed to :func:`~ehss.compensation.inverse.design_inverse_tf`.
+        Sample rate of an array reference (Hz); must equal the model's.
+    method : {"stable", "zpetc", "zmetc"}
+        Inverse design (see :mod:`ehss.compensation.inverse`); stable inversion, exact in
+        the band, is the default.
+    band_hz : (lo, hi), optional
+        Band limit of the inverse (Hz). Default: the band the model was validated over,
+        ``model.band_hz``; a model without one needs ``band_hz``.
+    preview : int, optional
+        Future samples usable (ZPETC, ZMETC); ``None`` = the whole file is known.
+    known : (num, den), optional
+        Known factor in series with the model (see
+        :func:`~ehss.compensation.inverse.design_inverse_tf`).
+    max_gain, limits, loop, params
+        Drive checks (:func:`~ehss.compensation.checks.check_drive`); ``max_gain=None``
+        switches the gain check off.
+    require_rest : bool
+        Refuse a reference that does not start and end at rest
+        (:func:`~ehss.compensation.checks.check_at_rest`; default).
 
     Returns
     -------
@@ -71,32 +107,45 @@ def compensate(
     Raises
     ------
     DataError
-        Empty, non-finite reference, or sample rate different from the model's.
+        Bad samples, or a sample rate different from the model's.
     ParameterError
-        Unusable model (unstable, ``b`` all zero, ...).
+        No band, an unusable model, a reference not at rest, or a drive that fails its
+        checks (the message gives the numbers).
 
     Examples
     --------
-    >>> from types import SimpleNamespace
-    >>> m = SimpleNamespace(a=[1.0, -0.5], b=[0.5], delay=1, dt=1e-3)
-    >>> compensate(m, [0.0, 0.0, 1.0, 1.0]).tolist()
-    [0.0, 2.0, 1.0, 1.0]
+    >>> from ehss.identification.model import ArmaxModel
+    >>> m = ArmaxModel(a=[1.0, -0.5], b=[0.5], delay=1, dt=1e-3, band_hz=(0.0, 100.0))
+    >>> r = np.exp(-(((np.arange(1000) - 500) / 100) ** 2))  # at rest, in the band
+    >>> u = compensate(m, r, fs=1000.0)
+    >>> bool(np.allclose(m.simulate(u), r, rtol=0, atol=1e-9))
+    True
     """
-    model_dt = getattr(model, "dt", None)
-    given = reference_rate(reference)
-    if given is None:
-        given = fs
-    elif fs is not None and not math.isclose(given, fs, rel_tol=_RATE_RTOL):
-        raise DataError(f"reference sample rate {given:g} Hz differs from fs={fs:g} Hz")
-    if given is not None and model_dt is not None and model_dt > 0 \
-            and not math.isclose(given * model_dt, 1.0, rel_tol=_RATE_RTOL):
-        raise DataError(
-            f"reference is sampled at {given:g} Hz but the model at {1.0 / model_dt:g} Hz "
-            f"(dt={model_dt:g} s); resample the reference or identify at its rate"
-        )
+    r, rate = as_reference(reference, fs)
     if isinstance(model, InverseModel):
         inverse = model
+        dt = model.dt
+    elif isinstance(model, ArmaxModel):
+        dt = model.dt
     else:
-        inverse = design_inverse(model, method=method, band_hz=band_hz, **options)
-    r = _as_reference(_signal_values(reference))
-    return inverse.apply(r, preview=preview)
+        raise TypeError(f"model must be an ArmaxModel or an InverseModel, not "
+                        f"{type(model).__name__}")
+    if not math.isclose(rate * dt, 1.0, rel_tol=_RATE_RTOL):
+        raise DataError(
+            f"reference is sampled at {rate:g} Hz but the model at {1.0 / dt:g} Hz "
+            f"(dt={dt:g} s); resample the reference or identify at its rate"
+        )
+    if isinstance(model, ArmaxModel):
+        if band_hz is None and model.band_hz is None:
+            raise ParameterError(
+                "the model carries no validated band (band_hz): give band_hz (e.g. the band "
+                "where its validation's coherence was high); without a band limit the "
+                "inverse amplifies everything the model never saw")
+        inverse = design_inverse(model, method=method, band_hz=band_hz, known=known)
+    if require_rest:
+        check_at_rest(r)
+    drive = inverse.apply(r, preview=preview)
+    if not np.all(np.isfinite(drive)):
+        raise ParameterError("the compensated drive is not finite (badly conditioned model)")
+    check_drive(drive, r, rate, max_gain=max_gain, limits=limits, loop=loop, params=params)
+    return drive

@@ -1,4 +1,4 @@
-"""Inverse-model feed-forward design: ZPETC and ZMETC with preview and a band limit.
+"""Inverse-model feed-forward design: exact stable inversion, ZPETC and ZMETC, band-limited.
 
 An identified closed loop (reference → measured output) is the ARMAX deterministic part
 
@@ -9,8 +9,24 @@ of eq (16) of the paper. Its inverse is what the identification is for: a drive
 inversion: the delay ``q^{-d}`` (inverting it needs future samples) and zeros of ``B``
 outside or near the unit circle (their inverse is unstable or rings). Because the whole
 drive file is known in advance, the delay is inverted exactly by *preview* (a non-causal
-advance), and the bad zeros are handled by one of two classic approximations:
+advance), and the bad zeros are handled by one of three designs:
 
+* **Stable inversion** (the default; Devasia, Chen & Paden 1996 in discrete time). Factor
+  ``B = k B_i B_o B_n``: zeros inside the unit circle ``B_i``, outside ``B_o`` (degree
+  ``s``), and near it ``B_n`` (``| |z| - 1 | < circle_margin``). The inverse is *exact*,
+
+  .. math:: F(q) = q^{d+s}\\,\\frac{A(q^{-1})}{k\\,B_i(q^{-1})\\,B_n(q^{-1})\\,D(q)},
+            \\qquad B_o(q^{-1}) = q^{-s} D(q),
+
+  with ``1/B_i`` run causally (forwards) and ``1/D(q)``, whose poles ``1/z`` lie inside the
+  unit circle in ``q``, run anti-causally (backwards over the record): ``G F = 1`` at every
+  frequency. A zero near the unit circle gives an inverse mode that decays too slowly for
+  a recursive filter to settle over a record (a time constant ``1/|ln|z||`` of more than
+  ``1/circle_margin`` samples), and oversampled identified models have them; ``1/B_n`` is
+  therefore applied in the frequency domain together with the band limit, exactly where
+  the band limit is non-zero and not at all where it is zero, so such a zero outside the
+  band cannot blow up the drive. A zero on the circle inside the band cannot be inverted
+  (the model says the loop does not pass that frequency): the design stops.
 * **ZPETC** (Tomizuka 1987, zero-phase-error tracking controller). Factor
   ``B = k B_s B_u`` into cancellable zeros ``B_s`` (inside the unit circle and well damped)
   and the rest ``B_u`` of degree ``s``. The inverse is
@@ -34,6 +50,22 @@ is a zero-phase raised-cosine taper applied by FFT to the reference before the i
 unity inside ``[lo, hi]``, smoothly to zero at ``lo/2`` and at ``cutoff_hz``, exactly zero
 beyond, so the inverse cannot amplify noise above the identified band.
 
+**Which one.** For a drive file (the whole reference known in advance) stable inversion is
+the better choice: it is exact inside the band whatever the zeros, where ZPETC leaves the
+magnitude error ``|B_u|^2/B_u(1)^2`` (which explodes when ``B_u(1)`` is small, as for the
+sampling zeros of an oversampled loop with zeros near ``z = 1``) and ZMETC a phase error.
+ZPETC and ZMETC remain the choice when only a short preview is available (real-time
+tracking of a reference known a few samples ahead): both are causal up to a fixed advance
+``d + s``, while the anti-causal part of stable inversion needs the reference until its
+settling time after each sample. ZPETC suits loops whose uncancelled zeros sit near
+``z = -1`` (its gain error stays out of band); ZMETC suits phase-tolerant, magnitude-
+critical tests.
+
+Every recursive filter starts in the steady state of the padded record's first sample
+(backwards: its last), so a reference that does not start at rest gives no start-up spike
+in the drive; the rig itself does start at rest, and :func:`ehss.compensation.compensate`
+checks that the reference does too.
+
 **Known factors.** Part of a closed loop may be known exactly and need not be identified:
 the acceleration loop's reference first passes the controller's acceleration generator,
 eq (10), GAR·s² = Kg s²/(s² + ωg s + δg) (discretised with a zero-order hold as the
@@ -53,17 +85,24 @@ where ``W > 0``). ``G_rest^{-1}`` (ZPETC or ZMETC) then acts on ``R_band`` as be
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import scipy.fft
 import scipy.signal
 
-from ehss._checks import as_signal
+from ehss.compensation.inverse_model import (
+    InverseModel,
+    _eval_ascending,
+    band_taper,
+    zmetc_phase,
+    zpetc_magnitude,
+)
 from ehss.errors import ParameterError
+from ehss.identification.model import ArmaxModel
 
 __all__ = [
+    "CIRCLE_MARGIN",
     "InverseModel",
     "METHODS",
     "design_inverse",
@@ -73,10 +112,18 @@ __all__ = [
     "zmetc_phase",
 ]
 
-METHODS = ("zpetc", "zmetc")
+METHODS = ("stable", "zpetc", "zmetc")
 
 #: Zeros closer than this to the unit circle cannot be inverted nor mirrored.
 _UNIT_CIRCLE_TOL = 1e-9
+
+#: Default ``circle_margin`` of stable inversion: zeros with ``| |z| - 1 |`` below it
+#: (an inverse mode slower than 1000 samples) are inverted in the frequency domain.
+CIRCLE_MARGIN = 1e-3
+
+#: Recursive inverse filters get 20 time constants of lead-in (their start-up transient
+#: falls by e^-20 ≈ 2e-9).
+_SETTLE_TIME_CONSTANTS = 20.0
 
 
 # --------------------------------------------------------------------------- helpers
@@ -88,11 +135,6 @@ def _poly_from_roots_ascending(roots: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.real_if_close(c, tol=1e6).real, dtype=float)
 
 
-def _eval_ascending(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Evaluate ``sum coef[i] x**i`` (``x = e^{-jωdt}`` gives a polynomial in q^-1)."""
-    return np.polynomial.polynomial.polyval(x, coef)
-
-
 def _zero_damping(z: np.ndarray, ) -> np.ndarray:
     """Damping ratio of the continuous mode ``s = ln z / dt`` of each zero (dt cancels)."""
     s = np.log(z.astype(complex))
@@ -100,248 +142,6 @@ def _zero_damping(z: np.ndarray, ) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         zeta = np.where(mag > 0, -s.real / np.where(mag > 0, mag, 1.0), 1.0)
     return zeta
-
-
-def band_taper(freq_hz: np.ndarray, band_hz: tuple[float, float] | None,
-               cutoff_hz: float | None) -> np.ndarray:
-    """Real, zero-phase gain of the band limit (raised-cosine edges).
-
-    Unity on ``[lo, hi]``; from ``hi`` to ``cutoff_hz`` a raised cosine down to exactly 0;
-    below ``lo`` a raised cosine from 1 at ``lo`` to 0 at ``lo/2`` (only when ``lo > 0``).
-    """
-    f = np.abs(np.asarray(freq_hz, dtype=float))
-    if band_hz is None:
-        return np.ones_like(f)
-    lo, hi = band_hz
-    w = np.ones_like(f)
-    if cutoff_hz is not None and cutoff_hz > hi:
-        x = np.clip((f - hi) / (cutoff_hz - hi), 0.0, 1.0)
-        w *= 0.5 * (1.0 + np.cos(np.pi * x))
-    if lo > 0.0:
-        x = np.clip((lo - f) / (0.5 * lo), 0.0, 1.0)
-        w *= 0.5 * (1.0 + np.cos(np.pi * x))
-    return w
-
-
-def zpetc_magnitude(b_u: np.ndarray, freq_hz: np.ndarray, dt: float) -> np.ndarray:
-    """Analytic ZPETC overall gain ``|B_u(e^{-jω dt})|^2 / B_u(1)^2`` (zero phase)."""
-    x = np.exp(-2j * np.pi * np.asarray(freq_hz, dtype=float) * dt)
-    return np.abs(_eval_ascending(b_u, x)) ** 2 / np.sum(b_u) ** 2
-
-
-def zmetc_phase(b_u: np.ndarray, extra_preview: int, freq_hz: np.ndarray,
-                dt: float) -> np.ndarray:
-    """Analytic ZMETC overall phase (rad): ``arg(B_u(e^{-jωdt}) / B_u^*(e^{-jωdt})) + ω dt p``."""
-    w = 2.0 * np.pi * np.asarray(freq_hz, dtype=float) * dt
-    x = np.exp(-1j * w)
-    ratio = _eval_ascending(b_u, x) / _eval_ascending(b_u[::-1], x)
-    return np.angle(ratio * np.exp(1j * w * extra_preview))
-
-
-# --------------------------------------------------------------------------- result
-@dataclass(frozen=True, kw_only=True)
-class InverseModel:
-    """A designed feed-forward inverse of a closed-loop model (ZPETC or ZMETC).
-
-    The drive is ``u(k) = v(k + preview)``, ``v = lfilter(num, den, r_band)``, with
-    ``r_band`` the band-limited reference.
-
-    Attributes
-    ----------
-    method : {"zpetc", "zmetc"}
-    num, den : ndarray
-        Causal filter in ascending powers of q^-1 (``den[0] == 1``).
-    preview : int
-        Samples of advance (non-causal part): model delay + leading zero b's + ``s`` (ZPETC)
-        or + the all-pass advance (ZMETC).
-    dt : float
-        Sample period (s).
-    b_u : ndarray
-        The uncancelled factor ``B_u`` (ascending powers of q^-1, ``[1.]`` if none).
-    extra_preview : int
-        Advance beyond the model delay for ``B_u`` (``s`` for ZPETC).
-    band_hz : (float, float) or None
-        Pass band ``(lo, hi)`` of the band limit; ``None`` for no band limit.
-    cutoff_hz : float or None
-        Above this frequency the band limit is exactly zero.
-    cancelled_zeros, uncancelled_zeros, poles : ndarray
-        Zeros cancelled exactly, zeros handled by the ZPETC/ZMETC factor, model poles.
-    model_delay : int
-        Total model delay (``delay`` plus leading zero b's).
-    known_num, known_den : ndarray
-        Known factor ``F = N/D`` in series with the inverted model (ascending powers of
-        q^-1; ``[1.]`` and ``[1.]`` for none). Its inverse is applied in the frequency
-        domain with the band limit (see the module notes).
-    """
-
-    method: str
-    num: np.ndarray
-    den: np.ndarray
-    preview: int
-    dt: float
-    b_u: np.ndarray
-    extra_preview: int
-    band_hz: tuple[float, float] | None = None
-    cutoff_hz: float | None = None
-    cancelled_zeros: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
-    uncancelled_zeros: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
-    poles: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
-    model_delay: int = 0
-    known_num: np.ndarray = field(default_factory=lambda: np.ones(1))
-    known_den: np.ndarray = field(default_factory=lambda: np.ones(1))
-
-    @property
-    def has_known(self) -> bool:
-        """Whether a known factor ``F`` other than 1 is inverted too."""
-        return not (self.known_num.size == 1 and self.known_den.size == 1
-                    and self.known_num[0] == self.known_den[0])
-
-    def known_response(self, freq_hz: np.ndarray) -> np.ndarray:
-        """Complex response of the known factor ``F = N/D`` at ``freq_hz``."""
-        x = np.exp(-2j * np.pi * np.asarray(freq_hz, dtype=float) * self.dt)
-        return _eval_ascending(self.known_num, x) / _eval_ascending(self.known_den, x)
-
-    @property
-    def fs(self) -> float:
-        """Sample rate (Hz)."""
-        return 1.0 / self.dt
-
-    # ---------------------------------------------------------------- responses
-    def band_response(self, freq_hz: np.ndarray) -> np.ndarray:
-        """Real gain of the band limit at ``freq_hz``."""
-        return band_taper(freq_hz, self.band_hz, self.cutoff_hz)
-
-    def frequency_response(self, freq_hz: np.ndarray, *, band: bool = True) -> np.ndarray:
-        """Complex response of the inverse: ``e^{jω dt preview} num/den`` (× band limit).
-
-        Parameters
-        ----------
-        freq_hz : array_like
-            Frequencies (Hz).
-        band : bool
-            Include the band limit (default).
-        """
-        f = np.asarray(freq_hz, dtype=float)
-        w = 2.0 * np.pi * f * self.dt
-        x = np.exp(-1j * w)
-        h = _eval_ascending(self.num, x) / _eval_ascending(self.den, x)
-        h = h * np.exp(1j * w * self.preview)
-        if self.has_known:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                h = h / self.known_response(f)
-        if band:
-            h = h * self.band_response(f)
-            if self.has_known:
-                h = np.where(self.band_response(f) > 0.0, h, 0.0)
-        return h
-
-    def design_response(self, freq_hz: np.ndarray) -> np.ndarray:
-        """Analytic overall response ``G·F`` the design aims at (no band limit).
-
-        A known factor is cancelled exactly and does not appear here.
-
-        ZPETC: ``|B_u|^2 / B_u(1)^2`` (real, non-negative); ZMETC: ``e^{jφ}`` with φ from
-        :func:`zmetc_phase`.
-        """
-        f = np.asarray(freq_hz, dtype=float)
-        if self.method == "zpetc":
-            return zpetc_magnitude(self.b_u, f, self.dt).astype(complex)
-        return np.exp(1j * zmetc_phase(self.b_u, self.extra_preview, f, self.dt))
-
-    # ---------------------------------------------------------------- apply
-    def apply(self, reference: Any, *, preview: int | None = None) -> np.ndarray:
-        """Drive that makes the modelled loop follow ``reference``.
-
-        Parameters
-        ----------
-        reference : array_like, shape (n_samples,)
-            Reference sampled at ``1/dt``. For an exact result it should start at rest
-            (zero over the first ``preview`` samples); after its end it is held at its
-            last value for the preview.
-        preview : int, optional
-            Future reference samples the compensator may use. ``None`` (default) means the
-            whole file is known and the full designed preview is used. With less preview
-            the drive is causal up to that advance and the tracking lags by the
-            difference.
-
-        Returns
-        -------
-        drive : ndarray, shape (n_samples,)
-
-        Raises
-        ------
-        DataError
-            Empty, non-1-D or non-finite reference.
-        ParameterError
-            Negative ``preview``.
-        """
-        r = _as_reference(reference)
-        advance = self.preview
-        if preview is not None:
-            if isinstance(preview, bool) or not isinstance(preview, (int, np.integer)) \
-                    or preview < 0:
-                raise ParameterError(f"preview={preview!r} must be a non-negative integer")
-            advance = min(int(preview), self.preview)
-        if self.band_hz is not None:
-            shape = None
-            if self.has_known:
-                def shape(f: np.ndarray) -> np.ndarray:
-                    w = band_taper(f, self.band_hz, self.cutoff_hz)
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        return np.where(w > 0.0, w / self.known_response(f), 0.0)
-            padded, npad = _fft_band_limit(r, self.dt, self.band_hz, self.cutoff_hz, shape,
-                                           padded=True)
-            # The band limit is non-causal: the limited reference rings a little before
-            # the record starts and after it ends. The inverse filter runs over that
-            # lead-in (starting at rest far before t = 0) and its preview reads the
-            # limited continuation, so the drive starts without the jump a recursive
-            # inverse would give to a reference that does not start exactly at rest.
-            r_ext = padded[: npad + r.size + advance]
-            v = scipy.signal.lfilter(self.num, self.den, r_ext)
-            return np.ascontiguousarray(v[npad + advance: npad + advance + r.size])
-        # r(k) held at its last value after the end: the preview needs r(N..N+p-1).
-        r_ext = np.concatenate([r, np.full(advance, r[-1])])
-        v = scipy.signal.lfilter(self.num, self.den, r_ext)
-        # u(k) = v(k + preview): the non-causal advance that inverts q^-d (and q^-s).
-        return np.ascontiguousarray(v[advance:])
-
-
-# --------------------------------------------------------------------------- design
-def _as_reference(reference: Any) -> np.ndarray:
-    data = getattr(reference, "values", None)
-    if data is None:
-        data = getattr(reference, "data", reference)
-    return as_signal(data, "reference")
-
-
-def _fft_band_limit(r: np.ndarray, dt: float, band_hz: tuple[float, float],
-                    cutoff_hz: float | None, shape: Any = None, *, padded: bool = False
-                    ) -> Any:
-    """Zero-phase band limit by FFT with constant-extended padding (no wrap-around).
-
-    ``shape(freq_hz) -> complex`` replaces the band taper when given (band limit times
-    the inverse of a known factor); it must vanish wherever the taper does. With
-    ``padded=True`` returns ``(y, npad)``: the limited signal with ``npad`` samples of
-    lead-in before the record and at least ``npad`` after it.
-    """
-    lo, hi = band_hz
-    widths = [w for w in ((cutoff_hz - hi) if cutoff_hz else 0.0, 0.5 * lo) if w > 0]
-    width = min(widths) if widths else 1.0 / (r.size * dt)
-    # The taper's impulse response decays within a few 1/width: pad by 8/width each side.
-    npad = int(min(max(math.ceil(8.0 / (width * dt)), 16), 4 * r.size + 16))
-    x = np.concatenate([np.full(npad, r[0]), r, np.full(npad, r[-1])])
-    n = scipy.fft.next_fast_len(x.size + npad, real=True)
-    # Pad the circular buffer with a smooth return from r[-1] to r[0] (half cosine).
-    gap = n - x.size
-    ramp = r[-1] + (r[0] - r[-1]) * 0.5 * (1.0 - np.cos(np.pi * np.arange(gap) / max(gap, 1)))
-    x = np.concatenate([x, ramp])
-    spec = scipy.fft.rfft(x)
-    freq = scipy.fft.rfftfreq(n, dt)
-    spec *= band_taper(freq, band_hz, cutoff_hz) if shape is None else shape(freq)
-    y = scipy.fft.irfft(spec, n)
-    if padded:
-        return y, npad
-    return np.ascontiguousarray(y[npad:npad + r.size])
 
 
 def _check_band(band_hz: Any, cutoff_hz: float | None, fs: float
@@ -373,15 +173,16 @@ def design_inverse_tf(
     *,
     delay: int,
     dt: float,
-    method: str = "zpetc",
+    method: str = "stable",
     band_hz: tuple[float, float] | None = None,
     cutoff_hz: float | None = None,
+    circle_margin: float = CIRCLE_MARGIN,
     max_zero_radius: float = 0.999,
     min_zero_damping: float = 0.1,
     fast_zero_radius: float = 0.5,
     known: tuple[Any, Any] | None = None,
 ) -> InverseModel:
-    """Design the inverse of ``G = q^-delay B(q^-1)/A(q^-1)`` (ZPETC or ZMETC).
+    """Design the inverse of ``G = q^-delay B(q^-1)/A(q^-1)`` (stable, ZPETC or ZMETC).
 
     Parameters
     ----------
@@ -393,14 +194,17 @@ def design_inverse_tf(
         Model delay ``d >= 0`` (samples).
     dt : float
         Sample period (s).
-    method : {"zpetc", "zmetc"}
-        How the uncancellable zeros are handled (see the module notes).
+    method : {"stable", "zpetc", "zmetc"}
+        How the zeros outside the unit circle are handled (see the module notes).
     band_hz : (lo, hi), optional
         Pass band of the zero-phase band limit (Hz); ``None`` for none.
     cutoff_hz : float, optional
         Where the high-side taper reaches zero; default ``min(1.5 hi, (hi + fs/2)/2)``.
+    circle_margin : float
+        Stable inversion: zeros with ``| |z| - 1 | < circle_margin`` are inverted in the
+        frequency domain inside the band limit (see the module notes).
     max_zero_radius : float
-        Zeros with ``|z|`` above this are never cancelled exactly.
+        ZPETC: zeros with ``|z|`` above this are never cancelled exactly.
     min_zero_damping : float
         Zeros whose continuous-equivalent mode ``ln(z)/dt`` has a damping ratio below this
         are badly damped and not cancelled (ZPETC) ...
@@ -426,6 +230,9 @@ def design_inverse_tf(
     """
     if method not in METHODS:
         raise ParameterError(f"method={method!r} must be one of {METHODS}")
+    if not (isinstance(circle_margin, (int, float, np.floating))
+            and 0.0 < circle_margin < 0.5):
+        raise ParameterError(f"circle_margin={circle_margin!r} must be in (0, 0.5)")
     try:
         b = np.atleast_1d(np.asarray(b, dtype=float)).ravel()
         a = np.atleast_1d(np.asarray(a, dtype=float)).ravel()
@@ -463,6 +270,10 @@ def design_inverse_tf(
     zeros = np.roots(b) if b.size > 1 else np.zeros(0, complex)
     radius = np.abs(zeros)
     on_circle = np.abs(radius - 1.0) < _UNIT_CIRCLE_TOL
+    if method == "stable":
+        return _design_stable(b, a, zeros, poles, delay=int(delay) + lead, dt=float(dt),
+                              band=band, cutoff=cutoff, circle_margin=float(circle_margin),
+                              known=known)
     if np.any(on_circle):
         z = zeros[on_circle][0]
         f = abs(np.angle(z)) / (2 * np.pi * dt)
@@ -480,15 +291,8 @@ def design_inverse_tf(
     z_s, z_u = zeros[good], zeros[~good]
     # Keep complex pairs together (np.roots returns exact conjugates for real b).
     b_s = _poly_from_roots_ascending(z_s)
-    # B_u: unstable roots as (q^-1 - 1/z) (bounded for huge z), the others as (1 - z q^-1).
-    out = np.abs(z_u) > 1.0
-    b_u = np.polynomial.polynomial.polymul(
-        _poly_from_roots_ascending(1.0 / z_u[out])[::-1], _poly_from_roots_ascending(z_u[~out])
-    )
-    b_u = np.atleast_1d(b_u)
-    # k: least-squares fit of b = k * B_s * B_u (exact up to rounding).
-    prod = np.polynomial.polynomial.polymul(b_s, b_u)
-    k = float(np.dot(prod, b) / np.dot(prod, prod))
+    b_u = _outside_factor(z_u)
+    k = _fit_gain(b, b_s, b_u)
     s = b_u.size - 1
 
     if method == "zpetc":
@@ -496,7 +300,7 @@ def design_inverse_tf(
         if abs(bu1) < 1e-8 * float(np.max(np.abs(b_u))):
             raise ParameterError(
                 "ZPETC gain B_u(1) is zero: an uncancelled zero sits at z = 1; use "
-                "method='zmetc' or a model without a DC zero"
+                "method='stable' or a model without a DC zero"
             )
         # F = q^(d+s) A B_u^* / (k B_s B_u(1)^2)
         num = np.polynomial.polynomial.polymul(a, b_u[::-1]) / (k * bu1 * bu1)
@@ -526,7 +330,103 @@ def design_inverse_tf(
         model_delay=int(delay) + lead,
         known_num=known_num,
         known_den=known_den,
+        settle_samples=_settle_samples(den),
     )
+
+
+def _outside_factor(z: np.ndarray) -> np.ndarray:
+    """``prod (q^-1 - 1/z)`` for ``|z| > 1`` times ``prod (1 - z q^-1)`` for the others.
+
+    Ascending powers of q^-1; the unstable roots are written as ``(q^-1 - 1/z)`` so that
+    the polynomial stays bounded for huge ``z`` (a tiny leading ``b0``).
+    """
+    out = np.abs(z) > 1.0
+    return np.atleast_1d(np.polynomial.polynomial.polymul(
+        _poly_from_roots_ascending(1.0 / z[out])[::-1], _poly_from_roots_ascending(z[~out])
+    ))
+
+
+def _fit_gain(b: np.ndarray, *factors: np.ndarray) -> float:
+    """``k`` of ``b = k * prod(factors)``: least squares, exact up to rounding."""
+    prod = np.ones(1)
+    for f in factors:
+        prod = np.polynomial.polynomial.polymul(prod, f)
+    return float(np.dot(prod, b) / np.dot(prod, prod))
+
+
+def _settle_samples(*polys_in_shift: np.ndarray) -> int:
+    """Lead-in for recursive filters ``1/p``: 20 time constants of their slowest mode.
+
+    Each ``p`` is monic ``[1, c1, .., cm]`` in the shift it runs in (q^-1 forwards, q
+    backwards), with modes of radius below 1.
+    """
+    slowest = 0.0
+    for p in polys_in_shift:
+        if p.size > 1:
+            # [1, c1, .., cm] with the recursion v(k) = x(k) - c1 v(k-1) - ...: modes are
+            # the roots of z^m + c1 z^(m-1) + ... + cm.
+            rmax = float(np.max(np.abs(np.roots(p))))
+            if rmax > 0.0:
+                slowest = max(slowest, 1.0 / max(-math.log(min(rmax, 1.0 - 1e-15)), 1e-15))
+    return int(math.ceil(_SETTLE_TIME_CONSTANTS * slowest))
+
+
+def _design_stable(b: np.ndarray, a: np.ndarray, zeros: np.ndarray, poles: np.ndarray, *,
+                   delay: int, dt: float, band: tuple[float, float] | None,
+                   cutoff: float | None, circle_margin: float, known: Any) -> InverseModel:
+    """Exact stable inverse ``q^(d+s) A / (k B_i B_n D(q))`` (see the module notes)."""
+    radius = np.abs(zeros)
+    near = np.abs(radius - 1.0) < circle_margin
+    z_in = zeros[(radius < 1.0) & ~near]
+    z_out = zeros[(radius > 1.0) & ~near]
+    z_near = zeros[near]
+    b_in = _poly_from_roots_ascending(z_in)
+    # B_o(q^-1) = prod (q^-1 - 1/z) = q^-s prod(1 - q/z) = q^-s D(q)
+    b_out = _outside_factor(z_out)
+    anti_den = _poly_from_roots_ascending(1.0 / z_out)  # D(q), ascending powers of q
+    b_near = _poly_from_roots_ascending(z_near)
+    k = _fit_gain(b, b_in, b_out, b_near)
+    known_num, known_den = _check_known(known, band, cutoff, dt)
+    if z_near.size:
+        _check_near_zeros(z_near, band, cutoff, dt)
+    s = int(z_out.size)
+    return InverseModel(
+        method="stable",
+        num=np.ascontiguousarray(a / k, dtype=float),
+        den=np.ascontiguousarray(b_in, dtype=float),
+        anti_den=np.ascontiguousarray(anti_den, dtype=float),
+        near_b=np.ascontiguousarray(b_near, dtype=float),
+        preview=delay + s,
+        dt=dt,
+        b_u=np.ascontiguousarray(b_out, dtype=float),
+        extra_preview=s,
+        band_hz=band,
+        cutoff_hz=cutoff,
+        cancelled_zeros=np.concatenate([z_in, z_out]),
+        near_zeros=z_near,
+        poles=poles,
+        model_delay=delay,
+        known_num=known_num,
+        known_den=known_den,
+        settle_samples=_settle_samples(b_in, anti_den),
+    )
+
+
+def _check_near_zeros(z_near: np.ndarray, band: tuple[float, float] | None,
+                      cutoff: float | None, dt: float) -> None:
+    """A zero (almost) on the unit circle where the band limit passes cannot be inverted."""
+    f_zero = np.abs(np.angle(z_near)) / (2.0 * np.pi * dt)
+    weight = band_taper(f_zero, band, cutoff)
+    bad = (np.abs(np.abs(z_near) - 1.0) < _UNIT_CIRCLE_TOL) & (weight > 0.0)
+    if np.any(bad):
+        z = z_near[bad][0]
+        f = abs(np.angle(z)) / (2 * np.pi * dt)
+        where = "no band limit" if band is None else f"band limit {band[0]:g}-{cutoff:g} Hz"
+        raise ParameterError(
+            f"model has a zero on the unit circle (|z|={abs(z):.12g}, {f:.4g} Hz) inside the "
+            f"{where}: the model says the loop does not pass {f:.4g} Hz and cannot be "
+            "inverted there; narrow the band or re-identify"
+        )
 
 
 def _check_known(known: Any, band: tuple[float, float] | None, cutoff: float | None,
@@ -580,13 +480,17 @@ def _allpass_advance(b_u: np.ndarray, dt: float, band: tuple[float, float] | Non
     return max(0, int(round(p)))
 
 
-def design_inverse(model: Any, *, method: str = "zpetc",
+def design_inverse(model: ArmaxModel, *, method: str = "stable",
                    band_hz: tuple[float, float] | None = None,
-                   cutoff_hz: float | None = None, **options: Any) -> InverseModel:
-    """Design the inverse of an identified closed-loop model (an ``ArmaxModel``).
+                   cutoff_hz: float | None = None,
+                   circle_margin: float = CIRCLE_MARGIN,
+                   known: tuple[Any, Any] | None = None) -> InverseModel:
+    """Design the inverse of an identified closed-loop model.
 
-    Only the deterministic part ``q^-delay B/A`` is used; ``model`` needs the attributes
-    ``b``, ``a``, ``delay`` and ``dt``. Options are those of :func:`design_inverse_tf`.
+    Only the deterministic part ``q^-delay B/A`` is used. The band limit is ``band_hz``,
+    or by default the band the model was validated over (``model.band_hz``); a model
+    without one is inverted without a band limit (:func:`ehss.compensation.compensate`
+    insists on a band). Other options are those of :func:`design_inverse_tf`.
 
     A model built by :func:`ehss.identification.known.compose` (identified behind known
     factors, ``meta["known_factors"]`` set) is split back into the identified rest and
@@ -594,26 +498,33 @@ def design_inverse(model: Any, *, method: str = "zpetc",
     the factor's numerator and denominator, and the inverse is ``rest^-1 ∘ F^-1`` (the
     factor's zeros at ``z ≈ 1`` could be neither cancelled nor mirrored).
 
+    Raises
+    ------
+    TypeError
+        ``model`` is not an :class:`~ehss.identification.model.ArmaxModel`.
+    ParameterError
+        See :func:`design_inverse_tf`.
+
     Examples
     --------
-    >>> from types import SimpleNamespace
-    >>> m = SimpleNamespace(a=[1.0, -0.5], b=[0.5], delay=1, dt=1e-3)
+    >>> from ehss.identification.model import ArmaxModel
+    >>> m = ArmaxModel(a=[1.0, -0.5], b=[0.5], delay=1, dt=1e-3)
     >>> inv = design_inverse(m)
     >>> inv.preview, inv.num.tolist(), inv.den.tolist()
     (1, [2.0, -1.0], [1.0])
     """
-    for name in ("b", "a", "delay", "dt"):
-        if not hasattr(model, name):
-            raise TypeError(f"model must have attributes b, a, delay, dt (missing {name!r})")
+    if not isinstance(model, ArmaxModel):
+        raise TypeError(f"model must be an ArmaxModel, not {type(model).__name__}")
     b, a = model.b, model.a
-    stored = (getattr(model, "meta", None) or {}).get("known_factors")
-    if options.get("known") is None and stored is not None:
+    stored = model.meta.get("known_factors")
+    if known is None and stored is not None:
         known = (np.asarray(stored["num"], dtype=float), np.asarray(stored["den"], dtype=float))
         b = _divide_exactly(np.asarray(b, dtype=float), known[0], "b", "numerator")
         a = _divide_exactly(np.asarray(a, dtype=float), known[1], "a", "denominator")
-        options["known"] = known
+    band = model.band_hz if band_hz is None else band_hz
     return design_inverse_tf(b, a, delay=model.delay, dt=model.dt, method=method,
-                             band_hz=band_hz, cutoff_hz=cutoff_hz, **options)
+                             band_hz=band, cutoff_hz=cutoff_hz, circle_margin=circle_margin,
+                             known=known)
 
 
 def _divide_exactly(p: np.ndarray, d: np.ndarray, name: str, what: str) -> np.ndarray:

@@ -1,11 +1,12 @@
-"""ARMAX models and their identification (RELS, batch least squares, order selection)."""
+"""ARMAX models and their identification (RELS/RML, ARX, ARMAX and OE by PEM, order selection)."""
 
 from __future__ import annotations
 
 from ehss.identification.batch import armax_els, arx_ls
-from ehss.identification.estimators import METHODS, estimate
+from ehss.identification.estimators import INITS, METHODS, estimate
 from ehss.identification.model import ArmaxModel, RoundingSensitivity
 from ehss.identification.order import OrderRow, OrderSelection, select_order
+from ehss.identification.pem import armax_pem, oe_pem
 from ehss.identification.rels import RelsEstimator, rels
 
 __all__ = [
@@ -15,8 +16,11 @@ __all__ = [
     "rels",
     "arx_ls",
     "armax_els",
+    "armax_pem",
+    "oe_pem",
     "estimate",
     "METHODS",
+    "INITS",
     "OrderRow",
     "OrderSelection",
     "select_order",

@@ -10,14 +10,13 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
 from ehss.errors import DataError, IdentificationError
 from ehss.identification.model import ArmaxModel
 from ehss.identification.rels import _check_settings, _order, _real, check_record
 
-__all__ = ["arx_ls", "armax_els", "regression_matrix"]
+__all__ = ["arx_ls", "armax_els", "els_theta", "regression_matrix"]
 
 
 def regression_matrix(
@@ -98,6 +97,38 @@ def _pred_errors(theta, u, y, na, nb, nc, delay) -> np.ndarray:
     return lfilter([1.0], c, v)
 
 
+def els_theta(
+    us: np.ndarray, ys: np.ndarray, na: int, nb: int, nc: int, delay: int,
+    max_iter: int = 50, tol: float = 1e-10,
+) -> np.ndarray:
+    """Extended least squares on (already scaled) data; returns θ and sets no state.
+
+    Start from ARX least squares, then repeat LS with the previous iteration's
+    prediction errors ε = (A y − q^-d B u)/C as the c-regressors until the relative
+    change of θ is below ``tol`` (or ``max_iter`` iterations), C kept stable.
+    """
+    theta, _ = _els(us, ys, na, nb, nc, delay, max_iter, tol)
+    return theta
+
+
+def _els(us, ys, na, nb, nc, delay, max_iter, tol) -> tuple[np.ndarray, int]:
+    phi, t, _ = regression_matrix(us, ys, None, na, nb, 0, delay)
+    theta = np.zeros(na + nb + 1 + nc)
+    theta[: na + nb + 1] = np.linalg.lstsq(phi, t, rcond=None)[0]
+    iters = 0
+    if nc:
+        for iters in range(1, max_iter + 1):  # noqa: B007 - reported in meta
+            e = _pred_errors(theta, us, ys, na, nb, nc, delay)
+            phi, t, _ = regression_matrix(us, ys, e, na, nb, nc, delay)
+            new = np.linalg.lstsq(phi, t, rcond=None)[0]
+            new[na + nb + 1 :] = _stabilise(new[na + nb + 1 :])
+            change = np.linalg.norm(new - theta) / max(np.linalg.norm(new), 1e-300)
+            theta = new
+            if change < tol:
+                break
+    return theta, iters
+
+
 def armax_els(
     u: Any,
     y: Any,
@@ -115,48 +146,31 @@ def armax_els(
 
     ELS: start from ARX least squares, then repeat LS with the previous iteration's
     prediction errors ε = (A y − q^-d B u)/C as the c-regressors until the relative
-    change of θ is below ``tol`` (or ``max_iter``). With ``refine`` the result is then
-    polished by minimising Σε² with ``scipy.optimize.least_squares`` (PEM), C kept
-    stable. Data are RMS-scaled internally, as in :func:`~ehss.identification.rels`.
+    change of θ is below ``tol`` (or ``max_iter``). With ``refine`` (and nc ≥ 1) the
+    result is :func:`~ehss.identification.pem.armax_pem`, which starts from this ELS
+    estimate (and from ARX) and minimises Σε² with C kept stable. Data are RMS-scaled
+    internally, as in :func:`~ehss.identification.rels`.
 
     Raises
     ------
     IdentificationError
-        If the refined estimate is not finite.
+        If the estimate is not finite.
     """
     u, y, na, nb, nc, delay, dt = _validate(u, y, na, nb, nc, delay, dt)
     max_iter = _order("max_iter", max_iter, 1)
     tol = _real("tol", tol)
+    if refine and nc:
+        from ehss.identification.pem import armax_pem
+
+        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt)
     su = float(np.sqrt(np.mean(u * u))) or 1.0
     sy = float(np.sqrt(np.mean(y * y))) or 1.0
     us, ys = u / su, y / sy
     n = na + nb + 1 + nc
-    phi, t, k0 = regression_matrix(us, ys, None, na, nb, 0, delay)
-    theta = np.zeros(n)
-    theta[: na + nb + 1] = np.linalg.lstsq(phi, t, rcond=None)[0]
-    iters = 0
-    if nc:
-        for iters in range(1, max_iter + 1):  # noqa: B007 - reported in meta
-            e = _pred_errors(theta, us, ys, na, nb, nc, delay)
-            phi, t, k0 = regression_matrix(us, ys, e, na, nb, nc, delay)
-            new = np.linalg.lstsq(phi, t, rcond=None)[0]
-            new[na + nb + 1 :] = _stabilise(new[na + nb + 1 :])
-            change = np.linalg.norm(new - theta) / max(np.linalg.norm(new), 1e-300)
-            theta = new
-            if change < tol:
-                break
-    if refine and nc:
-
-        def resid(th: np.ndarray) -> np.ndarray:
-            th = th.copy()
-            th[na + nb + 1 :] = _stabilise(th[na + nb + 1 :])
-            return _pred_errors(th, us, ys, na, nb, nc, delay)[k0:]
-
-        sol = least_squares(resid, theta, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        theta = sol.x
-        theta[na + nb + 1 :] = _stabilise(theta[na + nb + 1 :])
+    theta, iters = _els(us, ys, na, nb, nc, delay, max_iter, tol)
     if not np.all(np.isfinite(theta)):
         raise IdentificationError("extended least squares diverged (non-finite θ)")
+    k0 = max(na, nb + delay, nc)
     eps = _pred_errors(theta, us, ys, na, nb, nc, delay)[k0:]
     nv_s = float(eps @ eps / max(eps.size - n, 1))
     # covariance from the linearised regression at the solution: σ² (ΦᵀΦ)⁻¹
@@ -167,7 +181,7 @@ def armax_els(
     theta = theta * dvec
     cov = nv_s * np.linalg.pinv(phi.T @ phi) * dvec[:, None] * dvec[None, :]
     meta = {
-        "method": "armax_els" + ("+pem" if refine and nc else ""),
+        "method": "armax_els",
         "n_samples": int(u.size),
         "els_iterations": int(iters),
         "u_scale": su,
@@ -176,4 +190,3 @@ def armax_els(
     nv = nv_s * sy * sy
     return _model(theta, na, nb, nc, delay, dt, nv if math.isfinite(nv) else math.nan, cov,
                   meta)
-

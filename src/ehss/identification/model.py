@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import SAMPLE_RATE_RANGE_HZ, check_int, check_real, show
 from ehss._files import atomic_path
 from ehss.errors import DataError, EhssWarning, ParameterError
 
@@ -157,15 +158,9 @@ class ArmaxModel:
         object.__setattr__(self, "a", _coeffs("a", self.a, monic=True))
         object.__setattr__(self, "b", _coeffs("b", self.b, monic=False))
         object.__setattr__(self, "c", _coeffs("c", self.c, monic=True))
-        if isinstance(self.delay, bool) or not isinstance(self.delay, (int, np.integer)):
-            raise ParameterError(f"delay={self.delay!r} must be an integer >= 0")
-        if self.delay < 0:
-            raise ParameterError(f"delay={self.delay!r} must be an integer >= 0")
-        object.__setattr__(self, "delay", int(self.delay))
-        dt = self.dt
-        if not isinstance(dt, (int, float, np.floating)) or not (math.isfinite(dt) and dt > 0):
-            raise ParameterError(f"dt={dt!r} must be a finite number > 0 (seconds)")
-        object.__setattr__(self, "dt", float(dt))
+        object.__setattr__(self, "delay", check_int(self.delay, "delay", lo=0))
+        object.__setattr__(self, "dt", check_real(self.dt, "dt", lo=0.0, lo_open=True,
+                                                  unit="s"))
         object.__setattr__(self, "noise_variance", float(self.noise_variance))
         if self.covariance is not None:
             cov = np.array(self.covariance, dtype=np.float64, copy=True)
@@ -463,23 +458,18 @@ class ArmaxModel:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ArmaxModel:
-        """Inverse of :meth:`to_dict`."""
-        missing = [k for k in ("a", "b", "delay", "dt") if k not in d]
-        if missing:
-            raise DataError(f"model dict lacks {', '.join(missing)}")
-        nv = d.get("noise_variance")
-        off = d.get("offsets")
-        if off is not None:
-            if not isinstance(off, dict) or set(off) - {"input", "output"} or len(off) != 2:
-                raise DataError("model offsets must be an object with numbers 'input' and "
-                                f"'output', got {off!r}")
-            off = (off["input"], off["output"])
-        return cls(
-            a=d["a"], b=d["b"], c=d.get("c", [1.0]), delay=int(d["delay"]), dt=float(d["dt"]),
-            noise_variance=math.nan if nv is None else float(nv),
-            covariance=d.get("covariance"), meta=dict(d.get("meta") or {}),
-            offsets=off, band_hz=d.get("band_hz"),
-        )
+        """Inverse of :meth:`to_dict`, checking every field's type and shape.
+
+        Keys other than those of :meth:`to_dict` (such as ``validation``) are ignored.
+
+        Raises
+        ------
+        DataError
+            If a field is missing, of the wrong type or shape (strings for numbers,
+            nested or ragged lists, a fractional delay...) or out of range. The message
+            names the field.
+        """
+        return cls(**_fields_from_dict(d))
 
     def save_json(self, path: str | Path) -> None:
         """Write :meth:`to_dict` as JSON (atomically)."""
@@ -488,14 +478,204 @@ class ArmaxModel:
 
     @classmethod
     def load_json(cls, path: str | Path) -> ArmaxModel:
-        """Read a model written by :meth:`save_json`."""
+        """Read a model written by :meth:`save_json`.
+
+        Raises
+        ------
+        DataError
+            If the file is missing, unreadable, a folder, empty, not UTF-8, not JSON, too
+            deeply nested or too large, or if a field is malformed (see :meth:`from_dict`);
+            the message names the file and the field.
+        """
         path = Path(path)
+        where = f"model file {str(path)!r}"
         try:
-            d = json.loads(path.read_text())
+            if path.is_dir():
+                raise DataError(f"{where} is a folder")
+            if path.exists() and not path.is_file():
+                raise DataError(f"{where} is not a regular file (a pipe or a device?)")
+            size = path.stat().st_size
+            if size > MAX_MODEL_FILE_BYTES:
+                raise DataError(f"{where} is {size} bytes, more than a model file holds "
+                                f"(at most {MAX_MODEL_FILE_BYTES})")
+            raw = path.read_bytes()
         except FileNotFoundError:
-            raise DataError(f"model file {str(path)!r} does not exist") from None
+            raise DataError(f"{where} does not exist") from None
+        except OSError as exc:
+            raise DataError(f"cannot read {where}: {exc.strerror or exc}") from None
+        if not raw.strip():
+            raise DataError(f"{where} is empty")
+        try:
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{where} is not UTF-8 text (byte {exc.start}: "
+                            f"{raw[exc.start:exc.start + 1]!r})") from None
+        try:
+            d = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise DataError(f"model file {str(path)!r} is not valid JSON: {exc}") from None
+            raise DataError(f"{where} is not valid JSON: {exc}") from None
+        except RecursionError:
+            raise DataError(f"{where} is nested too deeply to be a model") from None
         if not isinstance(d, dict):
-            raise DataError(f"model file {str(path)!r} does not hold a JSON object")
-        return cls.from_dict(d)
+            raise DataError(f"{where} does not hold a JSON object (it holds a "
+                            f"{type(d).__name__})")
+        try:
+            return cls.from_dict(d)
+        except DataError as exc:
+            raise DataError(f"{where}: {exc}") from None
+
+
+#: Largest model file read (bytes); a model with its covariance is a few kB.
+MAX_MODEL_FILE_BYTES = 64 << 20
+#: Most coefficients in one polynomial of a model read from a file.
+MAX_COEFFICIENTS = 1001
+#: Largest input delay (samples) of a model read from a file.
+MAX_DELAY = 100_000
+
+
+def _number(value: Any, field_name: str) -> float:
+    """A finite float from a JSON number (bools and strings refused)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
+                                                                     np.floating)):
+        raise DataError(f"field {field_name!r} = {show(value)} must be a number, not "
+                        f"{_json_type(value)}")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise DataError(f"field {field_name!r} = {show(value)} is too large") from None
+    if not math.isfinite(x):
+        raise DataError(f"field {field_name!r} = {show(value)} must be finite")
+    return x
+
+
+def _json_type(value: Any) -> str:
+    names = {str: "a string", list: "a list", dict: "an object", bool: "true/false",
+             type(None): "null"}
+    return names.get(type(value), type(value).__name__)
+
+
+def _number_list(value: Any, field_name: str, *, max_len: int = MAX_COEFFICIENTS
+                 ) -> np.ndarray:
+    """A flat, non-empty list of finite numbers as a float64 array."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, tuple):
+        value = list(value)
+    if not isinstance(value, list):
+        raise DataError(f"field {field_name!r} = {show(value)} must be a list of numbers, "
+                        f"not {_json_type(value)}")
+    if not value:
+        raise DataError(f"field {field_name!r} is empty; it needs at least one coefficient")
+    if len(value) > max_len:
+        raise DataError(f"field {field_name!r} has {len(value)} entries; at most {max_len} "
+                        "are accepted")
+    out = np.empty(len(value))
+    for i, x in enumerate(value):
+        if isinstance(x, (list, tuple, dict)):
+            raise DataError(f"field {field_name!r} must be a flat list of numbers, but entry "
+                            f"{i} is {_json_type(x)} (a 2-D or ragged array)")
+        out[i] = _number(x, f"{field_name}[{i}]")
+    return out
+
+
+def _polynomial(d: dict, key: str, *, monic: bool) -> np.ndarray:
+    arr = _number_list(d[key], key)
+    if monic and arr[0] != 1.0:
+        raise DataError(f"field {key!r} must start with 1 (a monic polynomial), "
+                        f"got {arr[0]!r}")
+    return arr
+
+
+def _fields_from_dict(d: Any) -> dict[str, Any]:
+    """Checked constructor arguments of :class:`ArmaxModel` from a JSON-like dict."""
+    if not isinstance(d, dict):
+        raise DataError(f"a model must be a JSON object, not {_json_type(d)}")
+    missing = [k for k in ("a", "b", "delay", "dt") if k not in d]
+    if missing:
+        raise DataError(f"model lacks the field{'s' if len(missing) > 1 else ''} "
+                        f"{', '.join(missing)}")
+    a = _polynomial(d, "a", monic=True)
+    b = _polynomial(d, "b", monic=False)
+    if not np.any(b):
+        raise DataError("field 'b' is all zeros: the model has no path from input to output")
+    c = _polynomial(d, "c", monic=True) if d.get("c") is not None else np.ones(1)
+    delay = d["delay"]
+    if isinstance(delay, float) and delay.is_integer():
+        delay = int(delay)  # some JSON writers give every number a decimal point
+    if isinstance(delay, (bool, np.bool_)) or not isinstance(delay, (int, np.integer)):
+        raise DataError(f"field 'delay' = {show(delay)} must be a whole number of samples in "
+                        f"[0, {MAX_DELAY}]")
+    if not 0 <= delay <= MAX_DELAY:
+        raise DataError(f"field 'delay' = {delay} must be in [0, {MAX_DELAY}] samples")
+    dt = _number(d["dt"], "dt")
+    lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
+    if not 1.0 / hi_fs <= dt <= 1.0 / lo_fs:
+        raise DataError(f"field 'dt' = {dt!r} s must be a sample period in "
+                        f"[{1.0 / hi_fs:g}, {1.0 / lo_fs:g}] s")
+    nv = d.get("noise_variance")
+    if nv is not None:
+        nv = _number(nv, "noise_variance")
+        if nv < 0:
+            raise DataError(f"field 'noise_variance' = {nv!r} must be >= 0")
+    cov = d.get("covariance")
+    if cov is not None:
+        n = a.size + b.size + c.size - 2
+        if not isinstance(cov, list) or len(cov) != n or not all(
+                isinstance(row, list) and len(row) == n for row in cov):
+            raise DataError(f"field 'covariance' must be a list of {n} rows of {n} numbers "
+                            "for these orders (a square matrix)")
+        cov = np.array([_number_list(row, f"covariance[{i}]", max_len=n)
+                        for i, row in enumerate(cov)])
+    meta = d.get("meta")
+    if meta is None:
+        meta = {}
+    if not isinstance(meta, dict):
+        raise DataError(f"field 'meta' must be an object, not {_json_type(meta)}")
+    if meta.get("known_factors") is not None:
+        _check_known_factors(meta["known_factors"], a, b)
+    off = d.get("offsets")
+    if off is not None:
+        if not isinstance(off, dict) or set(off) != {"input", "output"}:
+            raise DataError("field 'offsets' must be an object with the numbers 'input' and "
+                            f"'output', got {show(off)}")
+        off = (_number(off["input"], "offsets.input"), _number(off["output"], "offsets.output"))
+    band = d.get("band_hz")
+    if band is not None:
+        if not isinstance(band, list) or len(band) != 2:
+            raise DataError(f"field 'band_hz' = {show(band)} must be a list [lo, hi] in Hz")
+        lo, hi = (_number(x, f"band_hz[{i}]") for i, x in enumerate(band))
+        if not 0.0 <= lo < hi <= 0.5 / dt * (1 + 1e-12):
+            raise DataError(f"field 'band_hz' = {show(band)} must satisfy 0 <= lo < hi <= "
+                            f"fs/2 = {0.5 / dt:g} Hz")
+        band = (lo, hi)
+    return dict(a=a, b=b, c=c, delay=int(delay), dt=dt,
+                noise_variance=math.nan if nv is None else nv, covariance=cov, meta=meta,
+                offsets=off, band_hz=band)
+
+
+def _check_known_factors(known: Any, a: np.ndarray, b: np.ndarray) -> None:
+    """``meta.known_factors`` = {"num": [...], "den": [...]} dividing ``b`` and ``a``.
+
+    A model identified behind known factors F = N/D (see
+    :func:`ehss.identification.known.compose`) has ``b = N * B_rest`` and ``a = D * A_rest``
+    (polynomial products); compensation divides them back out.
+    """
+    name = "meta.known_factors"
+    if not isinstance(known, dict) or set(known) != {"num", "den"}:
+        raise DataError(f"field {name!r} must be an object with the coefficient lists 'num' "
+                        f"and 'den', got {show(known)}")
+    num = _number_list(known["num"], f"{name}.num")
+    den = _number_list(known["den"], f"{name}.den")
+    if num[0] == 0.0 or den[0] == 0.0:
+        raise DataError(f"field {name!r}: num[0] and den[0] must not be 0")
+    if den.size > 1 and np.max(np.abs(np.roots(den))) >= 1.0:
+        raise DataError(f"field {name!r}: den has a pole on or outside the unit circle "
+                        "(an unstable known factor cannot be divided out)")
+    for poly, factor, what, key in ((b, num, "num", "b"), (a, den, "den", "a")):
+        if factor.size > poly.size:
+            raise DataError(f"field {name!r}: {what} is longer than the model's {key!r}, so "
+                            f"it cannot be a factor of it")
+        _, rem = np.polydiv(poly, factor)
+        if np.max(np.abs(rem)) > 1e-8 * np.max(np.abs(poly)):
+            raise DataError(f"field {name!r}: {what} does not divide the model's {key!r} "
+                            "(the known factors do not belong to this model)")

@@ -1,17 +1,21 @@
-"""Model order selection over a grid of ARMAX orders with AIC, FPE and MDL.
+"""Model order selection over a grid of ARMAX-family orders: the low-level search.
 
-For each candidate the model is fitted with :func:`~ehss.identification.armax_els`
-(or :func:`~ehss.identification.rels`, RELS or RML), its one-step prediction errors ε on the
-estimation data give the loss V = mean(ε²), and with p parameters and N samples
+Each candidate is fitted with :func:`~ehss.identification.estimate`, the estimator that
+identification uses (one ``method`` vocabulary: arx, armax, oe, rels, rml), so the pick
+carries over: refitting it with the same method on the same data gives the same model
+(every estimator is deterministic). Given a ``score`` (a model's fit on validation data,
+higher is better) the candidates are ranked by it, and AIC, FPE and MDL are extra columns;
+an unstable candidate is never recommended. :func:`ehss.workflow.select_orders` is the
+search on a measured record: it prepares the record as ``ehss identify`` does and scores
+each candidate with the validation ``ehss identify`` reports. The one-step prediction
+errors ε on the estimation data give the loss V = mean(ε²), and with p free parameters
+and N samples
 
 .. math::
 
     \\mathrm{AIC} = \\ln V + 2p/N,\\quad
     \\mathrm{FPE} = V\\,\\frac{1 + p/N}{1 - p/N},\\quad
     \\mathrm{MDL} = \\ln V + p\\ln N / N .
-
-If validation data are given, the simulation fit (%) on them is reported too:
-fit = 100 (1 − ‖y − ŷ_sim‖ / ‖y − ȳ‖).
 """
 
 from __future__ import annotations
@@ -19,18 +23,18 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ehss.errors import DataError, EhssWarning, ParameterError
-from ehss.identification.batch import armax_els
+from ehss.errors import DataError, EhssWarning, IdentificationError, ParameterError
+from ehss.identification.estimators import INITS, METHODS, estimate
 from ehss.identification.model import ArmaxModel
-from ehss.identification.rels import check_record, rels
+from ehss.identification.rels import check_record
 
-__all__ = ["OrderRow", "OrderSelection", "select_order", "fit_percent"]
+__all__ = ["OrderRow", "OrderSelection", "select_order"]
 
 _CRITERIA = ("aic", "fpe", "mdl", "fit")
 
@@ -49,6 +53,8 @@ class OrderRow:
     fpe: float
     mdl: float
     fit: float = math.nan
+    stable: bool = True
+    max_pole_radius: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -64,20 +70,15 @@ class OrderSelection:
     criterion : str
     model : ArmaxModel
         The fitted model of ``best``.
+    method : str
+        The estimator every candidate was fitted with.
     """
 
     table: tuple[OrderRow, ...]
     best: OrderRow
     criterion: str
     model: ArmaxModel
-
-
-def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
-    """100 (1 − ‖y − ŷ‖/‖y − ȳ‖) (NRMSE fit, 100 is perfect)."""
-    den = float(np.linalg.norm(y - np.mean(y)))
-    if den == 0.0:
-        return math.nan
-    return 100.0 * (1.0 - float(np.linalg.norm(y - yhat)) / den)
+    method: str = "armax"
 
 
 def _candidates(name: str, v: Any, minimum: int) -> list[int]:
@@ -99,86 +100,133 @@ def select_order(
     nc: Iterable[int] | int,
     delay: Iterable[int] | int = 1,
     dt: float = 1.0,
-    criterion: str = "aic",
-    validation: tuple[Any, Any] | None = None,
-    method: str = "els",
+    criterion: str | None = None,
+    score: Callable[[ArmaxModel], float] | None = None,
+    method: str = "armax",
+    init: str = "batch",
     p0: float = 1e6,
     p0_c: float | None = None,
     forgetting: float = 1.0,
+    fit_tolerance: float = 0.1,
 ) -> OrderSelection:
-    """Fit every (na, nb, nc, delay) of the grid and pick the best by ``criterion``.
+    """Fit every (na, nb, nc, delay) of the grid and pick the best stable one.
 
     Parameters
     ----------
     u, y : array_like, shape (n_samples,)
         Estimation data.
     na, nb, nc, delay : int or iterable of int
-        Candidate orders.
+        Candidate orders (nc is ignored, and listed once, for "arx" and "oe").
     dt : float
         Sample period (s).
-    criterion : {"aic", "fpe", "mdl", "fit"}
-        "fit" needs ``validation``.
-    validation : (u_val, y_val), optional
-        Held-out data for the simulation fit %.
-    method : {"els", "rels", "rml"}
-        Estimator: :func:`armax_els` (with PEM refinement), :func:`rels` with
-        ``method="rels"`` (the paper's eqs 19–22) or with ``method="rml"`` (recursive
-        maximum likelihood, for output-error-like disturbances; use nc = na).
-    p0, p0_c : float
-        Initial P of :func:`rels` (a, b part and c part) when ``method`` is "rels"
-        or "rml".
-    forgetting : float
-        λ of :func:`rels` when ``method`` is "rels" or "rml" (default 1).
+    criterion : {"fit", "aic", "fpe", "mdl"}, optional
+        How the best is chosen; default "fit" (the largest ``score``) when a score is
+        given, else "aic". "fit" needs ``score``.
+    score : callable, optional
+        ``score(model) -> float``: the fit (percent, higher is better, −inf for a
+        diverging simulation) of a fitted candidate on validation data, listed as
+        ``fit``; :func:`ehss.workflow.select_orders` passes the free-run fit that
+        ``ehss identify`` reports.
+    method : {"arx", "armax", "oe", "rels", "rml"}
+        The estimator, as in :func:`~ehss.identification.estimate` (default "armax").
+    init : {"batch", "zero"}
+        Start of "rels"/"rml", as in :func:`~ehss.identification.estimate`.
+    p0, p0_c, forgetting : float
+        α, α_c and λ of "rels"/"rml" (``p0``, ``p0_c`` with ``init="zero"`` only).
+    fit_tolerance : float
+        With ``criterion="fit"``, candidates within this many fit points of the best are
+        taken as equally good and the one with the fewest parameters is picked (fit
+        differences of a tenth of a point are within what one validation record can
+        resolve; the smaller model generalises better).
+
+    Returns
+    -------
+    OrderSelection
+        Remaining ties go to the candidate listed first in the grid.
+
+    Raises
+    ------
+    IdentificationError
+        If no candidate is stable (with a finite score).
     """
+    if criterion is None:
+        criterion = "aic" if score is None else "fit"
     if criterion not in _CRITERIA:
         raise ParameterError(f"criterion={criterion!r} must be one of {_CRITERIA}")
-    if method not in ("els", "rels", "rml"):
-        raise ParameterError(f"method={method!r} must be 'els', 'rels' or 'rml'")
-    if criterion == "fit" and validation is None:
-        raise ParameterError("criterion='fit' needs validation=(u_val, y_val)")
+    if not isinstance(method, str) or method not in METHODS:
+        raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
+    if not isinstance(init, str) or init not in INITS:
+        raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
+    if criterion == "fit" and score is None:
+        raise ParameterError("criterion='fit' needs a score (the fit on validation data)")
+    if score is not None and not callable(score):
+        raise TypeError(f"score must be callable, not {type(score).__name__}")
+    tol = fit_tolerance
+    if (isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating))
+            or not (math.isfinite(tol) and tol >= 0)):
+        raise ParameterError(f"fit_tolerance={fit_tolerance!r} must be a number >= 0")
     u, y = check_record(u, y)
-    if validation is not None:
-        uv, yv = check_record(*validation)
+    ncs = _candidates("nc", nc, 0)
+    if method in ("arx", "oe"):
+        ncs = [0]
     grid = list(itertools.product(
-        _candidates("na", na, 1), _candidates("nb", nb, 0), _candidates("nc", nc, 0),
+        _candidates("na", na, 1), _candidates("nb", nb, 0), ncs,
         _candidates("delay", delay, 0),
     ))
     rows: list[OrderRow] = []
-    models: list[ArmaxModel] = []
-    n_total = u.size
+    models: list[ArmaxModel | None] = []
     for a_, b_, c_, d_ in grid:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", EhssWarning)  # unstable candidates are scored
-            if method == "els":
-                m = armax_els(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt)
-            else:
-                m = rels(u, y, na=a_, nb=b_, nc=c_, delay=d_, dt=dt, p0=p0, p0_c=p0_c,
-                         forgetting=forgetting, method=method)
-        k0 = max(a_, b_ + d_, c_)
-        eps = (y - m.predict(u, y))[k0:]
-        N = eps.size
-        p = a_ + b_ + 1 + c_
-        V = float(np.mean(eps * eps))
-        if not (math.isfinite(V) and V > 0):
-            V = math.inf if not math.isfinite(V) else np.finfo(float).tiny
-        fit = math.nan
-        if validation is not None:
-            with np.errstate(all="ignore"):
-                fit = fit_percent(yv, m.simulate(uv))
-            if not math.isfinite(fit):
-                fit = -math.inf
-        rows.append(OrderRow(
-            na=a_, nb=b_, nc=c_, delay=d_, n_params=p, loss=V,
-            aic=math.log(V) + 2 * p / N,
-            fpe=V * (1 + p / N) / (1 - p / N) if p < N else math.inf,
-            mdl=math.log(V) + p * math.log(N) / N,
-            fit=fit,
-        ))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", EhssWarning)  # unstable ones are scored
+                m = estimate(u, y, method=method, na=a_, nb=b_, nc=c_, delay=d_, dt=dt,
+                             init=init, p0=p0, p0_c=p0_c, forgetting=forgetting)
+        except IdentificationError:  # a candidate that cannot be fitted is listed as failed
+            p = a_ + b_ + 1 + c_
+            rows.append(OrderRow(na=a_, nb=b_, nc=c_, delay=d_, n_params=p, loss=math.inf,
+                                 aic=math.inf, fpe=math.inf, mdl=math.inf,
+                                 fit=-math.inf if score is not None else math.nan,
+                                 stable=False, max_pole_radius=math.inf))
+            models.append(None)
+            continue
+        rows.append(_score(m, u, y, score))
         models.append(m)
     if not rows:  # pragma: no cover - _candidates forbids empty grids
-        raise DataError(f"no candidate orders for {n_total} samples")
+        raise DataError(f"no candidate orders for {u.size} samples")
+    key = (lambda r: -r.fit) if criterion == "fit" else (lambda r: getattr(r, criterion))
+    ok = [i for i, r in enumerate(rows) if r.stable and math.isfinite(key(r))]
+    if not ok:
+        raise IdentificationError(
+            f"none of the {len(rows)} candidate orders gives a stable model with method "
+            f"{method!r}; try lower orders, another method or a longer record"
+        )
+    i = min(ok, key=lambda j: key(rows[j]))
     if criterion == "fit":
-        i = int(np.argmax([r.fit for r in rows]))
-    else:
-        i = int(np.argmin([getattr(r, criterion) for r in rows]))
-    return OrderSelection(table=tuple(rows), best=rows[i], criterion=criterion, model=models[i])
+        near = [j for j in ok if rows[j].fit >= rows[i].fit - tol]
+        i = min(near, key=lambda j: (rows[j].n_params, j))
+    return OrderSelection(table=tuple(rows), best=rows[i], criterion=criterion,
+                          model=models[i], method=method)
+
+
+def _score(m: ArmaxModel, u: np.ndarray, y: np.ndarray,
+           score: Callable[[ArmaxModel], float] | None) -> OrderRow:
+    """Loss, AIC, FPE, MDL on the estimation data and the free-run fit on validation."""
+    k0 = max(m.na, m.nb + m.delay, m.nc)
+    with np.errstate(all="ignore"):
+        eps = (y - m.predict(u, y))[k0:]
+        V = float(np.mean(eps * eps))
+    N = eps.size
+    # free parameters: an output-error model (c = a) has na + nb + 1
+    oe = m.nc == m.na and m.nc > 0 and np.array_equal(m.a, m.c)
+    p = m.na + m.nb + 1 + (0 if oe else m.nc)
+    if not (math.isfinite(V) and V > 0):
+        V = math.inf if not math.isfinite(V) else np.finfo(float).tiny
+    radius = m.max_pole_radius()
+    fit = math.nan if score is None else float(score(m))
+    return OrderRow(
+        na=m.na, nb=m.nb, nc=m.nc, delay=m.delay, n_params=p, loss=V,
+        aic=math.log(V) + 2 * p / N,
+        fpe=V * (1 + p / N) / (1 - p / N) if p < N else math.inf,
+        mdl=math.log(V) + p * math.log(N) / N,
+        fit=fit, stable=radius < 1.0, max_pole_radius=radius,
+    )

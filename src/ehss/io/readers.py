@@ -16,12 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ehss._checks import SAMPLE_RATE_RANGE_HZ
 from ehss.errors import DataError
 
 __all__ = ["Table", "read_columns", "sample_rate", "SUPPORTED_SUFFIXES"]
 
 #: File name endings understood by :func:`read_columns`.
-SUPPORTED_SUFFIXES = (".csv", ".txt", ".dat", ".tsv", ".mat", ".h5", ".hdf5", ".npz")
+SUPPORTED_SUFFIXES = (
+    ".csv", ".txt", ".dat", ".tsv", ".mat", ".h5", ".hdf5", ".npz", ".parquet",
+)
 
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
@@ -41,11 +44,20 @@ class Table(Mapping[str, np.ndarray]):
         The columns, each float64, contiguous, finite and of length ``n_rows``.
     time_column : str or None
         Name of the time column (seconds) if the file had one, else None.
+    labels : dict of str to str
+        How each column is named in messages when that is not ``column 'key'``: a column
+        of a headerless text file is ``column 2``; one chosen by number from a file with
+        a header is ``column 'u'`` (its name).
     """
 
     path: Path
     columns: dict[str, np.ndarray] = field(repr=False)
     time_column: str | None = None
+    labels: dict[str, str] = field(default_factory=dict, repr=False)
+
+    def label(self, key: str) -> str:
+        """How column ``key`` is named in messages: ``column 'u'`` or ``column 2``."""
+        return self.labels.get(key, f"column {key!r}")
 
     # Tables compare by identity: comparing columns element-wise has no single answer.
     __eq__ = object.__eq__
@@ -86,16 +98,23 @@ def read_columns(
     ----------
     path : str or Path
         The file. The format follows the name ending: ``.csv``/``.txt``/``.dat``/``.tsv``
-        (one header row of names; comma, semicolon, tab or space separated, sniffed from
-        the header; lines starting with ``#`` before the header are comments), ``.mat``
-        (MATLAB v5 through :func:`scipy.io.loadmat`, v7.3 through h5py), ``.h5``/``.hdf5``
-        (datasets by name; nested paths such as ``"run1/u"`` allowed) and ``.npz``.
+        (text: comma, semicolon, tab or whitespace separated, sniffed from the first row;
+        lines starting with ``#`` before it are comments; the first row names the columns,
+        or holds numbers, and then the file has no header and its columns are known by
+        number only, as public identification records such as DaISy's ``.dat`` files
+        come), ``.mat`` (MATLAB v5 through :func:`scipy.io.loadmat`, v7.3 through h5py),
+        ``.h5``/``.hdf5`` (datasets by name; nested paths such as ``"run1/u"`` allowed)
+        and ``.npz``.
     columns : sequence of str, optional
-        The columns to read. None reads every numeric vector in the file.
+        The columns to read, by name or, in text files, by number counted from 1 as
+        MATLAB, awk and spreadsheets count (``"1"`` is the first column): a name found in
+        the header wins, else a whole number selects by position. The returned table is
+        keyed by the strings given here. None reads every numeric vector in the file
+        (a headerless text file's columns are then named ``"1"``, ``"2"``, ...).
     time_column : str or None, default "t"
-        Name of the time column (seconds). It is read as well when the file has it, and is
-        then available as :attr:`Table.time`; a file without it is not an error here (pass
-        the sample rate to :func:`sample_rate` instead).
+        Name (or, in text files, number) of the time column in seconds. It is read as well
+        when the file has it, and is then available as :attr:`Table.time`; a file without
+        it is not an error here (pass the sample rate to :func:`sample_rate` instead).
 
     Returns
     -------
@@ -104,25 +123,42 @@ def read_columns(
 
     Raises
     ------
+    TypeError
+        If a column or the time column is not given as a string.
     DataError
         If the file is missing, unreadable or garbled; a column is unknown (the message
-        lists the available ones); a cell is not a number or is NaN/inf (the message gives
-        the first bad data row, 1-based); the columns have unequal lengths; or there are no
-        data rows.
+        lists the available ones, or the column numbers of a headerless file); a row has
+        more or fewer fields than the first (every row is checked); a cell is not a number
+        or is NaN/inf (the message gives the first bad data row, 1-based); the columns have
+        unequal lengths; or there are no data rows.
 
     Examples
     --------
     >>> table = read_columns("run.csv", ["u", "y"])        # doctest: +SKIP
     >>> fs = sample_rate(table)                             # doctest: +SKIP
     """
+    if time_column is not None and not isinstance(time_column, str):
+        raise TypeError(f"time_column must be a name or a number written as a string, not "
+                        f"{type(time_column).__name__} {time_column!r}")
     path = Path(path)
     if not path.exists():
+        blocker = next((p for p in path.parents if p.is_file()), None)
+        if blocker is not None:
+            raise DataError(f"{str(path)!r}: cannot read: {str(blocker)!r} in its path is a "
+                            "file, not a folder")
         raise DataError(f"{str(path)!r}: no such file")
     if path.is_dir():
         raise DataError(f"{str(path)!r}: is a folder, not a data file")
+    if not path.is_file():
+        raise DataError(f"{str(path)!r}: is not a regular file (a pipe or a device?)")
     if columns is not None:
         if isinstance(columns, str):
             columns = [columns]
+        columns = list(columns)
+        for c in columns:
+            if not isinstance(c, str):
+                raise TypeError(f"columns must be names or numbers written as strings "
+                                f"('2' for the second column), not {type(c).__name__} {c!r}")
         columns = list(dict.fromkeys(columns))
         if not columns:
             raise DataError(f"{str(path)!r}: no columns requested")
@@ -141,6 +177,10 @@ def read_columns(
         raw = _read_hdf5(path, wanted, optional_time, transpose=False)
     elif suffix == ".npz":
         raw = _read_npz(path, wanted, optional_time)
+    elif suffix == ".parquet":
+        from ehss.io.tables import read_parquet
+
+        raw = _Raw(read_parquet(path, wanted, optional_time))
     else:
         raise DataError(
             f"{str(path)!r}: unknown file type {suffix or '(none)'!r}; "
@@ -148,7 +188,8 @@ def read_columns(
         )
     table = _finish(path, raw)
     has_time = bool(time_column) and time_column in table.columns
-    return Table(path=path, columns=table.columns, time_column=time_column if has_time else None)
+    return Table(path=path, columns=table.columns, time_column=time_column if has_time else None,
+                 labels=raw.labels)
 
 
 def sample_rate(
@@ -177,8 +218,12 @@ def sample_rate(
     Raises
     ------
     DataError
-        If the time steps are uneven (the message names the first uneven data row) or not
-        increasing, if the time column and ``fs`` disagree, or if neither is available.
+        If the time column has fewer than 2 samples, repeats a value, goes backwards, is
+        unevenly sampled (the message names the first bad data row), is stored too
+        coarsely for its step (large absolute times), or gives a sample rate outside
+        ``SAMPLE_RATE_RANGE_HZ`` (1e-9 to 1e9 Hz; a step of 1e-310 s or 1e300 s means the
+        column is not in seconds); if ``fs`` is not in that range; if the time column and
+        ``fs`` disagree; or if neither is available.
     """
     where = ""
     if isinstance(data, Table):
@@ -190,10 +235,14 @@ def sample_rate(
     else:
         name = "t"
         t = np.asarray(data, dtype=np.float64)
+    lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
     if fs is not None:
-        fs = float(fs)
-        if not math.isfinite(fs) or fs <= 0:
-            raise DataError(f"sample rate {fs=} Hz must be a positive finite number")
+        try:
+            fs = float(fs)
+        except (TypeError, ValueError):
+            raise DataError(f"sample rate {fs=} must be a number in Hz") from None
+        if not (math.isfinite(fs) and lo_fs <= fs <= hi_fs):
+            raise DataError(f"sample rate {fs=} Hz must be in [{lo_fs:g}, {hi_fs:g}] Hz")
     if t is None:
         if fs is None:
             raise DataError(f"{where}no time column to get the sample rate from; pass --fs HZ")
@@ -210,20 +259,46 @@ def sample_rate(
 
 
 def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
+    col = f"{where}time column {name!r}"
     if t.ndim != 1 or t.size < 2:
-        raise DataError(f"{where}time column {name!r} needs at least 2 samples")
+        raise DataError(f"{col} needs at least 2 samples")
     if not np.all(np.isfinite(t)):
         row = int(np.flatnonzero(~np.isfinite(t))[0]) + 1
-        raise DataError(f"{where}time column {name!r}: non-finite value at data row {row}")
+        raise DataError(f"{col}: non-finite value at data row {row}")
     steps = np.diff(t)
+    # Large absolute times (e.g. Unix time in seconds) may be stored more coarsely than
+    # the step: the column then looks repeated or uneven, so say what is wrong.
+    span = float(t[-1] - t[0])
+    resolution = float(np.spacing(np.max(np.abs(t))))
+    if span > 0 and resolution > 0.1 * rtol * span / (t.size - 1):
+        raise DataError(
+            f"{col} reaches {float(np.max(np.abs(t))):.6g} s, where a float resolves only "
+            f"{resolution:.3g} s, too coarse for its step of {span / (t.size - 1):.6g} s; "
+            "subtract the start time from the column"
+        )
+    back = np.flatnonzero(steps <= 0)
+    if back.size:
+        k = int(back[0])
+        if steps[k] == 0:
+            raise DataError(f"{col} repeats the time {float(t[k])!r} s at data rows {k + 1} and "
+                            f"{k + 2}; it must increase by one sample step per row"
+                            + (" (it is constant)" if np.all(steps == 0) else ""))
+        raise DataError(f"{col} goes backwards from {float(t[k])!r} s at data row {k + 1} "
+                        f"to {float(t[k + 1])!r} s at row {k + 2}; it must increase")
     dt = float(np.median(steps))
-    if not dt > 0:
-        raise DataError(f"{where}time column {name!r} is not increasing")
+    lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
+    if not 1.0 / hi_fs <= dt <= 1.0 / lo_fs:
+        with np.errstate(over="ignore", divide="ignore"):
+            rate = np.float64(1.0) / np.float64(dt)
+        raise DataError(
+            f"{col} has a typical step of {dt:.6g} s, a sample rate of {rate:.6g} Hz; "
+            f"accepted rates are {lo_fs:g} to {hi_fs:g} Hz (is the column in seconds?)"
+        )
     bad = np.flatnonzero(np.abs(steps - dt) > rtol * dt)
     if bad.size:
         k = int(bad[0])
         raise DataError(
-            f"{where}time column {name!r} is unevenly sampled: the step from data row {k + 1} "
+            f"{col} is unevenly sampled: the step from data row {k + 1} "
             f"to row {k + 2} is {steps[k]:.6g} s, the typical step is {dt:.6g} s"
         )
     return (t.size - 1) / float(t[-1] - t[0])
@@ -234,16 +309,30 @@ def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
 
 @dataclass(frozen=True)
 class _Raw:
-    """Columns as read, before the common checks (lengths, finiteness, float64)."""
+    """Columns as read, before the common checks (lengths, finiteness, float64).
+
+    ``labels`` gives how a column is named in messages when that differs from its key
+    (a column chosen by number: ``column 2 ('u')``; a headerless file: ``column 2``).
+    """
 
     columns: dict[str, np.ndarray]
+    labels: dict[str, str] = field(default_factory=dict)
 
 
 def _unknown_column(path: Path, name: str, available: list[str]) -> str:
     shown = ", ".join(repr(a) for a in available[:30])
     if len(available) > 30:
         shown += f", ... ({len(available)} in all)"
-    return f"{str(path)!r}: no column {name!r}; available: {shown or '(none)'}"
+    hint = ""
+    if _column_number(name) is not None and path.suffix.lower() not in _TEXT_SUFFIXES:
+        hint = " (column numbers select columns of text files only; name the variable)"
+    return f"{str(path)!r}: no column {name!r}; available: {shown or '(none)'}{hint}"
+
+
+def _column_number(spec: str) -> int | None:
+    """The whole number written in ``spec`` (``"2"``, ``" 2 "``), or None."""
+    text = spec.strip()
+    return int(text) if text.isascii() and text.isdigit() else None
 
 
 def _finish(path: Path, raw: _Raw) -> Table:
@@ -262,8 +351,9 @@ def _finish(path: Path, raw: _Raw) -> Table:
         finite = np.isfinite(a)
         if not finite.all():
             row = int(np.flatnonzero(~finite)[0])
+            label = raw.labels.get(name, f"column {name!r}")
             raise DataError(
-                f"{str(path)!r}: column {name!r} has a non-finite value ({float(a[row])!r}) "
+                f"{str(path)!r}: {label} has a non-finite value ({float(a[row])!r}) "
                 f"at data row {row + 1}"
             )
         a.flags.writeable = False
@@ -306,12 +396,20 @@ def _read_text(path: Path) -> str:
             raise DataError(f"{str(path)!r}: not a readable text file") from None
 
 
-def _split_fn(header: str):
-    if "," in header:
-        delim = ","
-    elif ";" in header:
+_TEXT_SUFFIXES = (".csv", ".txt", ".dat", ".tsv")
+
+
+def _split_fn(first: str):
+    """Delimiter sniffed from the first row, and a function splitting a line on it.
+
+    A semicolon wins over a comma (files with decimal commas separate by semicolons);
+    without comma, semicolon or tab the fields are separated by runs of whitespace.
+    """
+    if ";" in first:
         delim = ";"
-    elif "\t" in header:
+    elif "," in first:
+        delim = ","
+    elif "\t" in first:
         delim = "\t"
     else:
         delim = None
@@ -331,24 +429,26 @@ def _read_csv(path: Path, wanted: list[str] | None, optional: str | None) -> _Ra
     if i == len(lines):
         raise DataError(f"{str(path)!r}: empty file (no header row)")
     delim, split = _split_fn(lines[i])
-    header = [h.strip().strip('"').strip("'").strip() for h in split(lines[i])]
-    if any(not h for h in header):
-        k = header.index("")
-        raise DataError(
-            f"{str(path)!r}: the header row has an empty name in field {k + 1}; "
-            "the first row must name every column"
-        )
-    if _looks_numeric(header):
-        raise DataError(
-            f"{str(path)!r}: the first row holds numbers, not column names; "
-            "add a header row naming the columns"
-        )
-    if len(set(header)) != len(header):
-        dup = next(h for h in header if header.count(h) > 1)
-        raise DataError(f"{str(path)!r}: column name {dup!r} appears twice in the header")
-    names = _select(path, header, wanted, optional)
-    idx = [header.index(n) for n in names]
-    data_lines = lines[i + 1 :]
+    first = [h.strip().strip('"').strip("'").strip() for h in split(lines[i])]
+    headerless = _looks_numeric(first)
+    if headerless:
+        # No header: the columns are known by number, counted from 1.
+        header = [str(k) for k in range(1, len(first) + 1)]
+        data_lines = lines[i:]
+    else:
+        header = first
+        data_lines = lines[i + 1 :]
+        if any(not h for h in header):
+            k = header.index("")
+            raise DataError(
+                f"{str(path)!r}: the header row has an empty name in field {k + 1}; "
+                "the first row must name every column (or hold only numbers, for a file "
+                "without header)"
+            )
+        if len(set(header)) != len(header):
+            dup = next(h for h in header if header.count(h) > 1)
+            raise DataError(f"{str(path)!r}: column name {dup!r} appears twice in the header")
+    idx, keys, labels = _resolve_text_columns(path, header, headerless, wanted, optional)
     # Trailing blank lines are not rows.
     while data_lines and not data_lines[-1].strip():
         data_lines.pop()
@@ -368,14 +468,73 @@ def _read_csv(path: Path, wanted: list[str] | None, optional: str | None) -> _Ra
             )
         if block.shape != (len(data_lines), len(idx)):
             raise ValueError("shape")
-        n_fields_ok = _fields_consistent(data_lines, split, len(header))
+        n_fields_ok = bool(np.all(_field_counts(data_lines, delim, split) == len(header)))
     except ValueError:
         block = None
         n_fields_ok = False
     if block is None or not n_fields_ok:
-        _diagnose_csv(path, data_lines, split, header, names, idx)
+        _diagnose_csv(path, data_lines, split, header, [labels[k] for k in keys], idx,
+                      headerless)
         raise DataError(f"{str(path)!r}: cannot parse the data rows")  # pragma: no cover
-    return _Raw({n: block[:, j].copy() for j, n in enumerate(names)})
+    return _Raw({k: block[:, j].copy() for j, k in enumerate(keys)}, labels)
+
+
+def _resolve_text_columns(
+    path: Path, header: list[str], headerless: bool, wanted: list[str] | None,
+    optional: str | None,
+) -> tuple[list[int], list[str], dict[str, str]]:
+    """Field indices, table keys and message labels of the requested columns.
+
+    A request is a header name or a column number counted from 1; the key is the
+    request as given, so ``table[request]`` finds it.
+    """
+    def label(j: int) -> str:
+        return f"column {j + 1}" if headerless else f"column {header[j]!r}"
+
+    def find(spec: str) -> int | None:
+        if not headerless and spec in header:
+            return header.index(spec)
+        k = _column_number(spec)
+        if k is not None and 1 <= k <= len(header):
+            return k - 1
+        return None
+
+    if wanted is None:
+        return list(range(len(header))), list(header), {h: label(j) for j, h in
+                                                        enumerate(header)}
+    idx: list[int] = []
+    keys: list[str] = []
+    labels: dict[str, str] = {}
+    for spec in wanted:
+        j = find(spec)
+        if j is None:
+            raise DataError(_no_text_column(path, header, headerless, spec))
+        idx.append(j)
+        keys.append(spec)
+        labels[spec] = label(j)
+    if optional is not None:
+        j = find(optional)
+        if j is not None and optional not in keys:
+            idx.insert(0, j)
+            keys.insert(0, optional)
+            labels[optional] = label(j)
+    return idx, keys, labels
+
+
+def _no_text_column(path: Path, header: list[str], headerless: bool, spec: str) -> str:
+    n = len(header)
+    k = _column_number(spec)
+    if k is not None:
+        if k == 0:
+            return (f"{str(path)!r}: there is no column 0; columns are numbered from 1 "
+                    f"(the first) to {n}")
+        return f"{str(path)!r}: no column {k}; the file has {n} column{'s' if n > 1 else ''}"
+    if headerless:
+        return (f"{str(path)!r}: no column named {spec!r}: the file has no header row (its "
+                f"first row holds numbers), so its {n} columns are known by number only, "
+                f"1 to {n} (1 is the first)")
+    return _unknown_column(path, spec, header) + (
+        f", or a column number 1 to {n}")
 
 
 def _looks_numeric(header: list[str]) -> bool:
@@ -386,33 +545,37 @@ def _looks_numeric(header: list[str]) -> bool:
     return True
 
 
-def _fields_consistent(data_lines: list[str], split, n: int) -> bool:
-    # loadtxt with usecols ignores extra fields; a short or long row still means the
-    # columns do not line up, so check the count on a cheap sample (first and last rows)
-    # and fully when the file is small.
-    sample = data_lines if len(data_lines) <= 20000 else data_lines[:100] + data_lines[-100:]
-    return all(len(split(line)) == n for line in sample)
+def _field_counts(data_lines: list[str], delim: str | None, split) -> np.ndarray:
+    """Number of fields on every data line (all of them, not a sample)."""
+    n = len(data_lines)
+    if delim is not None:
+        if any('"' in line for line in data_lines):  # quoted fields: let csv split them
+            return np.fromiter((len(split(line)) for line in data_lines), np.int64, n)
+        return np.fromiter((line.count(delim) for line in data_lines), np.int64, n) + 1
+    # Whitespace-separated: str.split counts the runs of non-blank characters.
+    return np.fromiter(map(len, map(str.split, data_lines)), np.int64, n)
 
 
-def _diagnose_csv(path, data_lines, split, header, names, idx) -> None:
+def _diagnose_csv(path, data_lines, split, header, labels, idx, headerless) -> None:
     n = len(header)
+    reference = "the first row" if headerless else "the header"
     for r, line in enumerate(data_lines, start=1):
         fields = split(line)
         if not line.strip():
             raise DataError(f"{str(path)!r}: data row {r} is empty")
         if len(fields) != n:
             raise DataError(
-                f"{str(path)!r}: data row {r} has {len(fields)} fields, the header has {n} "
+                f"{str(path)!r}: data row {r} has {len(fields)} fields, {reference} has {n} "
                 "(unequal column lengths or a stray separator)"
             )
-        for name, j in zip(names, idx, strict=True):
+        for label, j in zip(labels, idx, strict=True):
             cell = fields[j].strip()
             try:
                 float(cell)
             except ValueError:
                 shown = cell if cell else "(empty)"
                 raise DataError(
-                    f"{str(path)!r}: column {name!r}, data row {r}: {shown!r} is not a number"
+                    f"{str(path)!r}: {label}, data row {r}: {shown!r} is not a number"
                 ) from None
 
 
@@ -550,19 +713,21 @@ def _load_ds(ds, transpose: bool) -> np.ndarray:
 
 
 def _read_npz(path: Path, wanted, optional) -> _Raw:
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise DataError(f"{str(path)!r}: not an .npz archive")
-    with archive:
+    # The file is opened here so that it is closed even when numpy refuses it.
+    with open(path, "rb") as fh:
         try:
-            if wanted is None:
-                flat = {k: archive[k] for k in archive.files}
-            else:
-                names = _select(path, list(archive.files), wanted, optional)
-                flat = {k: archive[k] for k in names}
+            archive = np.load(fh, allow_pickle=False)
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
+        if not isinstance(archive, np.lib.npyio.NpzFile):
+            raise DataError(f"{str(path)!r}: not an .npz archive")
+        with archive:
+            try:
+                if wanted is None:
+                    flat = {k: archive[k] for k in archive.files}
+                else:
+                    names = _select(path, list(archive.files), wanted, optional)
+                    flat = {k: archive[k] for k in names}
+            except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+                raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
     return _pick(path, flat, wanted, optional)

@@ -1,13 +1,22 @@
-"""Figures of the reproduction report, laid out like the paper's Figs 12–15."""
+"""Figures of the reproduction report, laid out like the paper's Figs 12–15.
+
+Layouts are fixed (margins in inches, :func:`ehss.plots.fixed_layout`) and time series
+are drawn to the pixels they cover (:func:`ehss.plots.plot_series`): each figure is laid
+out and drawn once when saved.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from ehss.report.programme import LoopResult, StepTest
+from ehss.experiments import LoopResult, StepTest
+from ehss.plots import bode_compare, fixed_layout, plot_series, theta_convergence, time_compare
 
-__all__ = ["step_figure", "loop_figure", "convergence_figure", "LOOP_UNITS"]
+__all__ = ["step_figure", "loop_figure", "convergence_figure", "LOOP_UNITS", "REPORT_DPI"]
+
+#: Resolution of the report's PNG figures.
+REPORT_DPI = 110
 
 LOOP_UNITS = {
     "position": ("displacement", "mm", 1e3),
@@ -18,13 +27,14 @@ LOOP_UNITS = {
 
 def step_figure(steps: dict[str, StepTest]) -> Figure:
     """Fig. 12: step responses of the three loops with their targets."""
-    fig = Figure(figsize=(11, 3.4), layout="constrained")
+    fig = Figure(figsize=(11, 3.4))
     axes = fig.subplots(1, len(steps))
+    fixed_layout(fig, left=0.65, right=0.1, bottom=0.5, top=0.6, wspace=0.75)
     for ax, (loop, st) in zip(np.atleast_1d(axes), steps.items(), strict=True):
         label, unit, scale = LOOP_UNITS[loop]
         r = st.result
-        ax.plot(r.t, st.target * scale, "k--", lw=1.0, label="target")
-        ax.plot(r.t, r.output * scale, lw=1.2, label="measured")
+        plot_series(ax, r.t, st.target * scale, "k--", dpi=REPORT_DPI, lw=1.0, label="target")
+        plot_series(ax, r.t, r.output * scale, dpi=REPORT_DPI, lw=1.2, label="measured")
         m = st.metrics
         ax.set_title(
             f"{loop}: rise {m.rise_time_s * 1e3:.0f} ms, overshoot {m.overshoot_pct:.0f} %",
@@ -44,24 +54,23 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
     The paper-order model is drawn, and, when it fails the acceptance, the simplest model
     that meets it. The Bode panels are :func:`ehss.plots.bode_compare`'s.
     """
-    from ehss.plots import bode_compare, time_compare
-
     label, unit, scale = LOOP_UNITS[res.setup.loop]
     checks = [res.paper] + ([res.passing] if res.passing is not None else [])
-    fig = Figure(figsize=(11, 8.5), layout="constrained")
+    fig = Figure(figsize=(11, 8.5))
     gs = fig.add_gridspec(3, 2, height_ratios=[3, 3, 1.2])
     ax_t = fig.add_subplot(gs[0, :])
     ax_m = fig.add_subplot(gs[1, 0])
     ax_p = fig.add_subplot(gs[1, 1], sharex=ax_m)
     ax_c = fig.add_subplot(gs[2, :])
+    fixed_layout(fig, left=0.75, right=0.15, bottom=0.5, top=0.8, wspace=0.75, hspace=0.75)
 
     sim = res.sim
     fs = res.frf.fs
     i0 = res.n_ident
     i1 = min(sim.t.size, i0 + int(round(window_s * fs)))
     window = (sim.t[i0], sim.t[i1 - 1])
-    ax_t.plot(sim.t[i0:i1], sim.reference[i0:i1] * scale, color="0.7", lw=0.8,
-              label="reference")
+    plot_series(ax_t, sim.t[i0:i1], sim.reference[i0:i1] * scale, dpi=REPORT_DPI,
+                color="0.7", lw=0.8, label="reference")
     time_compare(
         sim.t,
         sim.output * scale,
@@ -91,10 +100,9 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
 
 def convergence_figure(loops: dict[str, LoopResult]) -> Figure:
     """θ̂(k) of each paper-order model during its estimation record (RELS, eqs 20–22)."""
-    from ehss.plots import theta_convergence
-
-    fig = Figure(figsize=(11, 3.6), layout="constrained")
+    fig = Figure(figsize=(11, 3.6))
     axes = np.atleast_1d(fig.subplots(1, len(loops)))
+    fixed_layout(fig, left=0.75, right=0.1, bottom=0.5, top=0.6, wspace=0.95)
     for ax, (name, r) in zip(axes, loops.items(), strict=True):
         m = r.paper.model
         names = ([f"a{i}" for i in range(1, m.na + 1)] + [f"b{i}" for i in range(m.nb + 1)]

@@ -5,7 +5,6 @@ from __future__ import annotations
 import base64
 import dataclasses
 import html
-import io
 import json
 import shutil
 import tempfile
@@ -13,22 +12,25 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from ehss._provenance import versions
-from ehss.compensation import plot_demo
 from ehss.errors import DataError
-from ehss.identification import ArmaxModel
-from ehss.params import params_to_dict
-from ehss.report.figures import convergence_figure, loop_figure, step_figure
-from ehss.report.paper_models import PRINTED_MODELS, printed_model_findings
-from ehss.report.programme import (
+from ehss.experiments import (
     MAX_MAG_ERROR_DB,
     MAX_PHASE_ERROR_DEG,
     MIN_COHERENCE,
     MIN_FIT_PCT,
     LoopResult,
+    ModelCheck,
     ProgrammeResult,
 )
+from ehss.experiments.compensation_demo import plot_demo
+from ehss.identification import ArmaxModel
+from ehss.params import params_to_dict
+from ehss.plots import fixed_layout, png_bytes
+from ehss.report.figures import REPORT_DPI, convergence_figure, loop_figure, step_figure
+from ehss.report.paper_models import PRINTED_MODELS, printed_model_findings
 
 __all__ = ["write_report", "summary_dict"]
 
@@ -59,7 +61,7 @@ def _model_summary(model: ArmaxModel) -> dict[str, Any]:
     }
 
 
-def _model_entry(chk) -> dict[str, Any]:
+def _model_entry(chk: ModelCheck) -> dict[str, Any]:
     """The model's JSON layout (``a``, ``b``, ``c``, ``delay``, ``dt``, ...) plus its verdict."""
     entry = chk.model.to_dict()
     entry["label"] = chk.label
@@ -67,7 +69,7 @@ def _model_entry(chk) -> dict[str, Any]:
     return entry
 
 
-def _check_summary(chk) -> dict[str, Any]:
+def _check_summary(chk: ModelCheck) -> dict[str, Any]:
     return {
         "label": chk.label,
         "model": _model_summary(chk.model),
@@ -131,7 +133,7 @@ def _fmt(x: float, digits: int = 3) -> str:
     return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}g}"
 
 
-def _row(chk) -> str:
+def _row(chk: ModelCheck) -> str:
     e = chk.error
     return (
         f"| {chk.label} | {_fmt(e.max_magnitude_db)} | {_fmt(e.max_phase_deg)} | {e.n_points} | "
@@ -205,10 +207,11 @@ def _compensation_markdown(result: ProgrammeResult) -> list[str]:
     lines = [
         "## Feed-forward compensation",
         "",
-        "The identified closed loop is inverted (ZPETC: stable well-damped zeros cancelled, "
-        "the others by their zero-phase factor; the delay by preview over the known drive "
-        "file; a zero-phase band limit), the drive file is refined by re-identification "
-        "between runs, and the rig tracks a band-limited random reference and a "
+        "The identified closed loop is inverted exactly inside its validated band (stable "
+        "inversion: zeros inside the unit circle inverted forwards, outside backwards over "
+        "the known drive file, the delay by preview), the drive file is refined by learning "
+        "updates between runs (refused when the error grows), and the rig tracks a "
+        "band-limited random reference and a "
         "Kanai–Tajimi earthquake-like history. Targets: within ±1 dB and ±5° of unity over "
         "the working band (position 0–20 Hz, judged from 1 Hz; acceleration 1–50 Hz) and at "
         "least 10× lower RMS tracking error on the random reference.",
@@ -299,11 +302,11 @@ def _markdown(result: ProgrammeResult, summary: dict[str, Any]) -> str:
               "|---|---|---|---|---|---|---|"]
     units = {"position": ("m", 1.0), "acceleration": ("m/s²", 1.0), "force": ("N", 1.0)}
     for name, st in result.steps.items():
-        m = st.metrics
+        sm = st.metrics
         lines.append(
-            f"| {name} | {m.amplitude:g} {units[name][0]} | {_fmt(m.rise_time_s * 1e3)} | "
-            f"{_fmt(m.overshoot_pct)} | {_fmt(m.settling_time_s * 1e3)} | "
-            f"{_fmt(m.steady_state_error_pct)} | {_fmt(m.drive_saturated_pct)} |"
+            f"| {name} | {sm.amplitude:g} {units[name][0]} | {_fmt(sm.rise_time_s * 1e3)} | "
+            f"{_fmt(sm.overshoot_pct)} | {_fmt(sm.settling_time_s * 1e3)} | "
+            f"{_fmt(sm.steady_state_error_pct)} | {_fmt(sm.drive_saturated_pct)} |"
         )
     lines += ["", "## Identified closed loops", ""]
     for name, r in result.loops.items():
@@ -326,8 +329,8 @@ def _markdown(result: ProgrammeResult, summary: dict[str, Any]) -> str:
         "| loop | equation | largest pole radius |",
         "|---|---|---|",
     ]
-    for name, m in PRINTED_MODELS.items():
-        lines.append(f"| {name} | {m.equation} | {m.max_pole_radius:.3f} |")
+    for name, pm in PRINTED_MODELS.items():
+        lines.append(f"| {name} | {pm.equation} | {pm.max_pole_radius:.3f} |")
     lines += [
         "",
         "ehss therefore stores and prints its models at full precision (`models.json`), "
@@ -418,10 +421,8 @@ def _inline(text: str) -> str:
     return "".join(f"<em>{p}</em>" if i % 2 else p for i, p in enumerate(parts))
 
 
-def _png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    return buf.getvalue()
+def _png(fig: Figure) -> bytes:
+    return png_bytes(fig, dpi=REPORT_DPI)
 
 
 def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
@@ -446,7 +447,11 @@ def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
         figures[fname] = _png(loop_figure(r, title=title))
     figures[CONVERGENCE_FIGURE] = _png(convergence_figure(result.loops))
     for name, demo in result.compensation.items():
-        figures[COMPENSATION_FIGURES[name]] = _png(plot_demo(demo))
+        fig = plot_demo(demo)
+        # A fixed layout for the 2 × 2 panels: saved with one draw, no layout engine.
+        fixed_layout(fig, left=0.85, right=0.15, bottom=0.5, top=0.35, wspace=0.95,
+                     hspace=0.75)
+        figures[COMPENSATION_FIGURES[name]] = _png(fig)
     md = _markdown(result, summary)
 
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from ehss.report.steps import step_metrics
+from ehss.experiments.steps import step_metrics
 
 
 def test_first_order_step_has_analytic_figures():

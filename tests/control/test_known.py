@@ -7,13 +7,9 @@ import pytest
 from scipy import signal as sps
 
 from ehss import preset, signals, simulate
+from ehss.control.known import accelerometer_filter, generator_filter, known_factors
 from ehss.errors import ParameterError
-from ehss.identification.known import (
-    accelerometer_filter,
-    compose,
-    generator_filter,
-    known_factors,
-)
+from ehss.identification.known import compose
 from ehss.identification.model import ArmaxModel
 
 

@@ -1,19 +1,22 @@
 """Demonstration of inverse-model compensation on the simulated rig.
 
 :func:`demonstrate` runs the whole chain the paper's identification is meant for:
-identify the closed loop (RELS, eqs (16)–(22)) on a band-limited random test, design its
-inverse (:mod:`ehss.compensation.inverse`), refine it by a few learning iterations on the
-rig (:mod:`ehss.compensation.refine`), then track a band-limited random reference and an
-earthquake-like history (Kanai–Tajimi acceleration; for the position loop its doubly
-integrated, high-passed displacement) without and with compensation.
+identify the closed loop (RML, the recursive estimator of eqs (16)–(22) with filtered
+regressors) on a band-limited random test, give it
+the loop's working band as its validated band, design its inverse (exact stable
+inversion in that band, :mod:`ehss.compensation.inverse`), refine the drive by a few
+learning iterations on the rig (:mod:`ehss.experiments.refinement`, default gain chosen
+from the run, updates refused when the error grows), then track a band-limited random
+reference and an earthquake-like history (Kanai–Tajimi acceleration; for the position
+loop its doubly integrated, high-passed displacement) without and with compensation.
 
 The acceleration loop is identified behind its known factors
 (:mod:`ehss.identification.known`): the controller's acceleration generator, eq (10),
 Kg s²/(s² + ωg s + δg) with ωn = π rad/s, ζn = 0.7, as the controller runs it (ZOH), and
 the accelerometer's 0.5 Hz AC coupling. Both sit near 0.5 Hz, far below the paper's
-2–100 Hz identification test, which a 6th-order RELS model at 1 kHz cannot resolve: fitted
-from reference to output it shows −2° at 1 Hz where the loop leads by ~54°, and its
-inverse left ±3.5 dB / ±13° at 1–2 Hz. RELS therefore sees the reference filtered
+2–100 Hz identification test, which a 6th-order model at 1 kHz cannot resolve: fitted
+from reference to output (RELS) it shows −2° at 1 Hz where the loop leads by ~54°, and
+its inverse left ±3.5 dB / ±13° at 1–2 Hz. The estimator therefore sees the reference filtered
 through the known factors, F·a_r → a_m, and identifies only the rest (the servo-valve,
 actuator and feedback dynamics, which the 2–100 Hz test does excite); the compensator is
 rest⁻¹ ∘ F⁻¹, F⁻¹ applied in the frequency domain inside the 1–50 Hz band limit, which
@@ -23,6 +26,7 @@ loop has no known factor and is identified directly.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,9 +35,9 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from ehss.compensation.inverse import InverseModel, design_inverse
-from ehss.compensation.refine import refine, rms
+from ehss.compensation import InverseModel, design_inverse
 from ehss.errors import ParameterError
+from ehss.experiments.refinement import refine, rms
 
 __all__ = ["CompensationDemo", "LOOP_SETTINGS", "demonstrate", "write_demo_report",
            "plot_demo", "earthquake_reference", "random_reference"]
@@ -223,7 +227,7 @@ def demonstrate(
     params: Any = None,
     seed: int = 0,
     duration_s: float = 16.0,
-    method: str = "zpetc",
+    method: str = "stable",
     band_hz: tuple[float, float] | None = None,
     iterations: int = 2,
     identification_s: float | None = None,
@@ -239,9 +243,11 @@ def demonstrate(
         Seed of the references and of the sensor noise.
     duration_s : float
         Length of each test record (s).
-    method : {"zpetc", "zmetc"}
+    method : {"stable", "zpetc", "zmetc"}
+        Inverse design (default: exact stable inversion).
     band_hz : (lo, hi), optional
-        Band limit of the inverse; default the loop's working band (Table 2).
+        Band the identified model is taken as validated over, and so the band limit of
+        the inverse and of every update; default the loop's working band (Table 2).
     iterations : int
         Learning iterations on the random test (0: one-shot inverse only).
     identification_s : float, optional
@@ -251,8 +257,9 @@ def demonstrate(
     -------
     CompensationDemo
     """
-    from ehss.identification.known import compose, known_factors
-    from ehss.identification.rels import rels
+    from ehss.control.known import known_factors
+    from ehss.identification.estimators import estimate
+    from ehss.identification.known import compose
     from ehss.params import preset
     from ehss.signals import check_feasible
     from ehss.simulation import simulate
@@ -270,7 +277,7 @@ def demonstrate(
 
     # 1. Identification on a band-limited random test (the paper's 2-100 Hz random),
     #    behind the loop's known factors (the acceleration loop's generator, eq (10), and
-    #    accelerometer coupling; none for the position loop): RELS sees F·u → y.
+    #    accelerometer coupling; none for the position loop): RML sees F·u → y.
     u_id = random_reference(id_s, fs, cfg["ident_hz"], cfg["ident_rms"], seed)
     check_feasible(u_id, loop, params, fs)  # every test stays inside the rig's limits
     y_id = simulate(loop, u_id, params=params, seed=seed + 100).output
@@ -278,10 +285,12 @@ def demonstrate(
     known = None if num.size == 1 and den.size == 1 else (num, den)
     u_f = u_id if known is None else scipy.signal.lfilter(num, den, u_id)
     o = cfg["orders"]
-    rest = rels(u_f, y_id, na=o["na"], nb=o["nb"], nc=o["nc"], delay=o["delay"], dt=1.0 / fs)
+    rest = estimate(u_f, y_id, method="rml", na=o["na"], nb=o["nb"], nc=o["nc"],
+                    delay=o["delay"], dt=1.0 / fs)
 
     # 2. Inverse rest⁻¹ ∘ F⁻¹ (checked here: a bad model fails before the tests run).
-    design_inverse(rest, method=method, band_hz=band, known=known)
+    rest = dataclasses.replace(rest, band_hz=band)
+    design_inverse(rest, method=method, known=known)
     references = {
         "random": random_reference(duration_s, fs, band, cfg["test_rms"], seed + 1),
         "earthquake": earthquake_reference(
@@ -295,8 +304,9 @@ def demonstrate(
     for i, (name, r) in enumerate(references.items()):
         outputs_without[name] = simulate(loop, r, params=params, seed=seed + 300 + i).output
         # Drive-file iteration, as a shaking-table controller does for a known history.
-        ref = refine(loop, r, params=params, model=rest, iterations=iterations,
-                     method=method, band_hz=band, seed=seed + 200 + 10 * i, known=known)
+        ref = refine(loop, r, params=params, fs=fs, model=rest, iterations=iterations,
+                     method=method, seed=seed + 200 + 10 * i, known=known,
+                     stop_without_gain=True)
         best = int(np.argmin(ref.rms_error))
         drives[name] = ref.drive
         outputs_with[name] = ref.outputs[best]
@@ -304,8 +314,9 @@ def demonstrate(
         history[name] = ref.rms_error
         if name == "random":
             final_rest = ref.models[min(best, len(ref.models) - 1)]
-    final_inverse = design_inverse(final_rest, method=method, band_hz=band, known=known)
-    final_model = final_rest if known is None else compose(final_rest, num, den)
+    final_inverse = design_inverse(final_rest, method=method, known=known)
+    final_model = final_rest if known is None else dataclasses.replace(
+        compose(final_rest, num, den), band_hz=band)
     err0 = {k: rms(outputs_without[k] - references[k]) for k in references}
     err1 = {k: rms(outputs_with[k] - references[k]) for k in references}
     nperseg = int(2 ** round(math.log2(fs / 0.5)))  # ~0.5 Hz resolution

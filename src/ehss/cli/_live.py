@@ -1,0 +1,312 @@
+"""``ehss live``: identify a running rig online, detect changes, record, and show it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import threading
+from pathlib import Path
+
+import ehss
+from ehss._provenance import versions
+from ehss.errors import DataError, ParameterError
+
+__all__ = ["register", "run", "add_rig_arguments", "rig_or_replay", "WIRE_FORMAT"]
+
+WIRE_FORMAT = """\
+wire format (--udp): one UDP datagram = a 16-byte little-endian header, then n >= 1
+samples of F float64 fields (little-endian), sample after sample, the fields of each
+sample in --fields order:
+  bytes 0-3   magic b"EHSS"
+  bytes 4-5   uint16 version = 1
+  bytes 6-7   uint16 F, the number of fields (must equal the --fields count)
+  bytes 8-15  uint64 index of the packet's first sample (0 at the stream's start;
+              the next packet starts at index + n)
+  bytes 16-   n*F float64 values (datagram length 16 + 8*F*n bytes, at most 65507)
+Channels: fields ref<k> (reference, model input) and fb<k> (feedback, model output)
+with the same suffix form channel <k>; a field t (s) is the target's clock; other
+fields are recorded only. Gaps, reordered, late, malformed and foreign datagrams
+(senders outside --allow, or other than the first accepted sender) are counted and
+dropped; the receiver never stops on bad input.
+"""
+
+
+def add_rig_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of the simulated rig and of replayed files (shared with ehss stream)."""
+    p.add_argument("--channels", type=int, default=1, metavar="N",
+                   help="--rig: number of actuator channels (default: %(default)s)")
+    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+                   help="--rig: length of the run, s (default: %(default)s)")
+    p.add_argument("--event", action="append", default=[], metavar="T:NAME=VALUE[@CH]",
+                   help="--rig: a parameter change at T s, on channel CH or all, e.g. "
+                   "30:mass_kg=350@1 (repeatable; NAME may be group.field)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="--rig: seed of the references and sensor noise (default: 0)")
+    p.add_argument("--preset", choices=("default", "paper"), default="default",
+                   help="--rig: parameter set (default: %(default)s)")
+    p.add_argument("--params", metavar="FILE.toml", help="--rig: parameter file")
+    p.add_argument("--speed", type=float, default=1.0, metavar="X",
+                   help="--rig/--replay: × real time; inf for as fast as possible "
+                   "(default: %(default)s)")
+
+
+def _check_positive(name: str, value: float, *, allow_inf: bool = False) -> float:
+    if not (value > 0 and (allow_inf or math.isfinite(value))):
+        raise ParameterError(f"{name}={value!r} must be > 0")
+    return value
+
+
+def rig_or_replay(args: argparse.Namespace):
+    """``(layout, samples, fs)`` of ``--rig LOOP`` or ``--replay FILE``."""
+    from ehss.live.layout import parse_fields
+    from ehss.live.replay import replay_record
+    from ehss.live.rig import parse_event, rig_record
+
+    _check_positive("--speed", args.speed, allow_inf=True)
+    if args.rig is not None:
+        events = tuple(parse_event(e) for e in args.event)
+        params = ehss.load_params(args.params) if args.params else ehss.preset(args.preset)
+        _check_positive("--duration", args.duration)
+        return rig_record(args.rig, n_channels=args.channels, duration_s=args.duration,
+                          fs=args.fs, params=params, events=events, seed=args.seed)
+    if args.event:
+        raise ParameterError("--event applies to --rig only")
+    fields = parse_fields(args.fields) if args.fields else None
+    return replay_record(args.replay, fields=fields, fs=args.fs)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "live",
+        help="identify a running rig online (UDP, simulated rig or replay), detect "
+        "changes, record, dashboard",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Identify every channel of a running rig online with recursive "
+        "estimation and forgetting,\ncompare each model with a baseline (or the recent "
+        "past), raise alarms when it changes,\nrecord everything to HDF5 and show it in a "
+        "terminal summary and a local web dashboard.\n\n" + WIRE_FORMAT,
+        epilog="example: ehss live --rig position --channels 2 --event 30:mass_kg=350@1 "
+        "--record run.h5 --dashboard 5006",
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--udp", metavar="HOST:PORT",
+                     help="listen for datagrams of a real-time target (see the wire format)")
+    src.add_argument("--rig", choices=("position", "acceleration", "force"),
+                     help="the simulated rig, paced to the wall clock")
+    src.add_argument("--replay", metavar="FILE",
+                     help="a recording of ehss live, or a CSV/MAT/HDF5/NPZ file with "
+                     "t, ref<k>, fb<k> columns")
+    p.add_argument("--fields", metavar="t,ref1,fb1,...",
+                   help="--udp: the fields of one sample, in wire order (required); "
+                   "--replay: the columns to take")
+    p.add_argument("--fs", type=float, metavar="HZ",
+                   help="sample rate (default: the parameter set's, the file's, or from the "
+                   "t field)")
+    p.add_argument("--allow", metavar="IP[,IP...]",
+                   help="--udp: accept datagrams from these senders only")
+    add_rig_arguments(p)
+    e = p.add_argument_group("estimation")
+    e.add_argument("--na", type=int, default=4, metavar="N", help="order of A (default: 4)")
+    e.add_argument("--nb", type=int, default=3, metavar="N", help="order of B (default: 3)")
+    e.add_argument("--nc", type=int, default=4, metavar="N", help="order of C (default: 4)")
+    e.add_argument("--delay", type=int, default=1, metavar="D", help="delay (default: 1)")
+    e.add_argument("--method", choices=("rels", "rml"), default="rml",
+                   help="rml (default): recursive maximum likelihood, unbiased when the "
+                   "feedback carries mostly sensor noise; rels: the paper's eqs (19)-(22)")
+    e.add_argument("--memory", type=float, default=0.3, metavar="S",
+                   help="memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: "
+                   "%(default)s s)")
+    e.add_argument("--forgetting", type=float, metavar="LAMBDA", help="λ itself")
+    e.add_argument("--p0", type=float, default=1e6, metavar="ALPHA",
+                   help="P(0) = α I on the scaled data; tr P(0) also bounds tr P "
+                   "(default: %(default)g)")
+    e.add_argument("--u-scale", type=float, metavar="U",
+                   help="scale of the references (default: RMS of the first 0.5 s)")
+    e.add_argument("--y-scale", type=float, metavar="Y",
+                   help="scale of the feedbacks (default: RMS of the first 0.5 s)")
+    e.add_argument("--baseline", action="append", default=[], metavar="[CH=]MODEL.json",
+                   help="baseline model (ehss identify) for channel CH, or all channels; the "
+                   "estimator starts from it (repeatable)")
+    d = p.add_argument_group("change detection")
+    d.add_argument("--compare", choices=("baseline", "recent"), default="baseline",
+                   help="compare with the baseline, or the model of --recent s ago")
+    d.add_argument("--frf-db", type=float, default=0.5, metavar="DB",
+                   help="threshold of the RMS dB distance of the responses over the band "
+                   "(default: %(default)s)")
+    d.add_argument("--gain-db", type=float, default=1.0, metavar="DB",
+                   help="threshold of the gain change at the band's lower edge (default: "
+                   "%(default)s)")
+    d.add_argument("--pole-shift", type=float, default=math.inf, metavar="FRACTION",
+                   help="threshold of the relative shift of the dominant pole in the band "
+                   "(default: off; recorded all the same)")
+    d.add_argument("--hold", type=float, default=0.2, metavar="S",
+                   help="a figure must stay beyond its threshold this long (default: "
+                   "%(default)s s)")
+    d.add_argument("--clear", type=float, default=2.0, metavar="S",
+                   help="all figures below their thresholds this long clear an alarm "
+                   "(default: %(default)s s)")
+    d.add_argument("--learn", type=float, default=10.0, metavar="S",
+                   help="stream time before detection; the baseline is identified over it "
+                   "when none is given (default: %(default)s s)")
+    d.add_argument("--recent", type=float, default=5.0, metavar="S",
+                   help="look-back of --compare recent (default: %(default)s s)")
+    d.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="analysis band, Hz (default: the baseline's, else where the "
+                   "reference's spectrum is within 20 dB of its peak)")
+    e.add_argument("--batch", type=float, default=0.002, metavar="S",
+                   help="after a datagram, wait up to S s for more before updating (the "
+                   "estimators' cost is mostly per call; default: %(default)s s)")
+    d.add_argument("--update", type=float, default=0.1, metavar="S",
+                   help="evaluation period, s of stream time (default: %(default)s)")
+    o = p.add_argument_group("output")
+    o.add_argument("--record", metavar="FILE.h5",
+                   help="record samples, estimates and events (HDF5, readable while "
+                   "running; never overwritten)")
+    o.add_argument("--dashboard", type=int, metavar="PORT",
+                   help="serve the dashboard on this port (0: any free port)")
+    o.add_argument("--bind", default="127.0.0.1", metavar="HOST",
+                   help="dashboard address (default: %(default)s; anything else prints "
+                   "a warning and requires a token)")
+    o.add_argument("--quiet", action="store_true", help="no terminal summary")
+    o.add_argument("--stop-after", type=float, metavar="S",
+                   help="stop after S s of stream time")
+    o.add_argument("--idle-stop", type=float, metavar="S",
+                   help="--udp: stop when no datagram came for S s (after the first)")
+    o.add_argument("--report", metavar="FILE.json",
+                   help="write the session's figures (counters, lag, CPU, alarms) there")
+    p.set_defaults(func=run)
+
+
+def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
+    out = {}
+    for item in items:
+        ch, sep, path = item.rpartition("=")
+        if not sep:
+            ch, path = None, item
+        try:
+            model = ehss.ArmaxModel.load_json(path)
+        except (OSError, ValueError, KeyError) as exc:
+            raise DataError(f"{path!r}: not a model file ({exc})") from None
+        for name in (channels if ch is None else (ch,)):
+            out[name] = model
+    return out
+
+
+def _source(args: argparse.Namespace):
+    from ehss.live.layout import RecordLayout, parse_fields
+    from ehss.live.source import PacedSource
+    from ehss.live.udp import UdpSource, parse_address
+
+    if args.udp is not None:
+        if not args.fields:
+            raise ParameterError("--udp needs --fields, the names of one sample's fields in "
+                                 "wire order (e.g. t,ref1,fb1)")
+        if args.fs is not None:
+            _check_positive("--fs", args.fs)
+        layout = RecordLayout(parse_fields(args.fields))
+        allow = None if not args.allow else [a.strip() for a in args.allow.split(",")]
+        try:
+            return UdpSource(layout, parse_address(args.udp), fs=args.fs, allow=allow)
+        except ValueError as exc:
+            raise ParameterError(f"--allow {args.allow!r}: {exc}") from None
+    layout, samples, fs = rig_or_replay(args)
+    return PacedSource(layout, samples, fs, speed=args.speed)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ehss.live.channel import EstimatorSettings
+    from ehss.live.detect import DetectionSettings
+    from ehss.live.session import LiveSession
+    from ehss.live.summary import TerminalSummary
+
+    if args.record is not None and Path(args.record).exists():
+        raise DataError(f"{args.record!r} exists: a recording is never overwritten")
+    est = EstimatorSettings(na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
+                            method=args.method, memory_s=args.memory,
+                            forgetting=args.forgetting, p0=args.p0, u_scale=args.u_scale,
+                            y_scale=args.y_scale)
+    det = DetectionSettings(compare=args.compare, frf_db=args.frf_db, gain_db=args.gain_db,
+                            pole_shift=args.pole_shift, hold_s=args.hold, clear_s=args.clear,
+                            learn_s=args.learn, recent_s=args.recent,
+                            band_hz=None if args.band is None else tuple(args.band))
+    source = _source(args)
+    dashboard = None
+    summary = None
+    try:
+        baselines = _baselines(args.baseline, source.layout.channels)
+        if args.dashboard is not None:
+            from ehss.live.dashboard import Dashboard
+
+            dashboard = Dashboard(host=args.bind, port=args.dashboard)
+            dashboard.start()
+            print(f"ehss live: dashboard at {dashboard.url}", file=sys.stderr, flush=True)
+        if not args.quiet:
+            summary = TerminalSummary(sys.stderr)
+        publish = None
+        if dashboard is not None or summary is not None:
+            def publish(snap: dict) -> None:
+                if dashboard is not None:
+                    dashboard.publish(snap)
+                if summary is not None:
+                    summary.update(snap)
+
+        def log(event: dict) -> None:
+            if event["kind"] in ("alarm", "clear", "message"):
+                line = json.dumps({k: v for k, v in event.items() if k != "wall"})
+                if summary is not None:
+                    summary.note(line)
+                else:
+                    print(f"ehss live: {line}", file=sys.stderr, flush=True)
+
+        session = LiveSession(
+            source, est=est, det=det, baselines=baselines, record=args.record,
+            update_s=args.update, publish=publish, h1=dashboard is not None,
+            batch_s=args.batch,
+            settings={"argv": sys.argv[1:]}, log=log,
+        )
+        where = (f"listening on {source.address[0]}:{source.address[1]}"
+                 if hasattr(source, "address") else "running")
+        print(f"ehss live: ready, {where}", file=sys.stderr, flush=True)
+        stop = threading.Event()
+        previous = signal.getsignal(signal.SIGTERM)
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        try:
+            report = session.run(duration_s=args.stop_after, stop=stop,
+                                 idle_stop_s=args.idle_stop)
+        except KeyboardInterrupt:
+            report = None
+        finally:
+            if threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGTERM, previous)
+    finally:
+        source.close()
+        if summary is not None:
+            summary.close()
+        if dashboard is not None:
+            dashboard.stop()
+    if report is None:
+        print("ehss live: interrupted; the recording is closed", file=sys.stderr)
+        return 130
+    out = {
+        "samples": report.samples, "stream_s": report.stream_s, "wall_s": report.wall_s,
+        "cpu_s": report.cpu_s, "active_wall_s": report.active_wall_s,
+        "active_cpu_s": report.active_cpu_s,
+        "cpu_share": report.active_cpu_s / report.active_wall_s
+        if report.active_wall_s > 0 else math.nan,
+        "counters": report.counters, "lag_ms": report.lag_ms,
+        "setup_ms": session.setup_ms,
+        "alarms": report.alarms,
+        "final_theta": {k: (None if v is None else v.tolist())
+                        for k, v in report.final_theta.items()},
+        "versions": versions(),
+    }
+    print(f"ehss live: {report.samples} samples per channel ({report.stream_s:.1f} s), "
+          f"{len([a for a in report.alarms if a['kind'] == 'alarm'])} alarms, counters "
+          f"{report.counters}, lag p99 {report.lag_ms['p99']:.2f} ms", file=sys.stderr)
+    if args.report:
+        ehss.write_json(args.report, out)
+    return 0

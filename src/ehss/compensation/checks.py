@@ -1,0 +1,266 @@
+"""Checks of a compensated drive before it is written or played, and of its reference.
+
+An inverse model is only as good as the model over the band it was validated in. Outside
+that band, or where the model says the loop barely transmits, the inverse asks for more
+than the loop can give, and the drive grows far beyond the reference. These checks stop
+such a drive with the numbers instead of letting it reach a rig:
+
+* **Gain.** The drive's RMS and peak (about the operating point) against the
+  reference's. A closed loop used within its bandwidth passes its reference with a gain
+  near 1; even at the edge of its validated band (-3 dB to -6 dB for a loop identified up
+  to its bandwidth) the exact inverse asks for 1.4-2× there, and a broadband reference
+  has most of its power below that edge. A drive 3× the reference's RMS (+9.5 dB across
+  the reference's whole spectrum) therefore means the inverse amplifies where the model
+  says the loop attenuates by 10 dB or more, i.e. outside what the model can be trusted
+  for: :data:`DEFAULT_MAX_GAIN` = 3, applied to both the RMS and the peak ratio.
+* **Rig limits.** With a parameter set and the loop the drive is played into, the drive
+  must respect the same limits as any reference of that loop
+  (:func:`ehss.signals.check_feasible`: stroke, velocity, the acceleration loop's
+  acceleration and generated motion, force); a drive for the open loop (``"valve"``)
+  must stay within the valve's full-scale command. Explicit :class:`DriveLimits` bound
+  the drive's value, first and second derivatives (finite differences).
+* **At rest.** A rig starts and ends a test at rest; a reference that starts or ends away
+  from its operating point would make the drive (and the rig) jump.
+  :func:`check_at_rest` asks for a fade (:func:`fade_to_rest`) instead.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ehss._checks import as_signal
+from ehss.errors import ParameterError
+
+__all__ = [
+    "DEFAULT_MAX_GAIN",
+    "REST_TOLERANCE",
+    "DriveLimits",
+    "DriveCheck",
+    "check_drive",
+    "check_at_rest",
+    "fade_to_rest",
+]
+
+#: Default bound on the drive-to-reference RMS and peak ratios (see the module notes).
+DEFAULT_MAX_GAIN = 3.0
+
+#: A reference is at rest at an end when it is within this fraction of its peak of zero.
+REST_TOLERANCE = 0.01
+
+#: Loops whose drive limits :meth:`DriveLimits` knows from a parameter set.
+LOOPS = ("position", "acceleration", "force", "valve")
+
+
+def _optional_positive(name: str, value: Any) -> float | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}={value!r} must be a number or None")
+    if not (math.isfinite(value) and value > 0):
+        raise ParameterError(f"{name}={value!r} must be a finite number > 0")
+    return float(value)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriveLimits:
+    """Explicit bounds on a drive, in the units of the model's input.
+
+    Attributes
+    ----------
+    max_abs : float, optional
+        Bound on ``|u|`` (stroke in m for a position drive, command in V for a valve
+        drive, ...).
+    max_rate : float, optional
+        Bound on ``|du/dt|`` (velocity for a position drive), by finite differences.
+    max_rate2 : float, optional
+        Bound on ``|d²u/dt²|`` (acceleration for a position drive).
+    """
+
+    max_abs: float | None = None
+    max_rate: float | None = None
+    max_rate2: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("max_abs", "max_rate", "max_rate2"):
+            object.__setattr__(self, name, _optional_positive(name, getattr(self, name)))
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriveCheck:
+    """What :func:`check_drive` measured (drive and reference about the operating point).
+
+    Attributes
+    ----------
+    rms_gain, peak_gain : float
+        ``rms(drive) / rms(reference)`` and ``max|drive| / max|reference|``.
+    max_gain : float or None
+        The bound they were held to (None: not checked).
+    peak_abs, peak_rate, peak_rate2 : float
+        Peak of ``|u0 + u|``, ``|du/dt|`` and ``|d²u/dt²|`` (finite differences).
+    rig : dict
+        Peaks checked against the rig's limits (empty when no parameter set was given).
+    """
+
+    rms_gain: float
+    peak_gain: float
+    max_gain: float | None
+    peak_abs: float
+    peak_rate: float
+    peak_rate2: float
+    rig: dict
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready figures."""
+        return {"rms_gain": self.rms_gain, "peak_gain": self.peak_gain,
+                "max_gain": self.max_gain, "peak_abs": self.peak_abs,
+                "peak_rate": self.peak_rate, "peak_rate2": self.peak_rate2,
+                "rig": dict(self.rig)}
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x * x)))
+
+
+def check_drive(
+    drive: Any,
+    reference: Any,
+    fs: float,
+    *,
+    max_gain: float | None = DEFAULT_MAX_GAIN,
+    limits: DriveLimits | None = None,
+    loop: str | None = None,
+    params: Any = None,
+    drive_offset: float = 0.0,
+) -> DriveCheck:
+    """Check a drive against the reference it was computed for and the rig's limits.
+
+    Parameters
+    ----------
+    drive, reference : array_like, shape (n_samples,)
+        Drive and reference about the operating point (deviations), same length.
+    fs : float
+        Sample rate (Hz), for the finite-difference rates.
+    max_gain : float or None
+        Bound on the RMS and peak ratios drive/reference (:data:`DEFAULT_MAX_GAIN`;
+        None: not checked).
+    limits : DriveLimits, optional
+        Explicit bounds.
+    loop : {"position", "acceleration", "force", "valve"}, optional
+        With ``params``: the loop the drive is played into, whose limits it must respect.
+    params : RigParams, optional
+        Parameter set of the rig.
+    drive_offset : float
+        Operating point ``u0`` of the drive: the value and rig limits apply to
+        ``drive_offset + drive`` (the gains to the deviation).
+
+    Returns
+    -------
+    DriveCheck
+
+    Raises
+    ------
+    ParameterError
+        A bound is exceeded (the message gives the figure and the bound), or a bad
+        option.
+    DataError
+        Non-finite or mismatched signals.
+    """
+    u = as_signal(drive, "drive")
+    r = as_signal(reference, "reference")
+    if u.size != r.size:
+        raise ParameterError(f"drive and reference differ in length ({u.size} != {r.size})")
+    if not (isinstance(fs, (int, float, np.integer, np.floating)) and math.isfinite(fs)
+            and fs > 0):
+        raise ParameterError(f"fs={fs!r} must be a finite number > 0")
+    max_gain = _optional_positive("max_gain", max_gain)
+    if limits is not None and not isinstance(limits, DriveLimits):
+        raise TypeError(f"limits must be a DriveLimits, not {type(limits).__name__}")
+    if (loop is None) != (params is None):
+        raise ParameterError("loop and params go together (the rig's limits of that loop)")
+    if loop is not None and loop not in LOOPS:
+        raise ParameterError(f"loop={loop!r} must be one of {LOOPS}")
+    rms_r, peak_r = _rms(r), float(np.max(np.abs(r)))
+    rms_gain = _rms(u) / rms_r if rms_r > 0 else math.inf
+    peak_gain = float(np.max(np.abs(u))) / peak_r if peak_r > 0 else math.inf
+    rate = np.diff(u) * fs
+    rate2 = np.diff(u, 2) * fs * fs
+    if not (isinstance(drive_offset, (int, float, np.integer, np.floating))
+            and math.isfinite(drive_offset)):
+        raise ParameterError(f"drive_offset={drive_offset!r} must be a finite number")
+    absolute = u + float(drive_offset)
+    peak_abs = float(np.max(np.abs(absolute)))
+    peak_rate = float(np.max(np.abs(rate))) if rate.size else 0.0
+    peak_rate2 = float(np.max(np.abs(rate2))) if rate2.size else 0.0
+    if max_gain is not None:
+        for what, value in (("RMS", rms_gain), ("peak", peak_gain)):
+            if value > max_gain:
+                raise ParameterError(
+                    f"the drive's {what} is {value:.3g}× the reference's (bound {max_gain:g}×): "
+                    "the inverse amplifies where the model is not to be trusted; narrow the "
+                    "band or re-identify")
+    if limits is not None:
+        for name, value, bound in (("peak", peak_abs, limits.max_abs),
+                                   ("peak rate", peak_rate, limits.max_rate),
+                                   ("peak second derivative", peak_rate2, limits.max_rate2)):
+            if bound is not None and value > bound:
+                raise ParameterError(f"drive {name} {value:.4g} exceeds the limit {bound:.4g}")
+    rig = {} if params is None else _check_rig(absolute, float(fs), loop, params)
+    return DriveCheck(rms_gain=rms_gain, peak_gain=peak_gain, max_gain=max_gain,
+                      peak_abs=peak_abs, peak_rate=peak_rate, peak_rate2=peak_rate2, rig=rig)
+
+
+def _check_rig(u: np.ndarray, fs: float, loop: str, params: Any) -> dict[str, float]:
+    from ehss.signals import check_feasible
+
+    if loop == "valve":
+        full = float(params.valve.command_full_scale_v)
+        peak = float(np.max(np.abs(u)))
+        if peak > full:
+            raise ParameterError(f"drive peak valve command {peak:.4g} V exceeds "
+                                 f"valve.command_full_scale_v={full:.4g} V")
+        return {"peak_command_v": peak}
+    try:
+        return check_feasible(u, loop, params, fs)
+    except ParameterError as exc:
+        raise ParameterError(f"drive: {exc}") from None
+
+
+def check_at_rest(reference: Any, *, tolerance: float = REST_TOLERANCE) -> None:
+    """Raise if a reference (about its operating point) does not start and end at rest.
+
+    Parameters
+    ----------
+    reference : array_like, shape (n_samples,)
+    tolerance : float
+        Allowed ``|r[0]|`` and ``|r[-1]|`` as a fraction of ``max|r|``
+        (:data:`REST_TOLERANCE`: the rig jumps by at most 1 % of the test's peak).
+
+    Raises
+    ------
+    DataError
+        Bad samples.
+    ParameterError
+        The reference starts or ends away from rest; the message says by how much and
+        asks for a fade.
+    """
+    r = as_signal(reference, "reference")
+    peak = float(np.max(np.abs(r)))
+    for end, value in (("starts", r[0]), ("ends", r[-1])):
+        if abs(value) > tolerance * peak:
+            raise ParameterError(
+                f"the reference {end} at {value:.4g} (about the operating point), "
+                f"{abs(value) / peak:.1%} of its peak {peak:.4g}: the drive would jump at the "
+                "start or end of the test; fade it in and out (--fade SECONDS, "
+                "ehss.compensation.fade_to_rest)")
+
+
+def fade_to_rest(reference: Any, fs: float, fade_s: float) -> np.ndarray:
+    """Raised-cosine fade-in and fade-out of ``fade_s`` seconds towards 0 at both ends."""
+    from ehss.signals import with_fade
+
+    r = as_signal(reference, "reference")
+    return np.asarray(with_fade(r, fs=fs, fade_in_s=fade_s, fade_out_s=fade_s))

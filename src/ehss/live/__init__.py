@@ -1,0 +1,49 @@
+"""Online identification of a running rig: sources, per-channel estimation, change
+detection, recording, dashboard.
+
+``ehss live`` runs a :class:`~ehss.live.session.LiveSession` over a source: a real-time
+target's UDP datagrams (:class:`~ehss.live.udp.UdpSource`, format in
+:mod:`ehss.live.layout`), the simulated rig (:func:`~ehss.live.rig.rig_record`) or a
+recorded file (:func:`~ehss.live.replay.replay_record`), both played to the wall clock
+by :class:`~ehss.live.source.PacedSource`. Each channel runs :class:`ehss.RelsEstimator`
+with forgetting (:mod:`ehss.live.channel`) and change detection
+(:mod:`ehss.live.detect`); everything is recorded to HDF5 (:mod:`ehss.live.recording`)
+and shown in a terminal summary (:mod:`ehss.live.summary`) and a Bokeh dashboard
+(:mod:`ehss.live.dashboard`, imported on use).
+"""
+
+from __future__ import annotations
+
+from ehss.live.channel import ChannelProcessor, EstimatorSettings
+from ehss.live.detect import FIGURES, DetectionSettings, Detector
+from ehss.live.layout import RecordLayout, parse_fields
+from ehss.live.recording import LiveRecorder, read_recording
+from ehss.live.replay import replay_record
+from ehss.live.rig import RigEvent, parse_event, rig_record
+from ehss.live.session import LiveReport, LiveSession
+from ehss.live.source import COUNTERS, Block, PacedSource
+from ehss.live.udp import UdpSource, parse_address, stream_record
+
+__all__ = [
+    "COUNTERS",
+    "FIGURES",
+    "Block",
+    "ChannelProcessor",
+    "DetectionSettings",
+    "Detector",
+    "EstimatorSettings",
+    "LiveRecorder",
+    "LiveReport",
+    "LiveSession",
+    "PacedSource",
+    "RecordLayout",
+    "RigEvent",
+    "UdpSource",
+    "parse_address",
+    "parse_event",
+    "parse_fields",
+    "read_recording",
+    "replay_record",
+    "rig_record",
+    "stream_record",
+]

@@ -1,0 +1,366 @@
+"""Processing of one channel: the recursive estimator, the model's response, the
+sliding H1 estimate and change detection.
+
+The estimator is :class:`ehss.RelsEstimator` (RELS, eqs (19)–(22), or RML) with
+forgetting λ, started from the baseline model's θ when one is given. Every evaluation
+period the current model is compared with the reference model (:mod:`ehss.live.detect`).
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.signal import welch
+
+import ehss
+from ehss.errors import EhssError, ParameterError
+from ehss.live.detect import DetectionSettings, Detector, dominant_pole, figures
+
+__all__ = ["EstimatorSettings", "ChannelProcessor", "reference_band"]
+
+#: points of the frequency grid of the analysis band
+N_GRID = 64
+
+
+@dataclass(frozen=True, kw_only=True)
+class EstimatorSettings:
+    """Settings of each channel's recursive estimator (see :func:`ehss.rels`).
+
+    Attributes
+    ----------
+    na, nb, nc, delay : int
+        Model structure.
+    method : {"rels", "rml"}
+        Default RML with nc = na: a rig's feedback carries mostly sensor noise (an
+        output-error record), where RELS and least squares are biased and noisier.
+    memory_s : float
+        Memory of the forgetting factor: λ = 1 − 1 / (memory_s · fs), unless
+        ``forgetting`` is given.
+    forgetting : float or None
+        λ itself.
+    p0 : float
+        α of P(0) = α I (on the scaled data). It also sets the bound of tr P (tr P(0)):
+        a small α would hold P, and with it the tracking speed, below what the
+        forgetting asks for.
+    u_scale, y_scale : float or None
+        Scales of u and y (see :class:`ehss.RelsEstimator`); None: the RMS of each
+        channel's first ``scale_s`` of data (the estimator starts once it has them).
+    scale_s : float
+        Length of that first stretch, s.
+    """
+
+    na: int = 4
+    nb: int = 3
+    nc: int = 4
+    delay: int = 1
+    method: str = "rml"
+    memory_s: float = 0.3
+    forgetting: float | None = None
+    p0: float = 1e6
+    u_scale: float | None = None
+    y_scale: float | None = None
+    scale_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.memory_s, (int, float)) and self.memory_s > 0):
+            raise ParameterError(f"memory_s={self.memory_s!r} must be > 0 (s)")
+        if not (isinstance(self.scale_s, (int, float)) and self.scale_s > 0):
+            raise ParameterError(f"scale_s={self.scale_s!r} must be > 0 (s)")
+        # the estimator checks the rest when it is built
+        ehss.RelsEstimator(na=self.na, nb=self.nb, nc=self.nc, delay=self.delay,
+                           method=self.method, p0=self.p0,
+                           forgetting=1.0 if self.forgetting is None else self.forgetting,
+                           u_scale=self.u_scale or 1.0, y_scale=self.y_scale or 1.0)
+
+    def lam(self, fs: float) -> float:
+        """λ at sample rate ``fs``."""
+        if self.forgetting is not None:
+            return float(self.forgetting)
+        return 1.0 - 1.0 / (self.memory_s * fs)
+
+    @property
+    def n_params(self) -> int:
+        return self.na + self.nb + 1 + self.nc
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def reference_band(u: np.ndarray, fs: float, *, resolution_hz: float = 0.5
+                   ) -> tuple[float, float]:
+    """Band where the spectrum of ``u`` is within 20 dB of its peak (Welch, Hann).
+
+    Raises
+    ------
+    ParameterError
+        If ``u`` has no power.
+    """
+    # a power of two near fs / resolution
+    nper = int(min(u.size, 2 ** max(4, round(math.log2(fs / resolution_hz)))))
+    f, p = welch(u, fs=fs, nperseg=nper)
+    if not np.any(p > 0):
+        raise ParameterError("the reference has no power: no band to analyse")
+    keep = np.flatnonzero(p >= p.max() / 100.0)
+    lo, hi = float(f[keep[0]]), float(f[keep[-1]])
+    if hi <= lo:
+        hi = lo + fs / nper
+    return lo, hi
+
+
+class ChannelProcessor:
+    """Estimation and detection for one channel.
+
+    Parameters
+    ----------
+    name : str
+    fs : float
+        Sample rate, Hz.
+    est : EstimatorSettings
+    det : DetectionSettings
+    baseline : ArmaxModel, optional
+        Baseline model: the estimator starts from its θ and detection compares with
+        it. Without one, the baseline is the mean of the estimates over the second half
+        of the first ``det.learn_s`` (the same estimator and memory as the comparisons:
+        its figures then measure change, not the difference of two estimators).
+    h1_window_s : float
+        Length of the sliding window of the H1 estimate.
+    """
+
+    def __init__(self, name: str, fs: float, est: EstimatorSettings, det: DetectionSettings,
+                 baseline: ehss.ArmaxModel | None = None, *, h1_window_s: float = 8.0) -> None:
+        self.name = name
+        self.fs = float(fs)
+        self.est = est
+        self.det = det
+        if baseline is not None:
+            if (baseline.na, baseline.nb, baseline.nc, baseline.delay) != (
+                    est.na, est.nb, est.nc, est.delay):
+                raise ParameterError(
+                    f"channel {name}: the baseline model has structure (na, nb, nc, delay)="
+                    f"{(baseline.na, baseline.nb, baseline.nc, baseline.delay)}, the "
+                    f"estimator {(est.na, est.nb, est.nc, est.delay)}"
+                )
+            if not math.isclose(baseline.fs, self.fs, rel_tol=1e-9):
+                raise ParameterError(f"channel {name}: the baseline model is at "
+                                     f"{baseline.fs:g} Hz, the stream at {self.fs:g} Hz")
+        self.baseline = baseline
+        self.detector = Detector(det)
+        self.estimator: ehss.RelsEstimator | None = None
+        self._theta_sum: np.ndarray | None = None
+        self._theta_count = 0
+        self.just_set_up = False
+        self._captured_learning = True
+        self.n_samples = 0
+        self.messages: list[str] = []
+        n_learn = max(1, int(round(det.learn_s * self.fs)))
+        self._learn = (np.empty(n_learn), np.empty(n_learn))
+        self._n_scale = max(1, int(round(est.scale_s * self.fs)))
+        n_ring = max(16, int(round(h1_window_s * self.fs)))
+        self._ring = np.zeros((2, n_ring))
+        self._ring_fill = 0
+        self._ring_pos = 0
+        self.band_hz: tuple[float, float] | None = det.band_hz or (
+            baseline.band_hz if baseline is not None else None)
+        self.grid_hz: np.ndarray | None = None
+        self._va: np.ndarray | None = None
+        self._vb: np.ndarray | None = None
+        self._h_ref: np.ndarray | None = None
+        self._s_ref = complex("nan")
+        self._recent: collections.deque = collections.deque()
+        self.figures = np.full(3, np.nan)
+        self.peak_figures = np.zeros(3)
+        self.dominant = complex("nan")
+        self.track_sq = 0.0
+        self.pred_sq = 0.0
+        self._acc_n = 0
+        self.tracking_rms = math.nan
+        self.prediction_rms = math.nan
+        if est.u_scale is not None and est.y_scale is not None:
+            self._start(est.u_scale, est.y_scale)
+
+    # ------------------------------------------------------------------ feeding
+    def _start(self, u_scale: float, y_scale: float) -> None:
+        e = self.est
+        theta0 = None if self.baseline is None else self.baseline.theta
+        self.estimator = ehss.RelsEstimator(
+            na=e.na, nb=e.nb, nc=e.nc, delay=e.delay, forgetting=e.lam(self.fs), p0=e.p0,
+            theta0=theta0, dt=1.0 / self.fs, u_scale=u_scale, y_scale=y_scale,
+            method=e.method,
+        )
+
+    def feed(self, u: np.ndarray, y: np.ndarray) -> None:
+        """Process consecutive samples of the reference ``u`` and feedback ``y``."""
+        k0 = self.n_samples
+        n = u.size
+        n_learn = self._learn[0].size
+        if k0 < n_learn:
+            m = min(n, n_learn - k0)
+            self._learn[0][k0:k0 + m] = u[:m]
+            self._learn[1][k0:k0 + m] = y[:m]
+        self._push_ring(u, y)
+        self.n_samples += n
+        if self.estimator is None:
+            if self.n_samples < min(self._n_scale, n_learn):
+                return
+            have = min(self.n_samples, n_learn)
+            uu, yy = self._learn[0][:have], self._learn[1][:have]
+            su = float(np.sqrt(np.mean(uu**2))) or 1.0
+            sy = float(np.sqrt(np.mean(yy**2))) or 1.0
+            self._start(su, sy)
+            # catch up on the samples held before this block (all in the learning
+            # buffer: the estimator starts no later than the buffer's end)
+            if k0:
+                self.estimator.update_many(uu[:k0], yy[:k0])
+        err = self.estimator.update_many(u, y)
+        self.pred_sq += float(np.dot(err, err))
+        d = u - y
+        self.track_sq += float(np.dot(d, d))
+        self._acc_n += n
+
+    def _push_ring(self, u: np.ndarray, y: np.ndarray) -> None:
+        r = self._ring
+        size = r.shape[1]
+        if u.size >= size:
+            r[0], r[1] = u[-size:], y[-size:]
+            self._ring_pos, self._ring_fill = 0, size
+            return
+        a = self._ring_pos
+        b = a + u.size
+        if b <= size:
+            r[0, a:b], r[1, a:b] = u, y
+        else:
+            k = size - a
+            r[0, a:], r[1, a:] = u[:k], y[:k]
+            r[0, :b - size], r[1, :b - size] = u[k:], y[k:]
+        self._ring_pos = b % size
+        self._ring_fill = min(size, self._ring_fill + u.size)
+
+    def window(self) -> tuple[np.ndarray, np.ndarray]:
+        """The latest samples (u, y) of the sliding window, oldest first."""
+        r, n, p = self._ring, self._ring_fill, self._ring_pos
+        if n < r.shape[1]:
+            return r[0, :n].copy(), r[1, :n].copy()
+        return np.roll(r[0], -p), np.roll(r[1], -p)
+
+    # ------------------------------------------------------------------ evaluation
+    @property
+    def learning(self) -> bool:
+        """True until the learning time is over and the baseline and band are set."""
+        return self.grid_hz is None
+
+    def _finish_learning(self) -> None:
+        u = self._learn[0]
+        if self.band_hz is None:
+            # the last 4 s of the learning time, 0.5 Hz bins (coarser bins smear a band
+            # that starts at 1 Hz down to 0 Hz): a few ms at most
+            lo, hi = reference_band(u[-int(4 * self.fs):], self.fs)
+            self.band_hz = (lo, hi)
+        lo, hi = self.band_hz
+        self.grid_hz = np.linspace(max(lo, 0.0), min(hi, 0.5 * self.fs), N_GRID)
+        if self.baseline is None and self._theta_count:
+            # the mean of the estimates over the learning time's second half
+            e = self.est
+            th = self._theta_sum / self._theta_count
+            try:
+                self.baseline = ehss.ArmaxModel(
+                    a=np.r_[1.0, th[:e.na]], b=th[e.na:e.na + e.nb + 1],
+                    c=np.r_[1.0, th[e.na + e.nb + 1:]], delay=e.delay, dt=1.0 / self.fs,
+                    meta={"baseline": "mean of the live estimates over "
+                          f"{self._theta_count} evaluations"},
+                )
+            except EhssError as exc:
+                self.messages.append(f"no baseline: {exc}")
+        if self.baseline is not None:
+            if not self.baseline.is_stable():
+                self.messages.append("the baseline model is unstable: comparisons with it "
+                                     "are not meaningful")
+            self._h_ref = self.baseline.frequency_response(self.grid_hz)
+            self._s_ref = dominant_pole(self.baseline.a, 1.0 / self.fs, self.band_hz)
+        # z^-k on the grid, k = 0..na for A and d..d+nb for B: H = (V_b b) / (V_a a)
+        e = self.est
+        zi = np.exp(-2j * np.pi * self.grid_hz / self.fs)
+        self._va = zi[:, None] ** np.arange(e.na + 1)
+        self._vb = zi[:, None] ** (e.delay + np.arange(e.nb + 1))
+
+    def capture(self) -> np.ndarray | None:
+        """θ̂ now (a copy; None before the estimator starts), and the tracking and
+        prediction-error RMS over the samples since the last capture."""
+        if self._acc_n:
+            self.tracking_rms = math.sqrt(self.track_sq / self._acc_n)
+            self.prediction_rms = math.sqrt(self.pred_sq / self._acc_n)
+            self.track_sq = self.pred_sq = 0.0
+            self._acc_n = 0
+        self._captured_learning = self.n_samples < self._learn[0].size
+        return None if self.estimator is None else self.estimator.theta
+
+    def evaluate(self, t_s: float, theta: np.ndarray | None, *,
+                 may_set_up: bool = True) -> str | None:
+        """Compare the model θ̂ = ``theta`` (from :meth:`capture` at stream time
+        ``t_s``) with the reference model; returns "alarm", "clear" or None.
+
+        When the learning time is over, the first call with ``may_set_up`` sets the
+        baseline, band and grid (:attr:`just_set_up` tells it did; a session lets one
+        channel do so per evaluation, to spread the cost). Updates :attr:`figures` and
+        :attr:`dominant`.
+        """
+        self.just_set_up = False
+        if theta is None:
+            return None
+        if self._captured_learning:
+            if self.baseline is None and self.n_samples >= self._learn[0].size / 2:
+                self._theta_sum = theta if self._theta_sum is None else self._theta_sum + theta
+                self._theta_count += 1
+            return None
+        if self.grid_hz is None:
+            if not may_set_up:
+                return None
+            self._finish_learning()
+            self.just_set_up = True
+        h, s = self._response(theta)
+        self.dominant = s
+        if self.det.compare == "recent":
+            self._recent.append((t_s, h, s))
+            while self._recent and self._recent[0][0] < t_s - self.det.recent_s - 1e-9:
+                self._recent.popleft()
+            if self._recent[0][0] > t_s - self.det.recent_s + 1e-9:
+                return None                      # not enough history yet
+            _, h_ref, s_ref = self._recent[0]
+        elif self._h_ref is None:
+            return None
+        else:
+            h_ref, s_ref = self._h_ref, self._s_ref
+        self.figures = figures(h, h_ref, s, s_ref)
+        finite = np.where(np.isfinite(self.figures), np.abs(self.figures), 0.0)
+        if not self.detector.active:
+            self.peak_figures = np.maximum(self.peak_figures, finite)
+        return self.detector.step(t_s, self.figures)
+
+    def _response(self, theta: np.ndarray) -> tuple[np.ndarray, complex]:
+        """The response of the model θ̂ on the grid and its dominant pole.
+
+        The same G(e^{jωdt}) = e^{−jωdt·d} B/A as :meth:`ArmaxModel.frequency_response`,
+        from θ̂ through precomputed powers of z⁻¹ (no model object per evaluation).
+        """
+        e = self.est
+        a = np.concatenate(([1.0], theta[:e.na]))
+        b = theta[e.na:e.na + e.nb + 1]
+        return (self._vb @ b) / (self._va @ a), dominant_pole(a, 1.0 / self.fs, self.band_hz)
+
+    def model_response(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """``(grid_hz, current model's H, reference H)`` on the band grid."""
+        if self.grid_hz is None or self.estimator is None or self._va is None:
+            return np.empty(0), None, None
+        return self.grid_hz, self._response(self.estimator.theta)[0], self._h_ref
+
+    def h1(self) -> ehss.FrequencyResponse | None:
+        """H1 estimate over the sliding window, or None while it is too short."""
+        u, y = self.window()
+        if u.size < 256:
+            return None
+        try:
+            return ehss.h1_estimate(u, y, fs=self.fs)
+        except EhssError:
+            return None

@@ -1,0 +1,204 @@
+"""The simulated rig as a live source: several channels, scheduled parameter changes.
+
+:func:`rig_record` builds the whole schedule up front with :func:`ehss.simulate` (the
+whole-record kernel, several hundred times faster than real time) and the caller plays
+it to the wall clock (:class:`~ehss.live.source.PacedSource`) or sends it over UDP
+(``ehss stream``). Each channel is one actuator loop with its own reference and sensor
+noise (seeds ``seed + k``). An event changes a parameter of one channel, or of all, from
+its time on: the record is simulated in pieces between events, each piece with the new
+:class:`~ehss.params.RigParams` (``dataclasses.replace``) and starting from the plant
+state at the end of the previous piece (``initial_state``: spool, pistons, pressures,
+table). :func:`ehss.simulate` takes no controller state, so the controller's integrator
+and its one-sample delay line restart at an event: a transient of a few control periods
+that a real payload change would also cause, in its own way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+import ehss
+from ehss.errors import ParameterError
+from ehss.live.layout import RecordLayout
+
+__all__ = ["RigEvent", "parse_event", "rig_record", "rig_layout", "RIG_SIGNAL"]
+
+#: Reference of each loop on the live rig: (RMS in SI units, band in Hz). The band
+#: reaches past the hydraulic resonance so that a change of the load shows in the data.
+RIG_SIGNAL = {
+    "position": (1.0e-3, (1.0, 50.0)),
+    "acceleration": (0.5, (1.0, 50.0)),
+    "force": (1000.0, (1.0, 50.0)),
+}
+
+# plant states that the simulation result reports, to carry over an event
+_CARRIED = ("spool", "piston_displacement_m", "p1_pa", "p2_pa", "displacement_m",
+            "velocity_m_s")
+
+_EVENT = re.compile(
+    r"^\s*(?P<t>[0-9.eE+-]+)\s*:\s*(?P<name>[A-Za-z_][A-Za-z0-9_.]*)\s*=\s*"
+    r"(?P<value>[0-9.eE+-]+)\s*(?:@\s*(?P<ch>\w+))?\s*$"
+)
+
+
+@dataclass(frozen=True)
+class RigEvent:
+    """A parameter change of the simulated rig.
+
+    Attributes
+    ----------
+    time_s : float
+        When it happens (s from the start).
+    path : str
+        ``group.field`` of :class:`~ehss.params.RigParams` (e.g. ``load.mass_kg``).
+    value : float
+    channel : str or None
+        Channel it applies to (None: every channel).
+    """
+
+    time_s: float
+    path: str
+    value: float
+    channel: str | None = None
+
+
+def _resolve(name: str) -> str:
+    """``mass_kg`` → ``load.mass_kg``; a dotted path is checked as given."""
+    params = ehss.preset("default")
+    groups = [f.name for f in dataclasses.fields(params)
+              if dataclasses.is_dataclass(getattr(params, f.name))]
+    if "." in name:
+        group, leaf = name.split(".", 1)
+        if group in groups and leaf in {f.name for f in dataclasses.fields(getattr(params,
+                                                                                    group))}:
+            return name
+        raise ParameterError(f"unknown rig parameter {name!r}")
+    hits = [f"{g}.{name}" for g in groups
+            if name in {f.name for f in dataclasses.fields(getattr(params, g))}]
+    if len(hits) != 1:
+        raise ParameterError(
+            f"rig parameter {name!r} is " + ("unknown" if not hits else
+                                             f"ambiguous ({', '.join(hits)})")
+            + "; give it as group.field, e.g. load.mass_kg"
+        )
+    return hits[0]
+
+
+def parse_event(text: str) -> RigEvent:
+    """``"30:mass_kg=350"`` (every channel) or ``"30:valve.rated_flow_l_min=30@2"``.
+
+    Raises
+    ------
+    ParameterError
+        If the text is not ``T:NAME=VALUE[@CHANNEL]`` or names no rig parameter.
+    """
+    m = _EVENT.match(text) if isinstance(text, str) else None
+    if m is None:
+        raise ParameterError(
+            f"event {text!r} must be T:NAME=VALUE[@CHANNEL], e.g. 30:mass_kg=350@1"
+        )
+    try:
+        t, value = float(m["t"]), float(m["value"])
+    except ValueError:
+        raise ParameterError(f"event {text!r}: time and value must be numbers") from None
+    if not (math.isfinite(t) and t >= 0 and math.isfinite(value)):
+        raise ParameterError(f"event {text!r}: time must be >= 0 and the value finite")
+    return RigEvent(t, _resolve(m["name"]), value, m["ch"])
+
+
+def rig_layout(n_channels: int) -> RecordLayout:
+    """``t, ref1, fb1, …, ref<n>, fb<n>``."""
+    if not isinstance(n_channels, int) or not 1 <= n_channels <= 64:
+        raise ParameterError(f"channels={n_channels!r} must be an integer in 1..64")
+    names = ["t"]
+    for k in range(1, n_channels + 1):
+        names += [f"ref{k}", f"fb{k}"]
+    return RecordLayout(tuple(names))
+
+
+def _apply(params: ehss.RigParams, event: RigEvent) -> ehss.RigParams:
+    group, leaf = event.path.split(".", 1)
+    try:
+        sub = dataclasses.replace(getattr(params, group), **{leaf: event.value})
+        return dataclasses.replace(params, **{group: sub})
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"event {event.path}={event.value!r}: {exc}") from None
+
+
+def rig_record(
+    loop: str, *, n_channels: int, duration_s: float, fs: float | None = None,
+    params: ehss.RigParams | None = None, events: tuple[RigEvent, ...] = (),
+    seed: int = 0, rms: float | None = None, band_hz: tuple[float, float] | None = None,
+) -> tuple[RecordLayout, np.ndarray, float]:
+    """The whole live record of the simulated rig: ``(layout, samples, fs)``.
+
+    Parameters
+    ----------
+    loop : {"position", "acceleration", "force"}
+    n_channels : int
+        Number of actuators (channels 1..n).
+    duration_s : float
+    fs : float, optional
+        Control rate (default the parameter set's).
+    params : RigParams, optional
+        The rig (default preset "default").
+    events : tuple of RigEvent
+        Parameter changes; each applies from its time on (to its channel, or all).
+    seed : int
+        Channel k uses seed ``seed + k`` for its reference and ``seed + 1000 + k`` for
+        its sensor noise (and later pieces ``+ 1`` each).
+    rms, band_hz : optional
+        Reference RMS and band (default :data:`RIG_SIGNAL`).
+
+    Returns
+    -------
+    layout : RecordLayout
+    samples : ndarray, shape (n, 1 + 2 n_channels)
+    fs : float
+    """
+    if loop not in RIG_SIGNAL:
+        raise ParameterError(f"loop={loop!r} must be one of {sorted(RIG_SIGNAL)}")
+    layout = rig_layout(n_channels)
+    params = ehss.preset("default") if params is None else params
+    fs = params.timing.control_rate_hz if fs is None else float(fs)
+    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s)
+            and duration_s > 0):
+        raise ParameterError(f"duration_s={duration_s!r} must be > 0")
+    d_rms, d_band = RIG_SIGNAL[loop]
+    rms = d_rms if rms is None else rms
+    band_hz = d_band if band_hz is None else band_hz
+    n = int(round(duration_s * fs))
+    for ev in events:
+        if ev.channel is not None and ev.channel not in layout.channels:
+            raise ParameterError(f"event on channel {ev.channel!r}: the rig has channels "
+                                 f"{', '.join(layout.channels)}")
+    out = np.empty((n, layout.n_fields))
+    out[:, 0] = np.arange(n) / fs
+    for k, ch in enumerate(layout.channels, start=1):
+        ref = ehss.signals.band_limited_random(band_hz=band_hz, rms=rms, duration_s=n / fs,
+                                               fs=fs, seed=seed + k).values[:n]
+        mine = sorted((e for e in events if e.channel in (None, ch)), key=lambda e: e.time_s)
+        cuts = sorted({min(n, int(round(e.time_s * fs))) for e in mine} - {0, n})
+        p = params
+        for e in mine:
+            if int(round(e.time_s * fs)) <= 0:
+                p = _apply(p, e)
+        y = np.empty(n)
+        state = None
+        bounds = [0, *cuts, n]
+        for piece, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+            for e in mine:
+                if a > 0 and int(round(e.time_s * fs)) == a:
+                    p = _apply(p, e)
+            run = ehss.simulate(loop, ref[a:b], params=p, fs=fs,
+                                seed=seed + 1000 + k + piece, initial_state=state)
+            y[a:b] = run.output
+            state = {name: float(run.signals[name][-1]) for name in _CARRIED}
+        out[:, layout.ref_index[k - 1]] = ref
+        out[:, layout.fb_index[k - 1]] = y
+    return layout, out, fs

@@ -1,0 +1,59 @@
+"""ehss live / ehss stream: bad input is one line on stderr and exit 2."""
+
+from __future__ import annotations
+
+import pytest
+
+from ehss.cli import main
+
+
+@pytest.mark.parametrize("argv, word", [
+    (["live", "--udp", "localhost:5005", "--fields", "t,ref1,fb1"], "IPv4:PORT"),
+    (["live", "--udp", "127.0.0.1:99999", "--fields", "t,ref1,fb1"], "PORT"),
+    (["live", "--udp", "127.0.0.1:0"], "--fields"),
+    (["live", "--udp", "127.0.0.1:0", "--fields", "t,ref1"], "fb1"),
+    (["live", "--udp", "127.0.0.1:0", "--fields", "t,ref1,fb1", "--allow", "x"], "allow"),
+    (["live", "--rig", "position", "--event", "soon:mass_kg=3"], "T:NAME=VALUE"),
+    (["live", "--rig", "position", "--event", "3:weight=3"], "weight"),
+    (["live", "--rig", "position", "--event", "3:mass_kg=-3"], "mass_kg"),
+    (["live", "--rig", "position", "--channels", "2", "--event", "3:mass_kg=3@9"],
+     "channel"),
+    (["live", "--rig", "position", "--speed", "0"], "--speed"),
+    (["live", "--rig", "position", "--frf-db", "0"], "frf_db"),
+    (["live", "--rig", "position", "--memory", "-1"], "memory_s"),
+    (["live", "--replay", "no-such-file.csv"], "no such file"),
+    (["stream", "--to", "127.0.0.1", "--rig", "position"], "IPv4:PORT"),
+])
+def test_bad_input_exits_2_with_one_line(argv, word, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and word in err, err
+
+
+def test_recording_is_never_overwritten(tmp_path, capsys):
+    rec = tmp_path / "run.h5"
+    rec.write_bytes(b"keep")
+    assert main(["live", "--rig", "position", "--duration", "1", "--speed", "inf",
+                 "--quiet", "--record", str(rec)]) == 2
+    assert rec.read_bytes() == b"keep"
+    assert "never overwritten" in capsys.readouterr().err
+
+
+def test_help_documents_the_wire_format(capsys):
+    with pytest.raises(SystemExit):
+        main(["live", "--help"])
+    out = capsys.readouterr().out
+    for word in ("magic", "uint16", "uint64", "little-endian", "ref<k>", "fb<k>"):
+        assert word in out
+
+
+def test_rig_run_writes_a_report(tmp_path, capsys):
+    import json
+
+    assert main(["live", "--rig", "position", "--channels", "2", "--duration", "3",
+                 "--speed", "inf", "--learn", "1", "--quiet",
+                 "--report", str(tmp_path / "r.json")]) == 0
+    r = json.loads((tmp_path / "r.json").read_text())
+    assert r["samples"] == 3000 and r["counters"]["lost_samples"] == 0
+    assert set(r["final_theta"]) == {"1", "2"}
+    assert len(r["final_theta"]["1"]) == 4 + 4 + 4  # a1..a4, b0..b3, c1..c4

@@ -1,0 +1,99 @@
+"""The dashboard in a real browser (headless Chromium): it loads, updates, and shows the
+alarm after a payload change. Skipped, with the reason, where no browser is installed."""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ehss.live.dashboard import Dashboard
+
+SRC = str(Path(__file__).resolve().parents[2] / "src")
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+DRIVER = shutil.which("chromedriver")
+
+_STATE_JS = """
+const doc = (window.Bokeh && Bokeh.documents.length) ? Bokeh.documents[0] : null;
+if (!doc) return null;
+const get = (name) => doc.get_model_by_name(name);
+return [get('status').text, get('alarms').text, get('bode_model').data.mag.slice(0, 4)];
+"""
+
+
+def test_exposed_dashboard_needs_a_token():
+    local = Dashboard(host="127.0.0.1", port=5006)
+    assert local.token is None and local.url == "http://127.0.0.1:5006/"
+    exposed = Dashboard(host="10.1.2.3", port=5006)   # not started: nothing is bound
+    assert exposed.token and exposed.url.endswith(f"?token={exposed.token}")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
+                    reason="no headless browser: install Debian's chromium and "
+                    "chromium-driver (make test does so when run as root)")
+def test_dashboard_in_headless_chromium(tmp_path):
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    # the browser first (slow to start on a loaded machine), then the rig
+    opts = Options()
+    opts.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                "--window-size=1200,1150"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    live = subprocess.Popen(
+        [sys.executable, "-m", "ehss", "live", "--rig", "position", "--channels", "2",
+         "--duration", "30", "--event", "8:mass_kg=350@1", "--learn", "4", "--speed", "2",
+         "--dashboard", "0", "--quiet"], env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        url = None
+        deadline = time.monotonic() + 120
+        while url is None and time.monotonic() < deadline:
+            if not select.select([live.stderr], [], [], 0.5)[0]:
+                continue
+            line = live.stderr.readline()
+            if not line and live.poll() is not None:
+                break
+            m = re.search(r"dashboard at (http://127\.0\.0\.1:\d+/)", line)
+            url = m.group(1) if m else None
+        assert url, "the dashboard did not start"
+        driver.set_page_load_timeout(60)
+        driver.get(url)
+        # BokehJS comes from the ehss server itself, not from a CDN
+        scripts = re.findall(r'<script[^>]+src="([^"]+)"', driver.page_source)
+        assert scripts and all(s.startswith("/static/") for s in scripts), scripts
+        seen = []
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            state = driver.execute_script(_STATE_JS)
+            if state and state[0].startswith("<b>t ="):
+                seen.append(state)
+                if "ALARM" in state[1] and len(seen) > 5:
+                    break
+            time.sleep(0.5)
+        assert seen, "the page never showed data"
+        times = {re.search(r"t = ([0-9.]+) s", s[0]).group(1) for s in seen}
+        assert len(times) > 3                        # the status kept updating
+        bodes = {tuple(s[2]) for s in seen if s[2]}
+        assert len(bodes) > 1                        # the Bode plot of the model moved
+        alarm = seen[-1][1]
+        assert "ALARM" in alarm and "channel 1" in alarm and "channel 2" not in alarm
+        t_alarm = float(re.search(r"ALARM</b></span> t = ([0-9.]+) s", alarm).group(1))
+        assert 8.0 < t_alarm <= 9.0
+        driver.save_screenshot(str(tmp_path / "dashboard.png"))
+    finally:
+        driver.quit()
+        live.terminate()
+        live.wait(20)
+        live.stderr.close()
