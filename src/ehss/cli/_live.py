@@ -12,6 +12,7 @@ from pathlib import Path
 
 import ehss
 from ehss._provenance import versions
+from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import DataError, ParameterError
 
 __all__ = ["register", "run", "add_rig_arguments", "rig_or_replay", "WIRE_FORMAT"]
@@ -47,7 +48,7 @@ def add_rig_arguments(p: argparse.ArgumentParser) -> None:
                    help="--rig: seed of the references and sensor noise (default: 0)")
     p.add_argument("--preset", choices=("default", "paper"), default="default",
                    help="--rig: parameter set (default: %(default)s)")
-    p.add_argument("--params", metavar="FILE.toml", help="--rig: parameter file")
+    p.add_argument("--params", metavar="FILE.toml", type=InputFile, help="--rig: parameter file")
     p.add_argument("--speed", type=float, default=1.0, metavar="X",
                    help="--rig/--replay: × real time; inf for as fast as possible "
                    "(default: %(default)s)")
@@ -96,7 +97,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="listen for datagrams of a real-time target (see the wire format)")
     src.add_argument("--rig", choices=("position", "acceleration", "force"),
                      help="the simulated rig, paced to the wall clock")
-    src.add_argument("--replay", metavar="FILE",
+    src.add_argument("--replay", metavar="FILE", type=InputFile,
                      help="a recording of ehss live, or a CSV/MAT/HDF5/NPZ file with "
                      "t, ref<k>, fb<k> columns")
     p.add_argument("--fields", metavar="t,ref1,fb1,...",
@@ -128,6 +129,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--y-scale", type=float, metavar="Y",
                    help="scale of the feedbacks (default: RMS of the first 0.5 s)")
     e.add_argument("--baseline", action="append", default=[], metavar="[CH=]MODEL.json",
+                   type=InputFile,
                    help="baseline model (ehss identify) for channel CH, or all channels; the "
                    "estimator starts from it (repeatable)")
     d = p.add_argument_group("change detection")
@@ -162,7 +164,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--update", type=float, default=0.1, metavar="S",
                    help="evaluation period, s of stream time (default: %(default)s)")
     o = p.add_argument_group("output")
-    o.add_argument("--record", metavar="FILE.h5",
+    o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
                    help="record samples, estimates and events (HDF5, readable while "
                    "running; never overwritten)")
     o.add_argument("--dashboard", type=int, metavar="PORT",
@@ -175,7 +177,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="stop after S s of stream time")
     o.add_argument("--idle-stop", type=float, metavar="S",
                    help="--udp: stop when no datagram came for S s (after the first)")
-    o.add_argument("--report", metavar="FILE.json",
+    o.add_argument("--report", metavar="FILE.json", type=OutputFile,
                    help="write the session's figures (counters, lag, CPU, alarms) there")
     p.set_defaults(func=run)
 

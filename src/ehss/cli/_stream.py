@@ -8,6 +8,7 @@ import math
 import sys
 
 from ehss.cli._live import WIRE_FORMAT, add_rig_arguments, rig_or_replay
+from ehss.cli._outputs import InputFile
 from ehss.errors import ParameterError
 
 __all__ = ["register", "run"]
@@ -28,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--rig", choices=("position", "acceleration", "force"),
                      help="the simulated rig (fields t, ref1, fb1, ...)")
-    src.add_argument("--replay", metavar="FILE", help="a recording or data file")
+    src.add_argument("--replay", metavar="FILE", type=InputFile, help="a recording or data file")
     p.add_argument("--fields", metavar="t,ref1,fb1,...", help="--replay: columns to send")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate (default: the parameter set's or the file's)")
