@@ -29,6 +29,7 @@ __all__ = [
     "ModelCheck",
     "loop_record",
     "identify_and_check",
+    "check_model",
     "model_label",
     "simplest_passing",
     "convergence",
@@ -211,17 +212,34 @@ def identify_and_check(
     )
     if known is not None:
         model = compose(model, *known)
-    report, verdict = assess(model, p, acceptance=ACCEPTANCE)
+    return check_model(rec, model, label=model_label(orders, known is not None, method))
+
+
+def check_model(rec: Record, model: ArmaxModel, *, label: str) -> ModelCheck:
+    """Judge a complete model of the loop on the held-out end of ``rec``.
+
+    :func:`ehss.workflow.assess` with :data:`ACCEPTANCE`: the verdict ``ehss identify``
+    gives a model it fitted on the same record with the options of :func:`loop_record`.
+
+    Parameters
+    ----------
+    rec : Record
+        From :func:`loop_record`.
+    model : ArmaxModel
+        Reference → measured output about the operating point, at ``rec.fs``.
+    label : str
+        How it was obtained.
+
+    Returns
+    -------
+    ModelCheck
+    """
+    report, verdict = assess(model, rec.prepared, acceptance=ACCEPTANCE)
     with np.errstate(over="ignore", invalid="ignore"):
         yhat = model.simulate(rec.u)
     yhat = np.where(np.isfinite(yhat), yhat, np.nan)  # a diverging simulation: not drawn
-    return ModelCheck(
-        label=model_label(orders, known is not None, method),
-        model=model,
-        report=report,
-        verdict=verdict,
-        simulated=yhat + rec.output_mean,
-    )
+    return ModelCheck(label=label, model=model, report=report, verdict=verdict,
+                      simulated=yhat + rec.output_mean)
 
 
 def simplest_passing(
