@@ -172,6 +172,7 @@ def _model_block(title: str, m: ArmaxModel) -> list[str]:
 
 def _loop_markdown(name: str, r: LoopResult, fig_name: str) -> list[str]:
     m, printed = r.paper.model, PRINTED_MODELS[name]
+    vf = r.paper.report.frf
     k = ACCEPTANCE.uncertainty_sigmas
     lo, hi = r.band_hz
     lines = [
@@ -180,8 +181,10 @@ def _loop_markdown(name: str, r: LoopResult, fig_name: str) -> list[str]:
         f"![{name}]({fig_name})",
         "",
         f"Record: {r.sim.t.size} samples at {r.frf.fs:g} Hz, identified on the first "
-        f"{r.n_ident}, validated on the rest. Band {lo:g}–{hi:g} Hz, H1 resolution "
-        f"{r.frf.resolution_hz:.2f} Hz. RELS covariance resets: "
+        f"{r.n_ident}, validated on the rest. Band {lo:g}–{hi:g} Hz. The verdicts compare "
+        f"with the held-out end's own H1 estimate ({vf.method}, resolution "
+        f"{vf.resolution_hz:.2f} Hz, {vf.n_averages} averages); the figure shows the whole "
+        f"record's (resolution {r.frf.resolution_hz:.2f} Hz). RELS covariance resets: "
         f"{int(m.meta.get('resets', 0))}.",
         "",
         *_model_block("Identified with the paper's structure", m),
