@@ -3,16 +3,17 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sps
 
-from ehss.experiments.loop_identification import Record, convergence
+from ehss.experiments.loop_identification import convergence, loop_record
 from ehss.identification import rels
 
 
 def test_online_replay_ends_on_the_batch_estimate(rng):
     u = rng.standard_normal(3000)
     y = sps.lfilter([0.0, 0.3, 0.1], [1.0, -1.2, 0.5], u) + 0.01 * rng.standard_normal(3000)
-    model = rels(u[:2000], y[:2000], na=2, nb=1, nc=1, delay=1, dt=1e-3)
-    rec = Record(u=u, y=y, n_ident=2000, fs=1000.0, band_hz=(1.0, 100.0), frf=None,
-                 y_band=y, lowpass=None, input_mean=0.0, output_mean=0.0)
+    rec = loop_record(u, y, fs=1000.0, band_hz=(1.0, 100.0), holdout=1 / 3)
+    assert rec.n_ident == 2000
+    # the estimation part the programme fits on: the first 2000 samples about their mean
+    model = rels(rec.prepared.u, rec.prepared.y, na=2, nb=1, nc=1, delay=1, dt=1e-3)
     t, hist = convergence(rec, model, forgetting=1.0, p0=1.0e6, every=10)
     assert hist.shape == (200, model.theta.size)
     assert t[-1] == 2.0

@@ -7,7 +7,7 @@ import pytest
 from scipy import signal as sps
 
 from ehss.experiments.loop_identification import (
-    MIN_FIT_PCT,
+    ACCEPTANCE,
     identify_and_check,
     loop_record,
     simplest_passing,
@@ -51,6 +51,12 @@ def test_record_is_taken_about_its_operating_point_and_split(rng):
     assert rec.input_mean == pytest.approx(OFFSETS[0], abs=1e-12)
     assert rec.output_mean == pytest.approx(OFFSETS[1], abs=1e-3)
     np.testing.assert_allclose(rec.u + rec.input_mean, u_raw, rtol=0, atol=1e-12)
+    # Prepared as ehss identify prepares it: each part about its own mean, no decimation.
+    p = rec.prepared
+    assert p.decimation == 1 and p.holdout == 0.3 and p.band_hz == (2.0, 100.0)
+    assert p.u.size == 14_000 and p.u_val.size == 6_000
+    np.testing.assert_allclose(p.u, u_raw[:14_000] - np.mean(u_raw[:14_000]), atol=1e-12)
+    np.testing.assert_allclose(p.y_val, y_raw[14_000:] - np.mean(y_raw[14_000:]), atol=1e-12)
 
 
 def test_a_known_system_is_identified_and_passes(rng):
@@ -65,7 +71,7 @@ def test_a_known_system_is_identified_and_passes(rng):
     f = np.linspace(2.0, 100.0, 50)
     np.testing.assert_allclose(check.model.frequency_response(f),
                                _response(np.r_[0.0, B], A, f), rtol=1e-4)
-    assert check.passes
+    assert check.passes and check.verdict.failed == ()
     assert check.fit_pct > 99.9 and check.raw_fit_pct > 99.9
     # The simulated output is returned about the operating point, like the measurement.
     np.testing.assert_allclose(check.simulated[rec.n_ident:], y_raw[rec.n_ident:],
@@ -78,7 +84,9 @@ def test_too_simple_a_model_fails_and_the_search_finds_the_true_order(rng):
     low = identify_and_check(rec, (1, 0, 0, 1), forgetting=1.0, p0=1e6)
     # A first-order model cannot follow the 0.84-radius resonance: far outside 1 dB / 5°.
     assert not low.passes
-    assert low.fit_pct < MIN_FIT_PCT
+    assert low.fit_pct < ACCEPTANCE.min_fit_pct
+    assert any(f.startswith("fit ") for f in low.verdict.failed)
+    assert any(f.startswith("magnitude error") for f in low.verdict.failed)
     found = simplest_passing(rec, (1, 0, 0, 1), max_order=4, forgetting=1.0, p0=1e6)
     assert found is not None and found.passes
     assert found.model.na == 2  # the simplest that passes is the true order

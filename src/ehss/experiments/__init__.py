@@ -17,10 +17,7 @@ from ehss.experiments.compensation_demo import (
     write_demo_report,
 )
 from ehss.experiments.loop_identification import (
-    MAX_MAG_ERROR_DB,
-    MAX_PHASE_ERROR_DEG,
-    MIN_COHERENCE,
-    MIN_FIT_PCT,
+    ACCEPTANCE,
     ModelCheck,
     Record,
     identify_and_check,
@@ -44,10 +41,7 @@ __all__ = [
     "write_demo_report",
     "RefineResult",
     "refine",
-    "MAX_MAG_ERROR_DB",
-    "MAX_PHASE_ERROR_DEG",
-    "MIN_COHERENCE",
-    "MIN_FIT_PCT",
+    "ACCEPTANCE",
     "ModelCheck",
     "Record",
     "identify_and_check",

@@ -1,36 +1,35 @@
 """Identify one closed loop from a test record and judge the model (PAPER.md §6).
 
-The record is taken about its operating point (RELS has no constant term) and split
-into an estimation part and a held-out end (:func:`loop_record`); a model is identified
-on the first with RELS or RML (eqs 20–22), optionally behind the loop's known factors,
-and checked against the Hann-window H1 estimate and on the held-out end
-(:func:`identify_and_check`). These two functions are the whole identification
-workflow of the programme; the rest of this module searches orders with them and
-replays the online estimator.
+The programme judges its models as ``ehss identify`` does, through :mod:`ehss.workflow`:
+:func:`loop_record` prepares the record once (:func:`ehss.workflow.prepare`: the end held
+out for validation, the mean removed from each part, no decimation, since compensation
+plays drives at the control rate), and :func:`identify_and_check` fits a model on the
+estimation part with RELS or RML (eqs 20–22, from the paper's start θ̂(0) = 0,
+P(0) = αI), optionally behind the loop's known factors, and judges the complete model
+with :func:`ehss.workflow.assess` and the one :class:`ehss.workflow.Acceptance`. The rest
+of this module searches orders with them and replays the online estimator.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, lfilter, sosfiltfilt
+from scipy.signal import lfilter
 
 from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import ArmaxModel, RelsEstimator, rels
 from ehss.identification.known import compose
-from ehss.validation import FrfError, frf_error, nrmse_fit
+from ehss.validation import FrfError, ValidationReport
+from ehss.workflow import Acceptance, Prepared, Verdict, assess, prepare
 
 __all__ = [
-    "MIN_COHERENCE",
-    "MAX_MAG_ERROR_DB",
-    "MAX_PHASE_ERROR_DEG",
-    "MIN_FIT_PCT",
+    "ACCEPTANCE",
     "Record",
     "ModelCheck",
     "loop_record",
     "identify_and_check",
+    "check_model",
     "model_label",
     "simplest_passing",
     "convergence",
@@ -39,22 +38,23 @@ __all__ = [
 Orders = tuple[int, int, int, int]
 Factors = tuple[np.ndarray, np.ndarray]
 
-# Acceptance of PAPER.md §6 as set for this project: where γ² ≥ 0.9 in the band the
-# model is within 1 dB and 5° of H1, and the held-out fit is at least 90 %.
-MIN_COHERENCE = 0.9
-MAX_MAG_ERROR_DB = 1.0
-MAX_PHASE_ERROR_DEG = 5.0
-MIN_FIT_PCT = 90.0
+#: The acceptance the programme judges by: the library's default, the one ``ehss
+#: identify`` applies.
+ACCEPTANCE = Acceptance()
 
 
 @dataclass(frozen=True, kw_only=True)
 class Record:
-    """One identification record about its operating point.
+    """One identification record, prepared for identification and validation.
 
     Attributes
     ----------
+    prepared : Prepared
+        From :func:`ehss.workflow.prepare`: the estimation part and the held-out end,
+        each about its own mean. Models are fitted on ``prepared.u, prepared.y`` and
+        judged on ``prepared.u_val, prepared.y_val``.
     u, y : ndarray, shape (n,)
-        Input and output minus their means.
+        The whole record minus its means (for the figures and the online replay).
     n_ident : int
         Samples of the estimation part; the rest is held out.
     fs : float
@@ -62,23 +62,19 @@ class Record:
     band_hz : (float, float)
         Band where the model is validated.
     frf : FrequencyResponse
-        H1 estimate of the whole record.
-    y_band : ndarray, shape (n,)
-        ``y`` low-passed (zero-phase) by ``lowpass``.
-    lowpass : ndarray
-        Second-order sections of the low-pass just above the band.
+        H1 estimate of the whole record (for the figures; the verdict uses the held-out
+        end's own estimate, as ``ehss identify`` does).
     input_mean, output_mean : float
-        The operating point that was removed.
+        The whole record's means.
     """
 
+    prepared: Prepared
     u: np.ndarray
     y: np.ndarray
     n_ident: int
     fs: float
     band_hz: tuple[float, float]
     frf: FrequencyResponse
-    y_band: np.ndarray
-    lowpass: np.ndarray
     input_mean: float
     output_mean: float
 
@@ -93,36 +89,41 @@ class ModelCheck:
         How it was obtained, e.g. ``"RELS (4,3,2,1)"``.
     model : ArmaxModel
         The complete closed-loop model, reference → measured output.
-    error : FrfError
-        Against the H1 estimate, over the band, where γ² ≥ 0.9.
-    fit_pct : float
-        Held-out NRMSE fit of the simulated output, both signals low-passed (zero-phase)
-        just above the band so that broadband sensor noise outside the identified band
-        is not counted as model error.
-    raw_fit_pct : float
-        The same without the low-pass (bounded by the sensor noise level).
+    report : ValidationReport
+        :func:`ehss.workflow.assess` on the held-out end.
+    verdict : Verdict
+        The :class:`ehss.workflow.Acceptance`'s judgement of ``report``.
     simulated : ndarray
-        The model's simulated output over the whole record (operating point added).
+        The model's simulated output over the whole record from rest (operating point
+        added), for the figures.
     """
 
     label: str
     model: ArmaxModel
-    error: FrfError
-    fit_pct: float
-    raw_fit_pct: float
+    report: ValidationReport
+    verdict: Verdict
     simulated: np.ndarray
 
     @property
+    def error(self) -> FrfError | None:
+        """Frequency-response error against the held-out end's estimate, in the band
+        (never None here: :func:`ehss.workflow.assess` always compares over a band)."""
+        return self.report.frf_error
+
+    @property
+    def fit_pct(self) -> float:
+        """The fit that judges the model: held-out free-run fit in the band."""
+        return self.report.fit_pct
+
+    @property
+    def raw_fit_pct(self) -> float:
+        """The held-out free-run fit without band-limiting."""
+        return self.report.simulation_fit_pct
+
+    @property
     def passes(self) -> bool:
-        """Stable, and within the acceptance against H1 and on the held-out end."""
-        err = self.error
-        return (
-            bool(self.model.is_stable())
-            and err.n_points > 0
-            and err.max_magnitude_db <= MAX_MAG_ERROR_DB
-            and err.max_phase_deg <= MAX_PHASE_ERROR_DEG
-            and self.fit_pct >= MIN_FIT_PCT
-        )
+        """The model meets the acceptance."""
+        return self.verdict.accepted
 
 
 def model_label(orders: Orders, known: bool = False, method: str = "rels") -> str:
@@ -135,7 +136,7 @@ def loop_record(
     u_raw: np.ndarray, y_raw: np.ndarray, *, fs: float, band_hz: tuple[float, float],
     holdout: float,
 ) -> Record:
-    """A closed-loop test record about its operating point, split for identification.
+    """A closed-loop test record, prepared for identification as ``ehss identify`` does.
 
     Parameters
     ----------
@@ -151,21 +152,23 @@ def loop_record(
     Returns
     -------
     Record
+        ``prepared`` is ``prepare(u_raw, y_raw, fs=fs, validation=holdout,
+        band_hz=band_hz, detrend="mean", decimate=None)``: ``ehss identify --holdout
+        HOLDOUT --band LO HI --detrend mean --decimate none`` on the same record.
     """
-    # Deviations from the operating point: RELS has no constant term.
+    prepared = prepare(u_raw, y_raw, fs=fs, validation=holdout, band_hz=band_hz,
+                       detrend="mean", decimate=None)
     u_mean, y_mean = float(np.mean(u_raw)), float(np.mean(y_raw))
-    u, y = u_raw - u_mean, y_raw - y_mean
-    lowpass = butter(4, min(1.5 * band_hz[1], 0.45 * fs), fs=fs, output="sos")
+    u, y = np.asarray(u_raw, float) - u_mean, np.asarray(y_raw, float) - y_mean
     return Record(
+        prepared=prepared,
         u=u,
         y=y,
-        n_ident=int(round(u.size * (1.0 - holdout))),
+        n_ident=int(prepared.u.size),
         fs=fs,
         band_hz=band_hz,
         # About 0.5 Hz resolution: the slow dynamics near the band's low end need it.
         frf=h1_estimate(u, y, fs, nperseg=int(2 ** round(np.log2(2.0 * fs)))),
-        y_band=sosfiltfilt(lowpass, y),
-        lowpass=lowpass,
         input_mean=u_mean,
         output_mean=y_mean,
     )
@@ -180,7 +183,7 @@ def identify_and_check(
     method: str = "rels",
     known: Factors | None = None,
 ) -> ModelCheck:
-    """Identify on the estimation part of ``rec`` and check against the acceptance.
+    """Identify on the estimation part of ``rec`` and judge it as ``ehss identify`` does.
 
     Parameters
     ----------
@@ -194,39 +197,49 @@ def identify_and_check(
         Recursive estimator.
     known : (num, den), optional
         Known factors F(q) in ascending powers of q⁻¹: the input is filtered through
-        them, the rest is identified and the complete model composed.
+        them, the rest is identified and the complete model composed (and judged).
 
     Returns
     -------
     ModelCheck
     """
-    n = rec.n_ident
-    u = rec.u if known is None else lfilter(known[0], known[1], rec.u)
+    p = rec.prepared
+    u = p.u if known is None else lfilter(known[0], known[1], p.u)
     na, nb, nc, delay = orders
     model = rels(
-        u[:n], rec.y[:n], na=na, nb=nb, nc=nc, delay=delay, forgetting=forgetting, p0=p0,
+        u, p.y, na=na, nb=nb, nc=nc, delay=delay, forgetting=forgetting, p0=p0,
         dt=1.0 / rec.fs, method=method,
     )
     if known is not None:
         model = compose(model, *known)
-    # The model runs over the whole record from rest, so that the held-out part starts
-    # from the state the estimation part left (no initial-condition transient).
+    return check_model(rec, model, label=model_label(orders, known is not None, method))
+
+
+def check_model(rec: Record, model: ArmaxModel, *, label: str) -> ModelCheck:
+    """Judge a complete model of the loop on the held-out end of ``rec``.
+
+    :func:`ehss.workflow.assess` with :data:`ACCEPTANCE`: the verdict ``ehss identify``
+    gives a model it fitted on the same record with the options of :func:`loop_record`.
+
+    Parameters
+    ----------
+    rec : Record
+        From :func:`loop_record`.
+    model : ArmaxModel
+        Reference → measured output about the operating point, at ``rec.fs``.
+    label : str
+        How it was obtained.
+
+    Returns
+    -------
+    ModelCheck
+    """
+    report, verdict = assess(model, rec.prepared, acceptance=ACCEPTANCE)
     with np.errstate(over="ignore", invalid="ignore"):
         yhat = model.simulate(rec.u)
-    if np.all(np.isfinite(yhat)):
-        fit = nrmse_fit(rec.y_band[n:], sosfiltfilt(rec.lowpass, yhat)[n:])
-        raw_fit = nrmse_fit(rec.y[n:], yhat[n:])
-    else:  # an unstable model's simulation diverges: no fit at all
-        fit = raw_fit = -math.inf
-        yhat = np.where(np.isfinite(yhat), yhat, np.nan)
-    return ModelCheck(
-        label=model_label(orders, known is not None, method),
-        model=model,
-        error=frf_error(model, rec.frf, band_hz=rec.band_hz, min_coherence=MIN_COHERENCE),
-        fit_pct=fit,
-        raw_fit_pct=raw_fit,
-        simulated=yhat + rec.output_mean,
-    )
+    yhat = np.where(np.isfinite(yhat), yhat, np.nan)  # a diverging simulation: not drawn
+    return ModelCheck(label=label, model=model, report=report, verdict=verdict,
+                      simulated=yhat + rec.output_mean)
 
 
 def simplest_passing(
@@ -290,6 +303,6 @@ def convergence(
         y_scale=float(model.meta["y_scale"]),
         history_every=every,
     )
-    est.update_many(rec.u[: rec.n_ident], rec.y[: rec.n_ident])
+    est.update_many(rec.prepared.u, rec.prepared.y)
     history = np.asarray(est.history)
     return (np.arange(history.shape[0]) + 1) * every / rec.fs, history

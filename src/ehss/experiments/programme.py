@@ -7,10 +7,11 @@
 
 Each identification uses the reference as input and the measured feedback as output
 (the closed-loop transfer function), RELS on the first part of the record and the rest
-held out (:mod:`ehss.experiments.loop_identification`); the model is
-checked against the Hann-window H1 estimate and on the held-out segment, and order
-selection says which order it would have chosen. Then feed-forward compensation of the
-position and acceleration loops.
+held out (:mod:`ehss.experiments.loop_identification`); every model is judged on the
+held-out end by :func:`ehss.workflow.assess` and the one
+:class:`ehss.workflow.Acceptance`, so the report's verdict is the one ``ehss identify``
+prints for the same record, and order selection says which order it would have chosen.
+Then feed-forward compensation of the position and acceleration loops.
 """
 
 from __future__ import annotations
@@ -122,10 +123,16 @@ class ProgrammeSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class LoopResult:
-    """Everything the report shows for one identified loop."""
+    """Everything the report shows for one identified loop.
+
+    ``band_hz`` is the band the models were validated over (the excitation band clipped
+    to [0.5 Hz, 0.45 fs]): with ``settings.holdout``, mean removal and no decimation it
+    makes ``ehss identify``'s options for the same record.
+    """
 
     setup: LoopSetup
     sim: SimulationResult
+    band_hz: tuple[float, float]
     n_ident: int
     input_mean: float
     output_mean: float
@@ -202,8 +209,8 @@ def _run_loop(
     theta_t, theta_history = convergence(rec, paper.model, forgetting=lam, p0=p0)
     n = rec.n_ident
     selection = select_order(
-        rec.u[:n],
-        rec.y[:n],
+        rec.prepared.u,
+        rec.prepared.y,
         na=settings.order_grid,
         nb=sorted({k - 1 for k in settings.order_grid}),
         nc=settings.noise_orders,
@@ -228,6 +235,7 @@ def _run_loop(
     return LoopResult(
         setup=setup,
         sim=_trim(sim, skip),
+        band_hz=rec.band_hz,
         n_ident=n,
         input_mean=rec.input_mean,
         output_mean=rec.output_mean,

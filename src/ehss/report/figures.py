@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from ehss.experiments import LoopResult, StepTest
+from ehss.experiments import ACCEPTANCE, LoopResult, StepTest
 from ehss.plots import bode_compare, fixed_layout, plot_series, theta_convergence, time_compare
 
 __all__ = ["step_figure", "loop_figure", "convergence_figure", "LOOP_UNITS", "REPORT_DPI"]
@@ -89,7 +89,8 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
     }
     # Above the band the reference has no content and H1 means nothing: stop there.
     bode_compare(res.frf.band(0.0, band[1]), models, band_hz=band, axes=(ax_m, ax_p, ax_c))
-    ax_m.set_title("(b) magnitude (max errors where γ² ≥ 0.9)", fontsize=10)
+    ax_m.set_title(f"(b) magnitude (max errors vs the held-out H1 where γ² ≥ "
+                   f"{ACCEPTANCE.min_coherence:g})", fontsize=10)
     ax_p.set_title("(c) phase", fontsize=10)
     ax_m.legend(fontsize=7, loc="lower left")
     ax_p.set_xlabel("frequency (Hz)")
