@@ -55,8 +55,6 @@ ALLOWED_PRIVATE: frozenset[tuple[str, str]] = frozenset(
         ("ehss.simulation._kernels", "ehss.plant._kernels"),
         ("ehss.simulation.core", "ehss.control._kernels"),
         ("ehss.simulation.core", "ehss.plant._kernels"),
-        # `ehss simulate` reuses the simulator's sample-rate check.
-        ("ehss.cli._simulate", "ehss.simulation.core._with_rate"),
     }
 )
 ALLOWED_UPWARD: frozenset[tuple[str, str]] = frozenset()

@@ -122,10 +122,9 @@ def run(args: argparse.Namespace) -> int:
         kind = getattr(sig, "kind", args.signal)
         settings = dict(getattr(sig, "settings", {}) or {})
 
-    from ehss.simulation import simulate
-    from ehss.simulation.core import _with_rate
+    from ehss.simulation import simulate, with_control_rate
 
-    checked = _with_rate(params, fs)  # fs must divide the internal rate: fail before work
+    checked = with_control_rate(params, fs)  # fs must divide the internal rate: fail before work
     _check_feasible(values, args.loop, checked, fs, step=kind == "step")
 
     expected_s = values.size / fs / _EXPECTED_REAL_TIME_FACTOR

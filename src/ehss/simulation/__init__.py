@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ehss.simulation.core import LOOPS, SimulationResult, simulate
+from ehss.simulation.core import LOOPS, SimulationResult, simulate, with_control_rate
 from ehss.simulation.open_loop import simulate_open_loop
 
-__all__ = ["LOOPS", "SimulationResult", "simulate", "simulate_open_loop"]
+__all__ = ["LOOPS", "SimulationResult", "simulate", "simulate_open_loop", "with_control_rate"]

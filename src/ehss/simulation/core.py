@@ -29,7 +29,7 @@ from ehss.plant.model import (
 )
 from ehss.simulation import _kernels as SK
 
-__all__ = ["LOOPS", "SimulationResult", "simulate"]
+__all__ = ["LOOPS", "SimulationResult", "simulate", "with_control_rate"]
 
 #: Closed loops that :func:`simulate` can run.
 LOOPS = ("position", "acceleration", "force")
@@ -160,7 +160,15 @@ def _reference_values(reference: Any, fs: float | None) -> tuple[np.ndarray, flo
     return as_signal(reference, "reference"), (fs if fs is not None else ref_fs)
 
 
-def _with_rate(params: RigParams, fs: float | None) -> RigParams:
+def with_control_rate(params: RigParams, fs: float | None) -> RigParams:
+    """``params`` with the control (sample) rate ``fs``, checked before any work.
+
+    Raises
+    ------
+    ParameterError
+        If ``fs`` is not a positive number that divides the internal (integration) rate
+        an integer number of times.
+    """
     if fs is None:
         return params
     try:
@@ -258,7 +266,7 @@ def _run(
         raise TypeError(f"params must be a RigParams, got {type(params).__name__}")
     initial_state = _check_initial_state(initial_state)
     values, fs = _reference_values(reference, fs)
-    params = _with_rate(params, fs)
+    params = with_control_rate(params, fs)
     seed = _new_seed(seed)
     timing = params.timing
     fs = timing.control_rate_hz
