@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lfilter
 
+from ehss.errors import IdentificationError
 from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import ArmaxModel, RelsEstimator, rels
 from ehss.identification.known import compose
@@ -105,10 +106,13 @@ class ModelCheck:
     simulated: np.ndarray
 
     @property
-    def error(self) -> FrfError | None:
+    def error(self) -> FrfError:
         """Frequency-response error against the held-out end's estimate, in the band
-        (never None here: :func:`ehss.workflow.assess` always compares over a band)."""
-        return self.report.frf_error
+        (:func:`ehss.workflow.assess` always compares over a band)."""
+        err = self.report.frf_error
+        if err is None:
+            raise IdentificationError(f"{self.label}: validation compared no frequencies")
+        return err
 
     @property
     def fit_pct(self) -> float:

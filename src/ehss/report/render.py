@@ -137,7 +137,7 @@ def summary_dict(result: ProgrammeResult) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- text
-def _fmt(x: float, digits: int = 3) -> str:
+def _fmt(x: float | None, digits: int = 3) -> str:
     return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}g}"
 
 
