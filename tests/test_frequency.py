@@ -256,3 +256,22 @@ def test_dft_estimate_bad_arguments(rng):
         dft_estimate(np.ones(100), u, FS)
     with pytest.raises(ParameterError, match="method"):
         frf_estimate(u, u, FS, method="h2")
+
+
+@pytest.mark.parametrize("window", ["no-such-window", 3, None, ("kaiser",), [1.0, 1.0]])
+def test_bad_window_is_a_parameter_error(rng, window):
+    u = rng.standard_normal(1000)
+    with pytest.raises(ParameterError, match="window="):
+        h1_estimate(u, u, 100.0, window=window)
+
+
+def test_named_window_equals_its_samples(rng):
+    # a (name, parameter) window is the same estimate whether scipy or ehss samples it
+    u = rng.standard_normal(2000)
+    y = np.convolve(u, [0.5, 0.3, 0.2])[: u.size]
+    a = h1_estimate(u, y, 100.0, window=("tukey", 0.25), nperseg=256)
+    f, s_uy = scipy.signal.csd(u, y, fs=100.0, window=("tukey", 0.25), nperseg=256)
+    _, s_uu = scipy.signal.welch(u, fs=100.0, window=("tukey", 0.25), nperseg=256)
+    # the same Welch sums divided, bin for bin (DC, removed by the detrend, is left out)
+    assert_allclose(a.freq_hz, f[1:], rtol=0)
+    assert_allclose(a.response, (s_uy / s_uu)[1:], rtol=1e-12)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import operator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.signal
@@ -319,6 +320,7 @@ def h1_estimate(
     if not np.any(u != u[0]):
         raise DataError("the input u is constant: it has no power to estimate a response")
 
+    window = _check_window(window, nperseg)
     kw = dict(fs=fs, window=window, nperseg=nperseg, noverlap=noverlap, detrend=detrend)
     # S_uy = conj(U) Y, S_uu, S_yy: Welch averages of windowed segments.
     freq, s_uy = scipy.signal.csd(u, y, **kw)
@@ -513,6 +515,21 @@ def _as_int(x, name: str) -> int:
         return operator.index(x)
     except TypeError:
         raise ParameterError(f"{name}={x!r} must be an integer") from None
+
+
+def _check_window(window: Any, nperseg: int) -> np.ndarray:
+    """The window's nperseg samples: a name or (name, parameter) tuple that
+    :func:`scipy.signal.get_window` knows; anything else is a ParameterError."""
+    if isinstance(window, np.ndarray) or not isinstance(window, (str, tuple)):
+        raise ParameterError(f"window={window!r} must be a window name such as 'hann', or a "
+                             "(name, parameter) tuple such as ('tukey', 0.25)")
+    try:
+        w = scipy.signal.get_window(window, nperseg)
+    except (ValueError, TypeError) as exc:
+        raise ParameterError(f"window={window!r} is not a window scipy knows: {exc}") from None
+    if not np.all(np.isfinite(w)) or not np.any(w > 0):
+        raise ParameterError(f"window={window!r} gives no positive finite weights")
+    return w
 
 
 def check_fs(fs) -> float:
