@@ -108,7 +108,6 @@ def test_unknown_loop_is_an_argument_error(tmp_path):
     ],
 )
 def test_generated_signals(tmp_path, loop, signal, extra):
-    pytest.importorskip("ehss.signals")
     out = tmp_path / "run.csv"
     assert main(["simulate", "--loop", loop, "--signal", signal, "--duration", "1.0",
                  "--out", str(out), *extra]) == 0
@@ -117,7 +116,6 @@ def test_generated_signals(tmp_path, loop, signal, extra):
 
 
 def test_infeasible_signal_exit_2(tmp_path, capsys):
-    pytest.importorskip("ehss.signals")
     out = tmp_path / "run.csv"
     # 5 cm at 20 Hz needs 6 m/s: beyond the valve and Table 2
     assert main(["simulate", "--loop", "position", "--signal", "sine", "--amplitude", "0.05",
