@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -19,6 +20,7 @@ __all__ = [
     "add_record_arguments",
     "Record",
     "load_record",
+    "load_validation",
     "int_list",
     "check_outputs",
     "write_outputs",
@@ -121,6 +123,27 @@ def int_list(text: str) -> list[int]:
     if not out:
         raise argparse.ArgumentTypeError(f"{text!r} holds no integers")
     return list(dict.fromkeys(out))
+
+
+def load_validation(args: argparse.Namespace, rec: Record) -> Record | None:
+    """The ``--validate FILE`` record, read with DATA's column options, or None.
+
+    Raises
+    ------
+    ParameterError
+        If it is sampled at another rate than DATA, or ``--band`` reaches above fs/2.
+    """
+    band = getattr(args, "band", None)
+    if band is not None and band[1] > rec.fs / 2:
+        raise ParameterError(f"--band upper edge {band[1]:g} Hz is above fs/2 = "
+                             f"{rec.fs / 2:g} Hz")
+    if args.validate is None:
+        return None
+    val = load_record(argparse.Namespace(**{**vars(args), "data": args.validate}))
+    if not math.isclose(val.fs, rec.fs, rel_tol=1e-6):
+        raise ParameterError(f"--validate {args.validate} is sampled at {val.fs:g} Hz, "
+                             f"DATA at {rec.fs:g} Hz: they must match")
+    return val
 
 
 def check_outputs(*paths: str | Path | None, inputs: Sequence[str | Path] = ()) -> list[Path]:

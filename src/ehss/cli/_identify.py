@@ -17,6 +17,7 @@ import numpy as np
 from ehss.cli._dataargs import (
     add_record_arguments,
     load_record,
+    load_validation,
     report_warnings,
     write_outputs,
 )
@@ -167,17 +168,8 @@ def run(args: argparse.Namespace) -> int:
     opts = _check_args(args)
     plots = (args.plot, None if args.plot is None else time_plot_path(args.plot))
     rec = load_record(args)
-    validation: Any = opts["holdout"]
-    val_rec = None
-    if args.validate is not None:
-        val_rec = load_record(argparse.Namespace(**{**vars(args), "data": args.validate}))
-        if not math.isclose(val_rec.fs, rec.fs, rel_tol=1e-6):
-            raise ParameterError(f"--validate {args.validate} is sampled at {val_rec.fs:g} Hz, "
-                                 f"DATA at {rec.fs:g} Hz: they must match")
-        validation = (val_rec.u, val_rec.y)
-    if opts["band"] is not None and opts["band"][1] > rec.fs / 2:
-        raise ParameterError(f"--band upper edge {opts['band'][1]:g} Hz is above fs/2 = "
-                             f"{rec.fs / 2:g} Hz")
+    val_rec = load_validation(args, rec)
+    validation: Any = opts["holdout"] if val_rec is None else (val_rec.u, val_rec.y)
     with report_warnings("identify"):
         res = identify(
             rec.u, rec.y, fs=rec.fs, orders=(args.na, args.nb, args.nc, args.delay),

@@ -22,6 +22,7 @@ from ehss.cli._dataargs import (
     add_record_arguments,
     int_list,
     load_record,
+    load_validation,
     report_warnings,
     write_outputs,
 )
@@ -130,16 +131,8 @@ def run(args: argparse.Namespace) -> int:
 
     opts = _check_args(args)
     rec = load_record(args)
-    validation = opts["holdout"]
-    if args.validate is not None:
-        val = load_record(argparse.Namespace(**{**vars(args), "data": args.validate}))
-        if not math.isclose(val.fs, rec.fs, rel_tol=1e-6):
-            raise ParameterError(f"--validate {args.validate} is sampled at {val.fs:g} Hz, "
-                                 f"DATA at {rec.fs:g} Hz: they must match")
-        validation = (val.u, val.y)
-    if opts["band"] is not None and opts["band"][1] > rec.fs / 2:
-        raise ParameterError(f"--band upper edge {opts['band'][1]:g} Hz is above fs/2 = "
-                             f"{rec.fs / 2:g} Hz")
+    val = load_validation(args, rec)
+    validation = opts["holdout"] if val is None else (val.u, val.y)
     with report_warnings("order"):
         search = select_orders(
             rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
