@@ -18,7 +18,8 @@ model "meets the acceptance" in one sense only, the one :class:`Acceptance` defi
    refits it.
 
 The model comes back with its operating point (``offsets``) and with ``band_hz`` set to
-the span of frequencies over which the validation compared it with the data. A decimated
+the span of frequencies over which the validation compared it with the data
+(:func:`validated_band`: from DC when the comparison held from the estimate's first bin). A decimated
 record gives a model at the decimated rate (its ``dt`` says so, and so does
 :meth:`Identification.format`).
 """
@@ -53,6 +54,7 @@ __all__ = [
     "assess",
     "OrderSearch",
     "select_orders",
+    "validated_band",
 ]
 
 #: Estimator used when none is named: ARMAX by prediction-error minimisation started from
@@ -504,13 +506,43 @@ def identify(
                      dt=1.0 / fs_m, init=init)
     report, verdict = assess(model, prep, acceptance=acceptance, nperseg=nperseg,
                              frf_method=frf_method, initial=initial, horizons=horizons)
-    validated = None
-    e = report.frf_error
-    if e is not None and e.n_points >= 2 and e.compared_hz[0] < e.compared_hz[1]:
-        validated = (e.compared_hz[0], min(e.compared_hz[1], fs_m / 2))
-    model = dataclasses.replace(model, offsets=prep.offsets, band_hz=validated)
+    model = dataclasses.replace(model, offsets=prep.offsets,
+                                band_hz=validated_band(report, fs_m))
     return Identification(model=model, report=report, verdict=verdict, prepared=prep,
                           method=method, orders=(na, nb, nc, delay))
+
+
+def validated_band(report: ValidationReport, fs_model: float) -> tuple[float, float] | None:
+    """The band a validation confirmed a model over, as the model should carry it.
+
+    The span of the frequencies where the model was compared with the record's
+    frequency-response estimate (coherent and excited points, :func:`ehss.validation.
+    frf_error`), with one exception at the low end: an estimate resolves nothing below
+    its first frequency bin (``fs / nperseg``), so a comparison that already held there
+    validates the model down to DC as far as the record can tell, and the band then
+    starts at the lower edge of the band of interest (0 unless one was given). A record
+    that did not excite its lowest bins (a 10–40 Hz test) keeps the lower edge the
+    comparison found.
+
+    Parameters
+    ----------
+    report : ValidationReport
+    fs_model : float
+        The model's sample rate, Hz (the band never reaches beyond half of it).
+
+    Returns
+    -------
+    (lo, hi) or None
+        None when fewer than two points were compared.
+    """
+    e = report.frf_error
+    if e is None or e.n_points < 2 or not e.compared_hz[0] < e.compared_hz[1]:
+        return None
+    lo, hi = float(e.compared_hz[0]), min(float(e.compared_hz[1]), fs_model / 2)
+    resolved = report.frf.freq_hz[report.frf.freq_hz > 0]
+    if resolved.size and lo <= float(resolved[0]):
+        lo = float(e.band_hz[0])  # the band of interest's lower edge (0 by default)
+    return lo, hi
 
 
 def assess(
