@@ -169,7 +169,7 @@ def test_compensate_options(tmp_path, reference):
     [
         ({"a": (1.0, -1.2)}, {}, [], "max pole radius 1.2"),
         ({"b": (0.0, 0.0)}, {}, [], "all zero"),
-        ({"dt": 2e-3}, {}, [], "500 Hz"),
+        ({"dt": 2.5e-3}, {}, [], "400 Hz"),  # not an integer fraction of 1 kHz
         ({}, {"name": "other"}, [], "reference"),
         ({}, {}, ["--fs", "2000"], "2000"),
     ],

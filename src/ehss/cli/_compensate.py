@@ -166,7 +166,14 @@ def _band(args: argparse.Namespace, model: Any) -> tuple[float, float]:
 def run(args: argparse.Namespace) -> int:
     from ehss._provenance import versions
     from ehss.cli._dataargs import write_outputs
-    from ehss.compensation import check_at_rest, check_drive, design_inverse, fade_to_rest
+    from ehss.compensation import (
+        apply_inverse,
+        check_at_rest,
+        check_drive,
+        design_inverse,
+        fade_to_rest,
+    )
+    from ehss.compensation.rates import rate_factor
     from ehss.identification.model import ArmaxModel
     from ehss.io import read_columns, sample_rate, table_writers
 
@@ -187,9 +194,7 @@ def run(args: argparse.Namespace) -> int:
     u0, y0 = offsets if offsets is not None else (0.0, 0.0)
     table = read_columns(args.reference, [args.column])
     fs = sample_rate(table, args.fs)
-    if abs(fs * model.dt - 1.0) > 1e-6:
-        raise DataError(f"reference is sampled at {fs:g} Hz but the model at "
-                        f"{1.0 / model.dt:g} Hz; resample the reference or identify at its rate")
+    q = rate_factor(fs, model.dt)  # the model's rate, or a decimated one: DataError if not
     r = np.asarray(table[args.column], dtype=float)
     r_dev = r - y0
     if args.fade is not None:
@@ -207,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
         inverse = design_inverse(model, method=args.method, band_hz=band)
         # the model maps deviations from the operating point (u0, y0) it was identified
         # about: y − y0 = G (u − u0), so the drive for r is u0 + G⁻¹ (r − y0)
-        drive_dev = inverse.apply(r_dev)
+        drive_dev = apply_inverse(inverse, r_dev, fs)
         extra["iteration"] = {"log": [], "gain": None}
     else:
         drive_dev, columns, extra = _update(args, model, r_dev, fs, band, u0, y0)
@@ -234,6 +239,13 @@ def run(args: argparse.Namespace) -> int:
         "reference": str(args.reference),
         "column": args.column,
         "fs_hz": fs,
+        "model_fs_hz": 1.0 / model.dt,
+        "resampled": (None if q == 1 else
+                      f"model at fs/{q}: the inverse ran at its rate between polyphase "
+                      "resampling (ehss.compensation.rates)"),
+        "outside_band": ("reference: outside band_hz the drive is the reference itself"
+                         if args.update is None else
+                         "the update's correction is limited to band_hz (Q-filter)"),
         "method": args.method,
         "band_hz": list(band),
         "band_from": "--band" if args.band is not None else "model band_hz",

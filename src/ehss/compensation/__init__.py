@@ -3,7 +3,9 @@
 :mod:`~ehss.compensation.inverse` designs the inverse (exact stable inversion by default,
 ZPETC and ZMETC as options) inside the band the model was validated over, and
 :mod:`~ehss.compensation.inverse_model` holds it and applies it to a reference;
-:mod:`~ehss.compensation.apply` computes a drive file from it; :mod:`~ehss.compensation.checks`
+:mod:`~ehss.compensation.apply` computes a drive file from it (at the model's rate or,
+through :mod:`~ehss.compensation.rates`, at an integer multiple of it: a model identified
+from a decimated record drives the rig at the record's rate); :mod:`~ehss.compensation.checks`
 refuses drives that would exceed a sane gain or the rig's limits; and
 :mod:`~ehss.compensation.iteration` corrects a drive from a measured run (model-based or
 from the measured frequency response), refusing updates that make the error grow.
@@ -12,7 +14,7 @@ Experiments on the simulated rig live in :mod:`ehss.experiments`.
 
 from __future__ import annotations
 
-from ehss.compensation.apply import as_reference, compensate
+from ehss.compensation.apply import OUTSIDE_BAND, apply_inverse, as_reference, compensate
 from ehss.compensation.checks import (
     DEFAULT_MAX_GAIN,
     REST_TOLERANCE,
@@ -45,6 +47,8 @@ from ehss.compensation.iteration import (
 
 __all__ = [
     "compensate",
+    "apply_inverse",
+    "OUTSIDE_BAND",
     "as_reference",
     "DEFAULT_MAX_GAIN",
     "REST_TOLERANCE",

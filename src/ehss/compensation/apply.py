@@ -10,13 +10,16 @@ import numpy as np
 from ehss._checks import as_signal
 from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_at_rest, check_drive
 from ehss.compensation.inverse import InverseModel, design_inverse
-from ehss.errors import DataError, ParameterError
+from ehss.compensation.inverse_model import _fft_band_limit
+from ehss.compensation.rates import RATE_RTOL, rate_factor, to_model_rate, to_record_rate
+from ehss.errors import ParameterError
 from ehss.identification.model import ArmaxModel
 
-__all__ = ["compensate", "as_reference"]
+__all__ = ["compensate", "apply_inverse", "OUTSIDE_BAND", "as_reference"]
 
-#: Relative mismatch allowed between the model's sample rate and the reference's.
-_RATE_RTOL = 1e-6
+#: What a drive holds outside the inverse's band limit (:func:`apply_inverse`).
+OUTSIDE_BAND = ("reference", "zero")
+
 
 
 def as_reference(reference: Any, fs: float | None) -> tuple[np.ndarray, float]:
@@ -43,7 +46,7 @@ def as_reference(reference: Any, fs: float | None) -> tuple[np.ndarray, float]:
     from ehss.signals import Signal
 
     if isinstance(reference, Signal):
-        if fs is not None and not math.isclose(float(fs), reference.fs, rel_tol=_RATE_RTOL):
+        if fs is not None and not math.isclose(float(fs), reference.fs, rel_tol=RATE_RTOL):
             raise ParameterError(f"fs={fs!r} differs from the Signal's {reference.fs:g} Hz")
         return as_signal(reference.values, "reference"), reference.fs
     if fs is None:
@@ -54,6 +57,57 @@ def as_reference(reference: Any, fs: float | None) -> tuple[np.ndarray, float]:
     if not (math.isfinite(fs) and fs > 0):
         raise ParameterError(f"fs={fs!r} must be a finite number > 0 (Hz)")
     return as_signal(reference, "reference"), float(fs)
+
+
+def apply_inverse(
+    inverse: InverseModel,
+    reference: Any,
+    fs: float,
+    *,
+    preview: int | None = None,
+    outside_band: str = "reference",
+) -> np.ndarray:
+    """The drive ``inverse`` gives for ``reference`` sampled at ``fs``, unchecked.
+
+    Parameters
+    ----------
+    inverse : InverseModel
+    reference : array_like, shape (n_samples,)
+        About the model's operating point, at the model's rate or an integer multiple of
+        it: the inverse then runs at the model's rate, between band-limited resampling
+        (:mod:`ehss.compensation.rates`).
+    fs : float
+        Sample rate of ``reference``, Hz.
+    preview : int, optional
+        As for :meth:`InverseModel.apply`, in samples at the model's rate.
+    outside_band : {"reference", "zero"}
+        The inverse acts inside its band limit only (the band the model was validated
+        over). Outside it the drive is, with ``"reference"`` (default), the reference
+        itself: there the loop runs as it does without compensation, which a closed loop
+        tracks well below its band (unit gain at DC) and attenuates above it, instead of
+        not being driven at all. ``"zero"`` leaves nothing outside the band (what a
+        correction of a drive-file iteration needs: its Q-filter).
+
+    Returns
+    -------
+    drive : ndarray, shape (n_samples,)
+
+    Raises
+    ------
+    DataError
+        ``fs`` not an integer multiple of the model's rate, or bad samples.
+    ParameterError
+        Bad ``outside_band`` or ``preview``.
+    """
+    if outside_band not in OUTSIDE_BAND:
+        raise ParameterError(f"outside_band={outside_band!r} must be one of {OUTSIDE_BAND}")
+    r = as_signal(reference, "reference")
+    q = rate_factor(fs, inverse.dt)
+    drive = to_record_rate(inverse.apply(to_model_rate(r, q), preview=preview), q, r.size)
+    if outside_band == "reference":
+        # the complement of the band limit, zero-phase, at the reference's own rate
+        drive += r - _fft_band_limit(r, 1.0 / fs, inverse.band_hz, inverse.cutoff_hz)
+    return drive
 
 
 def compensate(
@@ -70,6 +124,7 @@ def compensate(
     loop: str | None = None,
     params: Any = None,
     require_rest: bool = True,
+    outside_band: str = "reference",
 ) -> np.ndarray:
     """Drive that makes the identified closed loop follow ``reference``, checked.
 
@@ -79,9 +134,11 @@ def compensate(
         The identified closed loop (reference → measured output), or an already designed
         inverse.
     reference : ehss.signals.Signal, or array_like of shape (n_samples,) with ``fs``
-        Desired output history about the model's operating point, at the model's rate.
+        Desired output history about the model's operating point, at the model's rate or
+        an integer multiple of it (a model from a decimated record: the inverse then runs
+        at the model's rate, see :mod:`ehss.compensation.rates`).
     fs : float, optional
-        Sample rate of an array reference (Hz); must equal the model's.
+        Sample rate of an array reference (Hz).
     method : {"stable", "zpetc", "zmetc"}
         Inverse design (see :mod:`ehss.compensation.inverse`); stable inversion, exact in
         the band, is the default.
@@ -89,7 +146,8 @@ def compensate(
         Band limit of the inverse (Hz). Default: the band the model was validated over,
         ``model.band_hz``; a model without one needs ``band_hz``.
     preview : int, optional
-        Future samples usable (ZPETC, ZMETC); ``None`` = the whole file is known.
+        Future samples usable (ZPETC, ZMETC), at the model's rate; ``None`` = the whole
+        file is known.
     known : (num, den), optional
         Known factor in series with the model (see
         :func:`~ehss.compensation.inverse.design_inverse_tf`).
@@ -99,6 +157,9 @@ def compensate(
     require_rest : bool
         Refuse a reference that does not start and end at rest
         (:func:`~ehss.compensation.checks.check_at_rest`; default).
+    outside_band : {"reference", "zero"}
+        What the drive holds outside the band limit (:func:`apply_inverse`): the
+        reference itself, uncompensated (default), or nothing.
 
     Returns
     -------
@@ -107,7 +168,7 @@ def compensate(
     Raises
     ------
     DataError
-        Bad samples, or a sample rate different from the model's.
+        Bad samples, or a sample rate that is not an integer multiple of the model's.
     ParameterError
         No band, an unusable model, a reference not at rest, or a drive that fails its
         checks (the message gives the numbers).
@@ -130,11 +191,7 @@ def compensate(
     else:
         raise TypeError(f"model must be an ArmaxModel or an InverseModel, not "
                         f"{type(model).__name__}")
-    if not math.isclose(rate * dt, 1.0, rel_tol=_RATE_RTOL):
-        raise DataError(
-            f"reference is sampled at {rate:g} Hz but the model at {1.0 / dt:g} Hz "
-            f"(dt={dt:g} s); resample the reference or identify at its rate"
-        )
+    rate_factor(rate, dt)  # a rate the model can be applied at, or DataError now
     if isinstance(model, ArmaxModel):
         if band_hz is None and model.band_hz is None:
             raise ParameterError(
@@ -144,7 +201,7 @@ def compensate(
         inverse = design_inverse(model, method=method, band_hz=band_hz, known=known)
     if require_rest:
         check_at_rest(r)
-    drive = inverse.apply(r, preview=preview)
+    drive = apply_inverse(inverse, r, rate, preview=preview, outside_band=outside_band)
     if not np.all(np.isfinite(drive)):
         raise ParameterError("the compensated drive is not finite (badly conditioned model)")
     check_drive(drive, r, rate, max_gain=max_gain, limits=limits, loop=loop, params=params)

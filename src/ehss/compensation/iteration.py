@@ -44,9 +44,12 @@ import scipy.fft
 import scipy.signal
 
 from ehss._checks import as_signal
+from ehss.compensation.apply import apply_inverse
 from ehss.compensation.inverse import design_inverse
 from ehss.compensation.inverse_model import InverseModel, _fft_band_limit, band_taper
+from ehss.compensation.rates import rate_factor
 from ehss.errors import ParameterError
+from ehss.preprocess import decimate
 
 __all__ = [
     "UPDATE_METHODS",
@@ -405,11 +408,12 @@ def update_drive(
         if model is None and inverse is None:
             raise ParameterError("method='model' needs the model (or its inverse)")
         if reidentify:
-            used_model, inverse = _reidentified(model, u, y, band, nc, known, orders,
+            used_model, inverse = _reidentified(model, u, y, fs, band, nc, known, orders,
                                                 inverse, inverse_method)
         if inverse is None:
             inverse = design_inverse(model, method=inverse_method, band_hz=band, known=known)
-        correction = inverse.apply(r - y)
+        # the correction stays inside the band (Q-filter): nothing passes outside it
+        correction = apply_inverse(inverse, r - y, fs, outside_band="zero")
 
         def operator(f: np.ndarray) -> np.ndarray:
             return inverse.frequency_response(f)
@@ -432,7 +436,8 @@ def update_drive(
                        message=f"update with gain {gain:g} (RMS error {record.rms_error:.4g})")
 
 
-def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, band: tuple[float, float],
+def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, fs: float,
+                  band: tuple[float, float],
                   nc: int | None, known: Any, orders: tuple[int, int] | None,
                   inverse: InverseModel | None, method: str
                   ) -> tuple[Any, InverseModel | None]:
@@ -449,6 +454,9 @@ def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, band: tuple[float, f
     if orders is None and stored is not None:
         na, nb = na - (len(stored["den"]) - 1), nb - (len(stored["num"]) - 1)
         known = (np.asarray(stored["num"], float), np.asarray(stored["den"], float))
+    q = rate_factor(fs, model.dt)
+    if q > 1:  # the model is at a decimated rate: so must its data be
+        u, y = decimate(u, y, q)
     u_id = u if known is None else scipy.signal.lfilter(known[0], known[1], u)
     try:
         new = estimate(u_id, y, method="rml", na=na, nb=nb,

@@ -108,7 +108,8 @@ def refine(
         Loop of the simulated rig (with ``params``), or a function ``drive -> measured
         output`` (same length) that runs the plant.
     reference : ehss.signals.Signal, or array_like with ``fs``
-        Desired output (SI), at rest at both ends, at the model's rate.
+        Desired output (SI), at rest at both ends, at the model's rate or an integer
+        multiple of it.
     fs : float, optional
         Sample rate of an array reference; default the model's (``1 / model.dt``).
     model : ArmaxModel
