@@ -19,9 +19,10 @@ model "meets the acceptance" in one sense only, the one :class:`Acceptance` defi
 
 The model comes back with its operating point (``offsets``) and with ``band_hz`` set to
 the span of frequencies over which the validation compared it with the data
-(:func:`validated_band`: from DC when the comparison held from the estimate's first bin). A decimated
-record gives a model at the decimated rate (its ``dt`` says so, and so does
-:meth:`Identification.format`).
+(:func:`validated_band`: from DC when the comparison held from the estimate's first
+bin). A decimated record gives a model at the decimated rate (its ``dt`` says so, and so
+does :meth:`Identification.format`); :func:`ehss.compensate` applies it at the record's
+rate.
 """
 
 from __future__ import annotations
