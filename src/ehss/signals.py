@@ -22,6 +22,7 @@ import numpy as np
 import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
+from ehss._checks import check_real
 from ehss.errors import ParameterError
 from ehss.params import GRAVITY_M_S2, RigParams
 
@@ -95,18 +96,13 @@ class Signal:
 
 # --------------------------------------------------------------------------- checks
 def _finite(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ParameterError(f"{name}={value!r} must be a real number")
-    if not math.isfinite(value):
-        raise ParameterError(f"{name}={value!r} must be finite")
-    return float(value)
+    """A finite real (TypeError for another type, ParameterError for NaN/inf)."""
+    return check_real(value, name)
 
 
 def _positive(name: str, value: Any) -> float:
-    v = _finite(name, value)
-    if v <= 0:
-        raise ParameterError(f"{name}={value!r} must be > 0")
-    return v
+    """A finite real > 0."""
+    return check_real(value, name, lo=0.0, lo_open=True)
 
 
 #: Longest record a generator makes: 2e7 samples (5.5 h at 1 kHz). A closed-loop

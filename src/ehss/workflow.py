@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import operator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ehss import preprocess
-from ehss._checks import as_record
+from ehss._checks import as_record, check_int
 from ehss.errors import DataError, ParameterError
 from ehss.frequency import FRF_METHODS, check_band, check_fs
 from ehss.identification import INITS, METHODS, ArmaxModel, estimate
@@ -491,7 +490,7 @@ def identify(
     if not isinstance(acceptance, Acceptance):
         raise TypeError(f"acceptance must be an Acceptance, not {type(acceptance).__name__}")
     if nperseg is not None:
-        nperseg = _positive_int(nperseg, "nperseg")
+        nperseg = check_int(nperseg, "nperseg", lo=1)
         if nperseg < 8:
             raise ParameterError(f"{nperseg=} must be >= 8")
     prep = prepare(u, y, fs=fs, validation=validation, band_hz=band_hz, detrend=detrend,
@@ -764,24 +763,12 @@ def _decimation(value, u: np.ndarray, y: np.ndarray, fs: float,
         if value != "auto":
             raise ParameterError(f"decimate={value!r} must be 'auto', an integer >= 1 or None")
         return preprocess.auto_decimation(u, y, fs, band_hz=band_hz)
-    q = _positive_int(value, "decimate")
+    q = check_int(value, "decimate", lo=1)
     if band_hz is not None and band_hz[1] >= 0.8 * fs / (2 * q):
         raise ParameterError(f"decimating by {q} puts the band's upper edge {band_hz[1]:g} Hz "
                              f"beyond the anti-alias filter's pass band "
                              f"({0.8 * fs / (2 * q):g} Hz)")
     return q
-
-
-def _positive_int(value, name: str) -> int:
-    if isinstance(value, bool):
-        raise ParameterError(f"{name}={value!r} must be an integer >= 1")
-    try:
-        v = operator.index(value)
-    except TypeError:
-        raise ParameterError(f"{name}={value!r} must be an integer >= 1") from None
-    if v < 1:
-        raise ParameterError(f"{name}={v} must be an integer >= 1")
-    return v
 
 
 def _orders(orders) -> tuple[int, int, int, int]:

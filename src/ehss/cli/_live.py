@@ -11,6 +11,7 @@ import threading
 from pathlib import Path
 
 import ehss
+from ehss._checks import check_real
 from ehss._provenance import versions
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import DataError, ParameterError
@@ -55,9 +56,9 @@ def add_rig_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _check_positive(name: str, value: float, *, allow_inf: bool = False) -> float:
-    if not (value > 0 and (allow_inf or math.isfinite(value))):
-        raise ParameterError(f"{name}={value!r} must be > 0")
-    return value
+    if allow_inf and value == math.inf:
+        return value
+    return check_real(value, name, lo=0.0, lo_open=True)
 
 
 def rig_or_replay(args: argparse.Namespace):
