@@ -20,6 +20,7 @@ import numpy as np
 
 from ehss._checks import as_signal
 from ehss.control.discrete import pid_coefficients, tvc_coefficients
+from ehss.control.kernels import PidSettings, TvcSettings
 from ehss.errors import ParameterError
 from ehss.params import RigParams, preset
 from ehss.plant.kernels import PlantState
@@ -191,6 +192,11 @@ def with_control_rate(params: RigParams, fs: float | None) -> RigParams:
     return dataclasses.replace(params, timing=dataclasses.replace(timing, control_rate_hz=fs))
 
 
+#: Settings of a controller that the loop does not run (the kernel never reads them).
+_NOT_RUN_PID = PidSettings._make(math.nan for _ in PidSettings._fields)
+_NOT_RUN_TVC = TvcSettings._make(math.nan for _ in TvcSettings._fields)
+
+
 def _sensor_settings(params: RigParams) -> SK.SensorSettings:
     s, v = params.sensors, params.valve
     lvdt_lsb = accel_lsb = force_lsb = dac_lsb = 0.0  # 0: no quantisation
@@ -274,9 +280,13 @@ def _kernel_inputs(
         params, stiffness_n_m=stiffness_n_m, internal_dt_s=h, spool_direct=spool_direct
     )
     dt = timing.dt_s
-    # both controllers are always packed: one compiled kernel serves every loop
-    pid = pid_coefficients(params.force if loop == "force" else params.position, dt)
-    tvc = tvc_coefficients(params.acceleration, dt)
+    # one compiled kernel serves every loop: the controller a loop does not run is NaN
+    pid = _NOT_RUN_PID
+    tvc = _NOT_RUN_TVC
+    if loop in ("position", "force"):
+        pid = pid_coefficients(params.force if loop == "force" else params.position, dt)
+    elif loop == "acceleration":
+        tvc = tvc_coefficients(params.acceleration, dt)
     drive0 = 0.0
     x0 = rest_state(params)
     if loop == "force" and initial_state is None and values[0] != 0.0 and stiffness_n_m > 0.0:
