@@ -201,6 +201,21 @@ def test_initial_state():
     assert r.output[0] == 0.01
 
 
+def test_acceleration_loop_starts_with_the_velocity_estimate_at_rest():
+    """Table at rest 1 mm off centre, zero reference, no noise: the first drive of the
+    TVC (eq (12)) is Kdf (0 − y) − Kvf v̂ − Kaf a with a = 0 and the velocity estimate
+    v̂[0] = p v̂[−1] + b_y (y − y) + b_a (a + a) = 0 (the estimate starts from rest)."""
+    p = preset("default")
+    quiet = dataclasses.replace(p, sensors=dataclasses.replace(
+        p.sensors, lvdt_noise_m=0.0, accel_noise_m_s2=0.0, quantize=False))
+    r = simulate("acceleration", np.zeros(3), params=quiet,
+                 initial_state={"displacement_m": 0.001}, seed=0)
+    assert r.signals["accel_m_s2"][0] == 0.0
+    # one product: exact; a velocity estimate started at v̂[−1] = y (a length read as a
+    # speed) would add −Kvf p y ≈ −8.6 mV
+    assert r.signals["drive_v"][0] == -p.acceleration.kdf_v_per_m * 0.001
+
+
 # ----------------------------------------------------------------------------- kernel
 def test_kernel_matches_its_python_source():
     """The compiled loop against its own source run by the interpreter (``py_func``)."""

@@ -205,9 +205,10 @@ def closed_loop(ref, noise, x0, s, rec):
         am = adc(a_hp + noise.accel_m_s2[k], sen.accel_range_m_s2, sen.accel_lsb_m_s2)
         fm = adc(f_true + noise.force_n[k], sen.force_range_n, sen.force_lsb_n)
         if k == 0:
-            # no derivative kick on the first sample: the previous measurement is this one
+            # no derivative kick on the first sample: the previous measurements are these;
+            # the generator and the velocity estimate v̂ start from rest
             pid = PidState(pid.integral_v, 0.0, fm if s.loop == FORCE else ym)
-            tvc = TvcState(0.0, 0.0, ym, ym, am)  # v̂[−1] = y_m[0], as the index layout had it
+            tvc = TvcState(rd_m=0.0, vd_m_s=0.0, v_hat_m_s=0.0, y_prev_m=ym, a_prev_m_s2=am)
 
         # ------------------------------------------------------------ controller
         u, aux, pid, tvc = _controller(ref[k], ym, am, fm, pid, tvc, s)
