@@ -42,11 +42,7 @@ __all__ = [
     "PlantSettings",
     "PlantState",
     "signed_sqrt",
-    "spool_opening",
-    "orifice_flows",
     "friction_force",
-    "end_stop_force",
-    "joint_force",
     "plant_derivative",
     "rk4_step",
     "clamp_state",
@@ -119,45 +115,6 @@ def signed_sqrt(dp, dp_lam):
 
 
 @njit(cache=True)
-def spool_opening(u, s):
-    """Effective opening u_e of the spool ``u``: saturation, then the overlap dead zone."""
-    if s.spool_saturates:
-        u = min(1.0, max(-1.0, u))
-    # overlap: no opening inside ±deadband, opening shifted by the deadband outside it
-    db = s.spool_overlap
-    if db > 0.0:
-        if u > db:
-            u -= db
-        elif u < -db:
-            u += db
-        else:
-            u = 0.0
-    return u
-
-
-@njit(cache=True)
-def orifice_flows(u, p1, p2, s):
-    """Flows (Q1 into chamber 1, Q2 out of chamber 2), m³/s, at the opening ``u`` (§5)."""
-    ps = s.supply_pressure_pa
-    pr = s.return_pressure_pa
-    g = s.flow_coef
-    lam = s.laminar_dp_pa
-    if u >= 0.0:
-        # Q = Qr u √(Δp_land/(Δp_r/2)): supply → chamber 1, chamber 2 → return
-        q1 = g * u * signed_sqrt(ps - p1, lam)
-        q2 = g * u * signed_sqrt(p2 - pr, lam)
-    else:
-        # mirrored: chamber 1 → return, supply → chamber 2 (u < 0 makes both negative)
-        q1 = g * u * signed_sqrt(p1 - pr, lam)
-        q2 = g * u * signed_sqrt(ps - p2, lam)
-    kc = s.null_leakage_m3_s_pa
-    # laminar null leakage of both lands of each chamber: QL = −Kc PL at null, eq (2)
-    q1 += kc * (ps - p1) - kc * (p1 - pr)
-    q2 -= kc * (ps - p2) - kc * (p2 - pr)
-    return q1, q2
-
-
-@njit(cache=True)
 def friction_force(v, s):
     """Coulomb + Stribeck seal friction with a smooth sign (0 when both levels are 0).
 
@@ -169,32 +126,6 @@ def friction_force(v, s):
         return 0.0
     r = v / s.stribeck_velocity_m_s
     return np.tanh(v / s.friction_sign_velocity_m_s) * (fc + fs * np.exp(-r * r))
-
-
-@njit(cache=True)
-def end_stop_force(y, v, s):
-    """Force of the end stops, N: a spring-damper beyond ±half stroke, 0 inside."""
-    stroke = s.half_stroke_m
-    if y > stroke:
-        return s.stop_stiffness_n_m * (y - stroke) + s.stop_damping_n_s_m * v
-    if y < -stroke:
-        return s.stop_stiffness_n_m * (y + stroke) + s.stop_damping_n_s_m * v
-    return 0.0
-
-
-@njit(cache=True)
-def joint_force(gap, dv, s):
-    """Force of the rod on the table through the clearance, N.
-
-    A stiff spring-damper outside the dead zone ±clearance/2 of the gap y − yt
-    (``dv`` = v − vt), 0 inside it.
-    """
-    half = 0.5 * s.clearance_m
-    if gap > half:
-        return s.joint_stiffness_n_m * (gap - half) + s.joint_damping_n_s_m * dv
-    if gap < -half:
-        return s.joint_stiffness_n_m * (gap + half) + s.joint_damping_n_s_m * dv
-    return 0.0
 
 
 @njit(cache=True)
@@ -212,11 +143,39 @@ def plant_derivative(x, ucmd, s):
         # ü = ωv² (u_cmd − u) − 2 ζv ωv u̇
         d_spool = x.spool_rate_1_s
         d_spool_rate = wv * wv * (ucmd - x.spool) - 2.0 * s.valve_damping * wv * x.spool_rate_1_s
+    # effective opening u_e: the spool within its stops, less the overlap
+    u = x.spool
+    if s.spool_saturates:
+        u = min(1.0, max(-1.0, u))
+    # overlap: no opening inside ±deadband, opening shifted by the deadband outside it
+    db = s.spool_overlap
+    if db > 0.0:
+        if u > db:
+            u -= db
+        elif u < -db:
+            u += db
+        else:
+            u = 0.0
 
     # ---------------------------------------------------------------- orifice flows, §5
     p1 = x.p1_pa
     p2 = x.p2_pa
-    q1, q2 = orifice_flows(spool_opening(x.spool, s), p1, p2, s)
+    ps = s.supply_pressure_pa
+    pr = s.return_pressure_pa
+    g = s.flow_coef
+    lam = s.laminar_dp_pa
+    if u >= 0.0:
+        # Q = Qr u √(Δp_land/(Δp_r/2)): supply → chamber 1, chamber 2 → return
+        q1 = g * u * signed_sqrt(ps - p1, lam)
+        q2 = g * u * signed_sqrt(p2 - pr, lam)
+    else:
+        # mirrored: chamber 1 → return, supply → chamber 2 (u < 0 makes both negative)
+        q1 = g * u * signed_sqrt(p1 - pr, lam)
+        q2 = g * u * signed_sqrt(ps - p2, lam)
+    kc = s.null_leakage_m3_s_pa
+    # laminar null leakage of both lands of each chamber: QL = −Kc PL at null, eq (2)
+    q1 += kc * (ps - p1) - kc * (p1 - pr)
+    q2 -= kc * (ps - p2) - kc * (p2 - pr)
 
     # ---------------------------------------------------------------- mechanics, eq (6)
     ap = s.piston_area_m2
@@ -224,7 +183,13 @@ def plant_derivative(x, ucmd, s):
     v = x.piston_velocity_m_s
     pl = p1 - p2
     ff = friction_force(v, s)
-    fstop = end_stop_force(y, v, s)
+    # end stops: a stiff spring-damper beyond ±half stroke
+    stroke = s.half_stroke_m
+    fstop = 0.0
+    if y > stroke:
+        fstop = s.stop_stiffness_n_m * (y - stroke) + s.stop_damping_n_s_m * v
+    elif y < -stroke:
+        fstop = s.stop_stiffness_n_m * (y + stroke) + s.stop_damping_n_s_m * v
     if s.clearance_m == 0.0:
         # mt ÿ = Ap PL − Bp ẏ − K y − Ff − Fstop ; the table moves with the rod
         a = (ap * pl - s.damping_n_s_m * v - s.stiffness_n_m * y - ff - fstop) / s.rod_mass_kg
@@ -233,7 +198,14 @@ def plant_derivative(x, ucmd, s):
     else:
         yt = x.displacement_m
         vt = x.velocity_m_s
-        fj = joint_force(y - yt, v - vt, s)
+        gap = y - yt
+        half = 0.5 * s.clearance_m
+        # joint force: stiff spring-damper outside the dead zone ±clearance/2
+        fj = 0.0
+        if gap > half:
+            fj = s.joint_stiffness_n_m * (gap - half) + s.joint_damping_n_s_m * (v - vt)
+        elif gap < -half:
+            fj = s.joint_stiffness_n_m * (gap + half) + s.joint_damping_n_s_m * (v - vt)
         # m_rod ÿ = Ap PL − Ff − Fstop − Fj ; m_table ÿt = Fj − Bp ẏt − K yt
         a = (ap * pl - ff - fstop - fj) / s.rod_mass_kg
         d_table_pos = vt
@@ -265,7 +237,9 @@ def plant_derivative(x, ucmd, s):
     )
 
 
-@njit(cache=True)
+# inline="always": folded into rk4_step by numba itself, which compiles faster than
+# separate functions that LLVM then inlines
+@njit(cache=True, inline="always")
 def _add_scaled(x, c, k):
     """x + c k, field by field (c a scalar, k a derivative)."""
     return PlantState(
@@ -281,7 +255,7 @@ def _add_scaled(x, c, k):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _weighted_slope(k1, k2, k3, k4):
     """k1 + 2 k2 + 2 k3 + k4, field by field."""
     return PlantState(

@@ -26,14 +26,10 @@ from ehss.plant._kernels import (
     PlantState,
     adc,
     clamp_state,
-    end_stop_force,
     friction_force,
-    joint_force,
-    orifice_flows,
     plant_derivative,
     rk4_step,
     signed_sqrt,
-    spool_opening,
     with_spool,
 )
 
@@ -42,13 +38,9 @@ __all__ = [
     "PlantState",
     "adc",
     "clamp_state",
-    "end_stop_force",
     "friction_force",
-    "joint_force",
-    "orifice_flows",
     "plant_derivative",
     "rk4_step",
     "signed_sqrt",
-    "spool_opening",
     "with_spool",
 ]

@@ -65,7 +65,11 @@ class SensorSettings(NamedTuple):
 
 
 class LoopSettings(NamedTuple):
-    """Everything the loop kernel needs besides the signals."""
+    """Everything the loop kernel needs besides the signals.
+
+    A PID starts with ``drive0_v`` in its integral, so that its first output holds the
+    drive already in the delay line (bumpless start, e.g. on a static force).
+    """
 
     loop: int  # POSITION, ACCELERATION, FORCE or OPEN
     plant: PlantSettings
@@ -75,8 +79,7 @@ class LoopSettings(NamedTuple):
     substeps: int  # RK4 steps per control period
     step_s: float  # h, length of one RK4 step
     delay_samples: int  # control periods between the controller and the valve
-    drive0_v: float  # drive held in the delay line before the first output; a PID starts
-    # with it in its integral (bumpless start)
+    drive0_v: float  # drive in the delay line before the first output, and a PID's integral
 
 
 class SensorNoise(NamedTuple):
@@ -111,71 +114,6 @@ class LoopRecord(NamedTuple):
 
 
 @njit(cache=True)
-def _true_signals(x, p):
-    """Table acceleration, rod force and the AC-coupled acceleration at the state ``x``."""
-    a_table = plant_derivative(x, 0.0, p).velocity_m_s
-    # load cell: rod force Ap PL − Ff
-    f_true = p.piston_area_m2 * (x.p1_pa - x.p2_pa) - friction_force(x.piston_velocity_m_s, p)
-    # accelerometer AC coupling: a_hp = a − ωa z
-    a_hp = a_table - p.accel_highpass_rad_s * x.accel_highpass_state_m_s
-    return a_table, f_true, a_hp
-
-
-@njit(cache=True)
-def _controller(r, ym, am, fm, pid, tvc, s):
-    """Controller output (unclipped), the aux signal and the controllers' next states."""
-    if s.loop == POSITION:
-        u, pid = pid_step(r - ym, ym, pid, s.pid)
-        return u, r, pid, tvc
-    if s.loop == FORCE:
-        u, pid = pid_step(r - fm, fm, pid, s.pid)
-        return u, r, pid, tvc
-    if s.loop == ACCELERATION:
-        u, ad, tvc = tvc_step(r, ym, am, tvc, s.tvc)
-        return u, ad, pid, tvc
-    return r, r, pid, tvc
-
-
-@njit(cache=True)
-def _drive(u, s):
-    """The drive after the output limit and the DAC, and 1.0 if the limit clipped it."""
-    if s.loop == OPEN:
-        return u, 0.0
-    limit = s.tvc.output_limit_v if s.loop == ACCELERATION else s.pid.output_limit_v
-    sat = 0.0
-    if u > limit:
-        u = limit
-        sat = 1.0
-    elif u < -limit:
-        u = -limit
-        sat = 1.0
-    # DAC over ±10 V
-    return adc(u, 10.0, s.sensors.dac_lsb_v), sat
-
-
-@njit(cache=True)
-def _flag(condition):
-    return 1.0 if condition else 0.0
-
-
-@njit(cache=True)
-def _record_state(rec, k, x, p):
-    """Write the plant's state and its limit flags at t_k into ``rec``."""
-    rec.spool[k] = x.spool
-    rec.p1_pa[k] = x.p1_pa
-    rec.p2_pa[k] = x.p2_pa
-    rec.displacement_m[k] = x.displacement_m
-    rec.velocity_m_s[k] = x.velocity_m_s
-    rec.piston_displacement_m[k] = x.piston_displacement_m
-    rec.spool_saturated[k] = _flag(p.spool_saturates and abs(x.spool) >= 1.0)
-    rec.stroke_end[k] = _flag(abs(x.piston_displacement_m) > p.half_stroke_m)
-    p1 = x.p1_pa
-    p2 = x.p2_pa
-    ps = p.supply_pressure_pa
-    rec.pressure_limit[k] = _flag(p1 <= 0.0 or p2 <= 0.0 or p1 >= ps or p2 >= ps)
-
-
-@njit(cache=True)
 def closed_loop(ref, noise, x0, s, rec):
     """Simulate ``ref.shape[0]`` control periods; fills ``rec``, returns the final state.
 
@@ -193,14 +131,23 @@ def closed_loop(ref, noise, x0, s, rec):
     """
     p = s.plant
     sen = s.sensors
+    ap = p.piston_area_m2
+    ps = p.supply_pressure_pa
+    limit = s.tvc.output_limit_v if s.loop == ACCELERATION else s.pid.output_limit_v
     x = x0
     nbuf = s.delay_samples + 1
     buf = np.full(nbuf, s.drive0_v)
     pid = PidState(s.drive0_v, 0.0, 0.0)
     tvc = TvcState(0.0, 0.0, 0.0, 0.0, 0.0)
     for k in range(ref.shape[0]):
-        # ------------------------------------------------------------ sensors at t_k
-        a_table, f_true, a_hp = _true_signals(x, p)
+        # ------------------------------------------------------------ true signals at t_k
+        a_table = plant_derivative(x, 0.0, p).velocity_m_s
+        # load cell: rod force Ap PL − Ff
+        f_true = ap * (x.p1_pa - x.p2_pa) - friction_force(x.piston_velocity_m_s, p)
+        # accelerometer AC coupling: a_hp = a − ωa z
+        a_hp = a_table - p.accel_highpass_rad_s * x.accel_highpass_state_m_s
+
+        # ------------------------------------------------------------ sensors
         ym = adc(x.piston_displacement_m + noise.lvdt_m[k], sen.lvdt_range_m, sen.lvdt_lsb_m)
         am = adc(a_hp + noise.accel_m_s2[k], sen.accel_range_m_s2, sen.accel_lsb_m_s2)
         fm = adc(f_true + noise.force_n[k], sen.force_range_n, sen.force_lsb_n)
@@ -211,8 +158,27 @@ def closed_loop(ref, noise, x0, s, rec):
             tvc = TvcState(rd_m=0.0, vd_m_s=0.0, v_hat_m_s=0.0, y_prev_m=ym, a_prev_m_s2=am)
 
         # ------------------------------------------------------------ controller
-        u, aux, pid, tvc = _controller(ref[k], ym, am, fm, pid, tvc, s)
-        u, sat = _drive(u, s)
+        r = ref[k]
+        aux = r
+        if s.loop == POSITION:
+            u, pid = pid_step(r - ym, ym, pid, s.pid)
+        elif s.loop == FORCE:
+            u, pid = pid_step(r - fm, fm, pid, s.pid)
+        elif s.loop == ACCELERATION:
+            # aux: the generated acceleration a_d, eq (10)
+            u, aux, tvc = tvc_step(r, ym, am, tvc, s.tvc)
+        else:
+            u = r
+        sat = 0.0
+        if s.loop != OPEN:
+            if u > limit:
+                u = limit
+                sat = 1.0
+            elif u < -limit:
+                u = -limit
+                sat = 1.0
+            # DAC over ±10 V
+            u = adc(u, 10.0, sen.dac_lsb_v)
 
         # ------------------------------------------------------------ delay line + ZOH
         buf[k % nbuf] = u
@@ -227,14 +193,24 @@ def closed_loop(ref, noise, x0, s, rec):
         # ------------------------------------------------------------ record t_k
         rec.drive_v[k] = u
         rec.valve_command_v[k] = applied
+        rec.spool[k] = x.spool
+        rec.p1_pa[k] = x.p1_pa
+        rec.p2_pa[k] = x.p2_pa
+        rec.displacement_m[k] = x.displacement_m
+        rec.velocity_m_s[k] = x.velocity_m_s
         rec.acceleration_m_s2[k] = a_table
         rec.force_n[k] = f_true
+        rec.piston_displacement_m[k] = x.piston_displacement_m
         rec.lvdt_m[k] = ym
         rec.accel_m_s2[k] = am
         rec.force_cell_n[k] = fm
         rec.aux[k] = aux
         rec.drive_saturated[k] = sat
-        _record_state(rec, k, x, p)
+        rec.spool_saturated[k] = 1.0 if (p.spool_saturates and abs(x.spool) >= 1.0) else 0.0
+        rec.stroke_end[k] = 1.0 if abs(x.piston_displacement_m) > p.half_stroke_m else 0.0
+        p1 = x.p1_pa
+        p2 = x.p2_pa
+        rec.pressure_limit[k] = 1.0 if (p1 <= 0.0 or p2 <= 0.0 or p1 >= ps or p2 >= ps) else 0.0
 
         # ------------------------------------------------------------ plant over one period
         for _ in range(s.substeps):
