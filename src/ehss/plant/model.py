@@ -135,7 +135,7 @@ def rest_state(params: RigParams) -> PlantState:
     a = params.actuator
     pc = 0.5 * (a.supply_pressure_pa + a.return_pressure_pa)
     return PlantState(
-        spool=params.valve.null_bias,
+        spool=float(params.valve.null_bias),
         spool_rate_1_s=0.0,
         piston_displacement_m=0.0,
         piston_velocity_m_s=0.0,
