@@ -47,16 +47,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
 
 # Known exceptions, each to be removed when the import it names is gone. Entries are
 # (importing module, imported module or name).
-ALLOWED_PRIVATE: frozenset[tuple[str, str]] = frozenset(
-    {
-        # The loop kernels inline the plant's and controllers' kernels, and the loop
-        # simulator packs their settings.
-        ("ehss.simulation._kernels", "ehss.control._kernels"),
-        ("ehss.simulation._kernels", "ehss.plant._kernels"),
-        ("ehss.simulation.core", "ehss.control._kernels"),
-        ("ehss.simulation.core", "ehss.plant._kernels"),
-    }
-)
+ALLOWED_PRIVATE: frozenset[tuple[str, str]] = frozenset()
 ALLOWED_UPWARD: frozenset[tuple[str, str]] = frozenset()
 
 

@@ -1,7 +1,7 @@
 """Slow, obvious references of the plant and controller kernels (plain Python, no numba).
 
 Written from the equations (PAPER.md §2, §5, §7) and the RigParams fields directly, not
-from the kernels' parameter vector, so that a packing mistake shows up too.
+from the kernels' settings, so that a packing mistake shows up too.
 """
 
 from __future__ import annotations

@@ -9,8 +9,8 @@ import pytest
 from numpy.testing import assert_allclose
 
 from ehss.params import preset
-from ehss.plant import _kernels as K
-from ehss.plant.model import plant_parameter_vector, rest_state
+from ehss.plant import kernels as K
+from ehss.plant.model import STATE_NAMES, plant_settings, rest_state
 
 from . import naive
 
@@ -22,19 +22,21 @@ def _params(**load):
     return dataclasses.replace(p, load=dataclasses.replace(p.load, **load))
 
 
-def _random_state(rng, p):
+def _random_state(rng, p, *, rigid):
     ps = p.actuator.supply_pressure_pa
-    x = rest_state(p)
-    x[K.X_SPOOL] = rng.uniform(-0.8, 0.8)
-    x[K.X_SPOOL_RATE] = rng.uniform(-50, 50)
-    x[K.X_POS] = rng.uniform(-0.05, 0.05)
-    x[K.X_VEL] = rng.uniform(-0.2, 0.2)
-    x[K.X_P1] = rng.uniform(0.1, 0.9) * ps
-    x[K.X_P2] = rng.uniform(0.1, 0.9) * ps
-    x[K.X_TABLE_POS] = x[K.X_POS] + rng.uniform(-3e-5, 3e-5)
-    x[K.X_TABLE_VEL] = x[K.X_VEL] + rng.uniform(-1e-3, 1e-3)
-    x[K.X_HP] = rng.uniform(-0.1, 0.1)
-    return x
+    y = rng.uniform(-0.05, 0.05)
+    v = rng.uniform(-0.2, 0.2)
+    return K.PlantState(
+        spool=rng.uniform(-0.8, 0.8),
+        spool_rate_1_s=rng.uniform(-50, 50),
+        piston_displacement_m=y,
+        piston_velocity_m_s=v,
+        p1_pa=rng.uniform(0.1, 0.9) * ps,
+        p2_pa=rng.uniform(0.1, 0.9) * ps,
+        displacement_m=y if rigid else y + rng.uniform(-3e-5, 3e-5),
+        velocity_m_s=v if rigid else v + rng.uniform(-1e-3, 1e-3),
+        accel_highpass_state_m_s=rng.uniform(-0.1, 0.1),
+    )
 
 
 CASES = {
@@ -49,22 +51,16 @@ CASES = {
 def test_derivative_and_rk4_match_reference(rng, case):
     p = _params(**CASES[case])
     k = p.load.stiffness_n_m
-    prm = plant_parameter_vector(p, stiffness_n_m=k, internal_dt_s=H)
-    work = np.empty((5, K.N_STATE))
-    dx = np.empty(K.N_STATE)
+    s = plant_settings(p, stiffness_n_m=k, internal_dt_s=H)
     for _ in range(20):
-        x = _random_state(rng, p)
-        if case in ("linear", "stiff"):
-            x[K.X_TABLE_POS], x[K.X_TABLE_VEL] = x[K.X_POS], x[K.X_VEL]
+        x = _random_state(rng, p, rigid=case in ("linear", "stiff"))
         ucmd = rng.uniform(-1.2, 1.2)
-        K.plant_derivative(x, ucmd, prm, dx)
-        ref = naive.derivative(x, ucmd, p, k_n_m=k, h=H)
+        dx = np.array(K.plant_derivative(x, ucmd, s))
+        ref = naive.derivative(np.array(x), ucmd, p, k_n_m=k, h=H)
         # same operations in a different order: agreement to a few ulps of the largest term
         assert_allclose(dx, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
-        xk = x.copy()
-        K.rk4_step(xk, ucmd, prm, H, work)
-        K.clamp_state(xk, prm)
-        xr = naive.rk4(x, ucmd, p, k_n_m=k, h=H)
+        xk = np.array(K.clamp_state(K.rk4_step(x, ucmd, s, H), s))
+        xr = naive.rk4(np.array(x), ucmd, p, k_n_m=k, h=H)
         assert_allclose(xk, xr, rtol=1e-12, atol=1e-9)  # atol: pressures ~1e7 Pa × 1e-16
 
 
@@ -78,12 +74,28 @@ def test_signed_sqrt_is_a_signed_root_with_a_smooth_core():
 
 def test_clamps():
     p = preset("default")
-    prm = plant_parameter_vector(p, stiffness_n_m=0.0, internal_dt_s=H)
-    x = rest_state(p)
-    x[K.X_P1], x[K.X_P2], x[K.X_SPOOL], x[K.X_SPOOL_RATE] = -5.0, 3e7, 1.2, 4.0
-    K.clamp_state(x, prm)
-    assert (x[K.X_P1], x[K.X_P2]) == (0.0, p.actuator.supply_pressure_pa)
-    assert (x[K.X_SPOOL], x[K.X_SPOOL_RATE]) == (1.0, 0.0)
+    s = plant_settings(p, stiffness_n_m=0.0, internal_dt_s=H)
+    x = rest_state(p)._replace(p1_pa=-5.0, p2_pa=3e7, spool=1.2, spool_rate_1_s=4.0)
+    x = K.clamp_state(x, s)
+    assert (x.p1_pa, x.p2_pa) == (0.0, p.actuator.supply_pressure_pa)
+    assert (x.spool, x.spool_rate_1_s) == (1.0, 0.0)
+    # pushing back inward from the stop keeps its rate
+    x = K.clamp_state(x._replace(spool=-1.5, spool_rate_1_s=3.0), s)
+    assert (x.spool, x.spool_rate_1_s) == (-1.0, 3.0)
+
+
+def test_state_names_are_the_kernel_state():
+    # the names accepted by simulate(initial_state=...) are the kernel's fields, in order
+    assert STATE_NAMES == K.PlantState._fields
+    assert rest_state(preset("default"))._fields == STATE_NAMES
+
+
+def test_settings_are_floats_whatever_the_parameter_types():
+    # integer-valued parameters must not give the kernels a second compiled signature
+    p = _params(stiffness_n_m=0, clearance_m=0)
+    s = plant_settings(p, stiffness_n_m=0, internal_dt_s=H)
+    assert all(type(v) is (bool if f in ("spool_saturates", "spool_prescribed") else float)
+               for f, v in zip(s._fields, s, strict=True))
 
 
 def test_adc_quantises_and_clips():

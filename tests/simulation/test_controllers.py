@@ -9,7 +9,7 @@ import pytest
 import scipy.signal
 from numpy.testing import assert_allclose
 
-from ehss.control import _kernels as CK
+from ehss.control import kernels as CK
 from ehss.control.discrete import (
     complementary_velocity_tustin,
     generator_zoh,
@@ -49,15 +49,14 @@ def test_pid_step_against_plain_loop(rng):
     pid = PositionPidParams(kp_v_per_m=900.0, ki_v_per_m_per_s=2500.0, kd_v_s_per_m=3.0,
                             derivative_filter_hz=150.0, output_limit_v=2.0)
     c = pid_coefficients(pid, DT)
-    st = np.zeros(CK.N_PID_STATE)
     y = np.cumsum(rng.normal(0, 1e-4, 400))
     r = np.full(400, 0.003)
-    st[2] = y[0]
+    st = CK.PidState(integral_v=0.0, derivative_v=0.0, measurement_prev=y[0])
     tau = 1 / (2 * math.pi * pid.derivative_filter_hz)
     integ = deriv = 0.0
     for k in range(400):
         e = r[k] - y[k]
-        u = CK.pid_step(e, y[k], st, c)
+        u, st = CK.pid_step(e, y[k], st, c)
         deriv = tau / (tau + DT) * deriv - pid.kd_v_s_per_m / (tau + DT) * (
             y[k] - (y[k - 1] if k else y[0]))
         ref = pid.kp_v_per_m * e + integ + deriv
@@ -71,9 +70,11 @@ def test_tvc_generator_in_the_step():
                     kdf_v_per_m=1.0, kvf_v_per_m_s=0.0, kaf_v_per_m_s2=0.0, kdr=1.0,
                     kvr_s=0.0, kar_s2=0.0)
     c = tvc_coefficients(tvc, DT)
-    st = np.zeros(CK.N_TVC_STATE)
+    st = CK.TvcState(0.0, 0.0, 0.0, 0.0, 0.0)
     # ym = am = 0: u = Kdf Kdr r_d, the ZOH step response of GAR, settling to Kg/δg
-    out = np.array([CK.tvc_step(1.0, 0.0, 0.0, st, c) for _ in range(20000)])
+    out = np.empty(20000)
+    for k in range(out.size):
+        out[k], _, st = CK.tvc_step(1.0, 0.0, 0.0, st, c)
     sys = scipy.signal.StateSpace([[0, 1], [-3.14**2, -2 * 0.7 * 3.14]], [[0], [1.0]],
                                   [[1, 0]], [[0]])
     _, y_ref = scipy.signal.step(sys, T=np.arange(20000) * DT)

@@ -201,24 +201,37 @@ def test_initial_state():
     assert r.output[0] == 0.01
 
 
+def test_acceleration_loop_starts_with_the_velocity_estimate_at_rest():
+    """Table at rest 1 mm off centre, zero reference, no noise: the first drive of the
+    TVC (eq (12)) is Kdf (0 − y) − Kvf v̂ − Kaf a with a = 0 and the velocity estimate
+    v̂[0] = p v̂[−1] + b_y (y − y) + b_a (a + a) = 0 (the estimate starts from rest)."""
+    p = preset("default")
+    quiet = dataclasses.replace(p, sensors=dataclasses.replace(
+        p.sensors, lvdt_noise_m=0.0, accel_noise_m_s2=0.0, quantize=False))
+    r = simulate("acceleration", np.zeros(3), params=quiet,
+                 initial_state={"displacement_m": 0.001}, seed=0)
+    assert r.signals["accel_m_s2"][0] == 0.0
+    # one product: exact; a velocity estimate started at v̂[−1] = y (a length read as a
+    # speed) would add −Kvf p y ≈ −8.6 mV
+    assert r.signals["drive_v"][0] == -p.acceleration.kdf_v_per_m * 0.001
+
+
 # ----------------------------------------------------------------------------- kernel
 def test_kernel_matches_its_python_source():
     """The compiled loop against its own source run by the interpreter (``py_func``)."""
-    r = simulate("acceleration", 0.5 * np.sin(np.arange(60) / 5.0), seed=9)
-    p = r.params
-    from ehss.control.discrete import tvc_coefficients
-    from ehss.plant.model import plant_parameter_vector, rest_state
-    from ehss.simulation.core import _sensor_vector
+    from ehss.simulation.core import _kernel_inputs
 
-    prm = plant_parameter_vector(p, stiffness_n_m=p.load.stiffness_n_m, internal_dt_s=1e-4)
-    args = (SK.LOOP_ACCELERATION, np.ascontiguousarray(r.reference), prm, _sensor_vector(p),
-            tvc_coefficients(p.acceleration, 1e-3), rest_state(p), np.zeros(5), 0.0,
-            np.random.default_rng(0).standard_normal((3, 60)) * 1e-3, 10, 1e-4, 1)
-    out_fast = np.empty((SK.N_ROWS, 60))
-    out_slow = np.empty((SK.N_ROWS, 60))
-    SK.closed_loop(*args, out_fast)
-    SK.closed_loop.py_func(*args, out_slow)
-    assert_allclose(out_fast, out_slow, rtol=1e-12, atol=0)
+    p = preset("default")
+    ref = np.ascontiguousarray(0.5 * np.sin(np.arange(60) / 5.0))
+    x0, noise, settings = _kernel_inputs("acceleration", ref, p, seed=9, initial_state=None,
+                                         spool_direct=False, stiffness_n_m=0.0)
+    n_rows = len(SK.LoopRecord._fields)
+    fast = SK.LoopRecord._make(np.empty((n_rows, 60)))
+    slow = SK.LoopRecord._make(np.empty((n_rows, 60)))
+    x_fast = SK.closed_loop(ref, noise, x0, settings, fast)
+    x_slow = SK.closed_loop.py_func(ref, noise, x0, settings, slow)
+    assert_allclose(np.array(fast), np.array(slow), rtol=1e-12, atol=0)
+    assert_allclose(np.array(x_fast), np.array(x_slow), rtol=1e-12, atol=0)
 
 
 def test_one_position_loop_against_slow_reference():

@@ -1,95 +1,149 @@
 """Numba kernels of the digital controllers of the three loops (one step each).
 
-The coefficient vectors are built by :mod:`ehss.control.discrete`; the layouts are the
-``PID_*`` and ``TVC_*`` indices below. Controller states live in small float64 arrays
-owned by the caller, so a step allocates nothing.
+The settings are NamedTuples of discrete coefficients built by
+:mod:`ehss.control.discrete` (:class:`PidSettings`, :class:`TvcSettings`); a
+controller's memory is a NamedTuple too (:class:`PidState`, :class:`TvcState`). A step
+takes the state and returns the output with the next state, so it allocates nothing and
+a reader sees every variable by name. :mod:`ehss.control.kernels` is the public face of
+this module.
 
-PID state ``st``: ``[I, D, y_prev]``; TVC state ``st``: ``[r_d, v_d, v̂, y_prev, a_prev]``.
+Symbol table
+------------
+==========  ================================  ===========================================
+symbol      code                              meaning
+==========  ================================  ===========================================
+e, y_m      e, ym                             error and measured (fed-back) variable
+I, D        integral_v, derivative_v          PID integral and filtered derivative terms
+τ           (in derivative_pole, _gain)       derivative filter time constant
+r_d, v_d    rd_m, vd_m_s                      generated displacement and velocity, eq (10)
+a_d         ad                                generated acceleration, eq (10)
+v̂           v_hat_m_s                         synthesised velocity (Fig. 6)
+Φ, Γ        phi_*, gamma_*                    ZOH discretisation of the generator
+==========  ================================  ===========================================
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from numba import njit
 
-__all__ = ["pid_step", "tvc_step", "N_PID", "N_TVC", "N_PID_STATE", "N_TVC_STATE"]
+__all__ = [
+    "PidSettings",
+    "PidState",
+    "TvcSettings",
+    "TvcState",
+    "pid_step",
+    "tvc_step",
+]
 
-# ----------------------------------------------------------------- PID coefficients
-PID_KP = 0  # kp
-PID_KI_DT = 1  # ki·dt
-PID_D_POLE = 2  # τ/(τ + dt)
-PID_D_GAIN = 3  # kd/(τ + dt)
-PID_LIMIT = 4  # output limit, V
-N_PID = 5
-N_PID_STATE = 3
 
-# ----------------------------------------------------------------- TVC coefficients
-TVC_PHI00 = 0  # generator ZOH transition matrix Φ (2×2, row major)
-TVC_PHI01 = 1
-TVC_PHI10 = 2
-TVC_PHI11 = 3
-TVC_GAM0 = 4  # generator ZOH input vector Γ
-TVC_GAM1 = 5
-TVC_KG = 6  # Kg
-TVC_WG = 7  # ωg = 2 ζn ωn
-TVC_DG = 8  # δg = ωn²
-TVC_KDF = 9
-TVC_KVF = 10
-TVC_KAF = 11
-TVC_KDR = 12
-TVC_KVR = 13
-TVC_KAR = 14
-TVC_VF_POLE = 15  # (c − ωc)/(c + ωc), c = 2/dt   (Tustin)
-TVC_VF_Y = 16  # ωc c/(c + ωc)
-TVC_VF_A = 17  # 1/(c + ωc)
-TVC_LIMIT = 18
-N_TVC = 19
-N_TVC_STATE = 5
+class PidSettings(NamedTuple):
+    """Discrete coefficients of a PID (eq (9) position, eq (15) force)."""
+
+    kp: float  # proportional gain, V per m or V per N
+    ki_dt: float  # ki·dt, integral gain times the control period
+    derivative_pole: float  # τ/(τ + dt), backward-Euler pole of the derivative filter
+    derivative_gain: float  # kd/(τ + dt)
+    output_limit_v: float  # drive clipped to ±output_limit_v
+
+
+class PidState(NamedTuple):
+    """Memory of a PID between two control periods."""
+
+    integral_v: float  # I
+    derivative_v: float  # D
+    measurement_prev: float  # y_m[k−1]
+
+
+class TvcSettings(NamedTuple):
+    """Discrete coefficients of the three-variable controller (eqs (10)–(12), Fig. 6)."""
+
+    # generator, eq (10): [r_d, v_d][k+1] = Φ [r_d, v_d][k] + Γ a_r[k]  (exact ZOH)
+    phi_rr: float  # Φ[0, 0]
+    phi_rv: float  # Φ[0, 1], s
+    phi_vr: float  # Φ[1, 0], 1/s
+    phi_vv: float  # Φ[1, 1]
+    gamma_r: float  # Γ[0], s²
+    gamma_v: float  # Γ[1], s
+    # a_d = Kg a_r − ωg v_d − δg r_d
+    kg: float  # Kg
+    omega_g_rad_s: float  # ωg = 2 ζn ωn
+    delta_g_rad2_s2: float  # δg = ωn²
+    # feedback (f) and feed-forward (r) gains, eqs (11)–(12)
+    kdf_v_per_m: float
+    kvf_v_per_m_s: float
+    kaf_v_per_m_s2: float
+    kdr: float
+    kvr_s: float
+    kar_s2: float
+    # complementary velocity filter v̂ = (ωc s y + a)/(s + ωc), Tustin with c = 2/dt
+    vf_pole: float  # (c − ωc)/(c + ωc)
+    vf_gain_y_1_s: float  # ωc c/(c + ωc)
+    vf_gain_a_s: float  # 1/(c + ωc)
+    output_limit_v: float  # drive clipped to ±output_limit_v
+
+
+class TvcState(NamedTuple):
+    """Memory of the three-variable controller between two control periods."""
+
+    rd_m: float  # r_d[k], generated displacement
+    vd_m_s: float  # v_d[k], generated velocity
+    v_hat_m_s: float  # v̂[k−1]
+    y_prev_m: float  # y[k−1], LVDT
+    a_prev_m_s2: float  # a[k−1], accelerometer
 
 
 @njit(cache=True)
 def pid_step(e, ym, st, c):
-    """One PID step; returns the unsaturated output and updates ``st`` = [I, D, y_prev].
+    """One PID step; returns the unsaturated output and the next :class:`PidState`.
 
     u = kp e + I + D, derivative on measurement with a first-order filter (backward Euler),
     conditional integration as anti-windup.
     """
     # D[k] = τ/(τ+dt) D[k−1] − kd/(τ+dt) (y_m[k] − y_m[k−1])
-    d = c[PID_D_POLE] * st[1] - c[PID_D_GAIN] * (ym - st[2])
+    d = c.derivative_pole * st.derivative_v - c.derivative_gain * (ym - st.measurement_prev)
     # u = kp e + I + D   (I from the previous periods)
-    u = c[PID_KP] * e + st[0] + d
+    u = c.kp * e + st.integral_v + d
     # I += ki e dt, skipped while saturated and e pushes further into saturation
-    lim = c[PID_LIMIT]
+    lim = c.output_limit_v
+    integral = st.integral_v
     if not ((u > lim and e > 0.0) or (u < -lim and e < 0.0)):
-        st[0] += c[PID_KI_DT] * e
-    st[1] = d
-    st[2] = ym
-    return u
+        integral += c.ki_dt * e
+    return u, PidState(integral_v=integral, derivative_v=d, measurement_prev=ym)
 
 
 @njit(cache=True)
 def tvc_step(ar, ym, am, st, c):
-    """One three-variable-controller step (eqs (10)–(12), Fig. 6); returns the output.
+    """One three-variable-controller step (eqs (10)–(12), Fig. 6).
 
-    ``ar`` acceleration reference, ``ym`` LVDT, ``am`` accelerometer;
-    ``st`` = [r_d, v_d, v̂, y_prev, a_prev].
+    ``ar`` acceleration reference, ``ym`` LVDT, ``am`` accelerometer. Returns the
+    unsaturated output, the generated acceleration a_d of this period and the next
+    :class:`TvcState`.
     """
-    rd = st[0]
-    vd = st[1]
+    rd = st.rd_m
+    vd = st.vd_m_s
     # a_d = Kg a_r − ωg v_d − δg r_d            (generator, eq (10))
-    ad = c[TVC_KG] * ar - c[TVC_WG] * vd - c[TVC_DG] * rd
+    ad = c.kg * ar - c.omega_g_rad_s * vd - c.delta_g_rad2_s2 * rd
     # v̂ = (ωc s y + a)/(s + ωc), Tustin:
     # v̂[k] = p v̂[k−1] + ωc c/(c+ωc) (y[k] − y[k−1]) + (a[k] + a[k−1])/(c+ωc)
-    vh = c[TVC_VF_POLE] * st[2] + c[TVC_VF_Y] * (ym - st[3]) + c[TVC_VF_A] * (am + st[4])
+    vh = (
+        c.vf_pole * st.v_hat_m_s
+        + c.vf_gain_y_1_s * (ym - st.y_prev_m)
+        + c.vf_gain_a_s * (am + st.a_prev_m_s2)
+    )
     # u = Kdf (Kdr r_d + Kvr v_d + Kar a_d − y) − Kvf v̂ − Kaf a   (eq (12) feed-forward)
     u = (
-        c[TVC_KDF] * (c[TVC_KDR] * rd + c[TVC_KVR] * vd + c[TVC_KAR] * ad - ym)
-        - c[TVC_KVF] * vh
-        - c[TVC_KAF] * am
+        c.kdf_v_per_m * (c.kdr * rd + c.kvr_s * vd + c.kar_s2 * ad - ym)
+        - c.kvf_v_per_m_s * vh
+        - c.kaf_v_per_m_s2 * am
     )
     # [r_d, v_d][k+1] = Φ [r_d, v_d][k] + Γ a_r[k]   (exact ZOH discretisation)
-    st[0] = c[TVC_PHI00] * rd + c[TVC_PHI01] * vd + c[TVC_GAM0] * ar
-    st[1] = c[TVC_PHI10] * rd + c[TVC_PHI11] * vd + c[TVC_GAM1] * ar
-    st[2] = vh
-    st[3] = ym
-    st[4] = am
-    return u
+    nxt = TvcState(
+        rd_m=c.phi_rr * rd + c.phi_rv * vd + c.gamma_r * ar,
+        vd_m_s=c.phi_vr * rd + c.phi_vv * vd + c.gamma_v * ar,
+        v_hat_m_s=vh,
+        y_prev_m=ym,
+        a_prev_m_s2=am,
+    )
+    return u, ad, nxt

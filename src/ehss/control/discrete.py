@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from ehss.control import _kernels as K
+from ehss.control._kernels import PidSettings, TvcSettings
 from ehss.params import ForcePidParams, PositionPidParams, TvcParams
 
 __all__ = [
@@ -28,8 +28,8 @@ __all__ = [
 ]
 
 
-def pid_coefficients(pid: PositionPidParams | ForcePidParams, dt_s: float) -> np.ndarray:
-    """Coefficient vector ``[kp, ki·dt, τ/(τ+dt), kd/(τ+dt), limit]`` of a PID.
+def pid_coefficients(pid: PositionPidParams | ForcePidParams, dt_s: float) -> PidSettings:
+    """Discrete coefficients ``(kp, ki·dt, τ/(τ+dt), kd/(τ+dt), limit)`` of a PID.
 
     Parameters
     ----------
@@ -40,20 +40,27 @@ def pid_coefficients(pid: PositionPidParams | ForcePidParams, dt_s: float) -> np
 
     Returns
     -------
-    ndarray, shape (5,)
+    PidSettings
+        The coefficients by name (:class:`ehss.control.kernels.PidSettings`).
     """
     if isinstance(pid, PositionPidParams):
         kp, ki, kd = pid.kp_v_per_m, pid.ki_v_per_m_per_s, pid.kd_v_s_per_m
     else:
         kp, ki, kd = pid.kp_v_per_n, pid.ki_v_per_n_per_s, pid.kd_v_s_per_n
     tau = 1.0 / (2.0 * math.pi * pid.derivative_filter_hz)
-    c = np.empty(K.N_PID)
-    c[K.PID_KP] = kp
-    c[K.PID_KI_DT] = ki * dt_s
-    c[K.PID_D_POLE] = tau / (tau + dt_s)
-    c[K.PID_D_GAIN] = kd / (tau + dt_s)
-    c[K.PID_LIMIT] = pid.output_limit_v
-    return c
+    # float(): the kernels are compiled for float64 fields, whatever type a gain was given in
+    return _floats(PidSettings(
+        kp=kp,
+        ki_dt=ki * dt_s,
+        derivative_pole=tau / (tau + dt_s),
+        derivative_gain=kd / (tau + dt_s),
+        output_limit_v=pid.output_limit_v,
+    ))
+
+
+def _floats(settings):
+    """``settings`` (a NamedTuple) with every field a Python float."""
+    return type(settings)._make(float(v) for v in settings)
 
 
 def _expm_small(m: np.ndarray) -> np.ndarray:
@@ -127,28 +134,39 @@ def complementary_velocity_tustin(omega_c: float, dt_s: float) -> tuple[float, f
     return (c - omega_c) / (c + omega_c), omega_c * c / (c + omega_c), 1.0 / (c + omega_c)
 
 
-def tvc_coefficients(tvc: TvcParams, dt_s: float) -> np.ndarray:
-    """Coefficient vector of the three-variable controller (layout ``TVC_*``)."""
+def tvc_coefficients(tvc: TvcParams, dt_s: float) -> TvcSettings:
+    """Discrete coefficients of the three-variable controller at the period ``dt_s``.
+
+    Returns
+    -------
+    TvcSettings
+        The coefficients by name (:class:`ehss.control.kernels.TvcSettings`): the
+        generator's ZOH matrices (:func:`generator_zoh`), the gains of eqs (11)–(12) and
+        the velocity filter (:func:`complementary_velocity_tustin`).
+    """
     wn = tvc.generator_omega_rad_s
     wg = 2.0 * tvc.generator_damping * wn
     dg = wn * wn
     phi, gam = generator_zoh(tvc.kg, wg, dg, dt_s)
     pole, by, ba = complementary_velocity_tustin(2.0 * math.pi * tvc.velocity_crossover_hz, dt_s)
-    c = np.empty(K.N_TVC)
-    c[K.TVC_PHI00], c[K.TVC_PHI01] = phi[0]
-    c[K.TVC_PHI10], c[K.TVC_PHI11] = phi[1]
-    c[K.TVC_GAM0], c[K.TVC_GAM1] = gam
-    c[K.TVC_KG] = tvc.kg
-    c[K.TVC_WG] = wg
-    c[K.TVC_DG] = dg
-    c[K.TVC_KDF] = tvc.kdf_v_per_m
-    c[K.TVC_KVF] = tvc.kvf_v_per_m_s
-    c[K.TVC_KAF] = tvc.kaf_v_per_m_s2
-    c[K.TVC_KDR] = tvc.kdr
-    c[K.TVC_KVR] = tvc.kvr_s
-    c[K.TVC_KAR] = tvc.kar_s2
-    c[K.TVC_VF_POLE] = pole
-    c[K.TVC_VF_Y] = by
-    c[K.TVC_VF_A] = ba
-    c[K.TVC_LIMIT] = tvc.output_limit_v
-    return c
+    return _floats(TvcSettings(
+        phi_rr=phi[0, 0],
+        phi_rv=phi[0, 1],
+        phi_vr=phi[1, 0],
+        phi_vv=phi[1, 1],
+        gamma_r=gam[0],
+        gamma_v=gam[1],
+        kg=tvc.kg,
+        omega_g_rad_s=wg,
+        delta_g_rad2_s2=dg,
+        kdf_v_per_m=tvc.kdf_v_per_m,
+        kvf_v_per_m_s=tvc.kvf_v_per_m_s,
+        kaf_v_per_m_s2=tvc.kaf_v_per_m_s2,
+        kdr=tvc.kdr,
+        kvr_s=tvc.kvr_s,
+        kar_s2=tvc.kar_s2,
+        vf_pole=pole,
+        vf_gain_y_1_s=by,
+        vf_gain_a_s=ba,
+        output_limit_v=tvc.output_limit_v,
+    ))

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
-from ehss.plant.model import STATE_NAMES, plant_parameter_vector, rest_state, static_force_state
+from ehss.plant.kernels import PlantSettings, PlantState
+from ehss.plant.model import STATE_NAMES, plant_settings, rest_state, static_force_state
 
 __all__ = [
+    "PlantSettings",
+    "PlantState",
     "STATE_NAMES",
-    "plant_parameter_vector",
+    "plant_settings",
     "rest_state",
     "static_force_state",
 ]

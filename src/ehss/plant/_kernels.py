@@ -1,19 +1,20 @@
 """Numba kernels of the nonlinear actuator channel (PAPER.md §2 and §7).
 
-Everything here is private: the kernels take only contiguous float64 arrays, scalars and
-preallocated outputs and do no validation. :mod:`ehss.plant.model` packs a
-:class:`~ehss.params.RigParams` into the parameter vector ``prm`` whose layout is given by
-the ``P_*`` indices below.
+The kernels take a :class:`PlantSettings` (the rig's constants, packed by
+:func:`ehss.plant.model.plant_settings`) and a :class:`PlantState` (the integrated
+variables) and do no validation. Both are NamedTuples: inside a kernel every constant
+and state variable is read by name, and a step returns a new state instead of writing
+into a buffer. :mod:`ehss.plant.kernels` is the public face of this module.
 
 Symbol table
 ------------
-State vector ``x`` (``X_*`` indices)::
+State (:class:`PlantState`)::
 
-    u, u̇        normalised spool position and rate, eq (1)
-    y, v        piston (rod) displacement and velocity, m and m/s
-    P1, P2      chamber pressures, Pa
-    yt, vt      table (load) displacement and velocity; equal to y, v without clearance
-    z           state of the accelerometer's AC coupling (first-order high-pass)
+    u, u̇        spool, spool_rate_1_s: normalised spool position and rate, eq (1)
+    y, v        piston_displacement_m, piston_velocity_m_s: rod, m and m/s
+    P1, P2      p1_pa, p2_pa: chamber pressures, Pa
+    yt, vt      displacement_m, velocity_m_s: table (load); equal to y, v without clearance
+    z           accel_highpass_state_m_s: the accelerometer's AC coupling (high-pass)
 
 Model (the readable equations are repeated before the lines that compute them)::
 
@@ -32,64 +33,75 @@ table are two bodies joined by a stiff spring-damper with a dead zone of the cle
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 __all__ = [
-    "N_STATE",
-    "N_PRM",
+    "PlantSettings",
+    "PlantState",
     "signed_sqrt",
     "friction_force",
     "plant_derivative",
     "rk4_step",
     "clamp_state",
+    "with_spool",
     "adc",
 ]
 
-# ----------------------------------------------------------------- state indices
-X_SPOOL = 0
-X_SPOOL_RATE = 1
-X_POS = 2
-X_VEL = 3
-X_P1 = 4
-X_P2 = 5
-X_TABLE_POS = 6
-X_TABLE_VEL = 7
-X_HP = 8
-N_STATE = 9
 
-# ----------------------------------------------------------------- parameter indices
-P_OMEGA_V = 0  # ωv, rad/s
-P_ZETA_V = 1  # ζv
-P_SATURATE = 2  # 1.0: spool limited to [−1, 1]
-P_DEADBAND = 3  # overlap, fraction of full spool
-P_FLOW_COEF = 4  # Qr / √(Δp_r/2), m³/(s·√Pa) per unit spool and land
-P_DP_LAMINAR = 5  # Δp_lam of the signed root, Pa
-P_KC = 6  # Kc, laminar null leakage per land, m³/(s·Pa)
-P_AP = 7  # Ap, m²
-P_VT = 8  # Vt, m³
-P_BETA = 9  # βe, Pa
-P_PS = 10  # Ps, Pa
-P_PR = 11  # Pr, Pa
-P_CIP = 12  # Cip, m³/(s·Pa)
-P_CEP = 13  # Cep, m³/(s·Pa)
-P_MASS_ROD = 14  # rod mass (mt when there is no clearance), kg
-P_MASS_TABLE = 15  # table mass (ignored when there is no clearance), kg
-P_BP = 16  # Bp, N·s/m
-P_K = 17  # K of eq (6), N/m
-P_FC = 18  # Coulomb friction, N
-P_FS = 19  # Stribeck friction, N
-P_VS = 20  # Stribeck velocity, m/s
-P_VEPS = 21  # velocity scale of the smooth sign tanh(v/v_eps), m/s
-P_CLEARANCE = 22  # total joint clearance, m (0: rigid joint, one body)
-P_KJ = 23  # joint contact stiffness, N/m
-P_CJ = 24  # joint contact damping, N·s/m
-P_STROKE = 25  # half stroke, m
-P_KSTOP = 26  # end-stop stiffness, N/m
-P_CSTOP = 27  # end-stop damping, N·s/m
-P_OMEGA_HP = 28  # accelerometer AC-coupling corner, rad/s (0: DC coupled)
-P_SPOOL_DIRECT = 29  # 1.0: the spool is prescribed (open-loop tests), not integrated
-N_PRM = 30
+class PlantSettings(NamedTuple):
+    """Constants of one actuator channel for one test (see :mod:`ehss.plant.model`)."""
+
+    # servo valve, eq (1), and its orifices (§5)
+    valve_omega_rad_s: float  # ωv
+    valve_damping: float  # ζv
+    spool_saturates: bool  # spool limited to [−1, 1]
+    spool_overlap: float  # deadband (overlap), fraction of full spool
+    flow_coef: float  # Qr / √(Δp_r/2), m³/(s·√Pa) per unit spool and land
+    laminar_dp_pa: float  # Δp_lam of the signed root sr
+    null_leakage_m3_s_pa: float  # Kc, laminar null leakage per land, eq (2)
+    spool_prescribed: bool  # the spool is set from outside (open-loop tests), not integrated
+    # actuator, eq (5)
+    piston_area_m2: float  # Ap
+    total_volume_m3: float  # Vt
+    bulk_modulus_pa: float  # βe
+    supply_pressure_pa: float  # Ps
+    return_pressure_pa: float  # Pr
+    internal_leakage_m3_s_pa: float  # Cip
+    external_leakage_m3_s_pa: float  # Cep
+    half_stroke_m: float  # end stops at ±half_stroke_m
+    stop_stiffness_n_m: float  # end-stop spring
+    stop_damping_n_s_m: float  # end-stop damper
+    # load, eq (6)
+    rod_mass_kg: float  # mt when there is no clearance
+    table_mass_kg: float  # ignored when there is no clearance
+    damping_n_s_m: float  # Bp
+    stiffness_n_m: float  # K
+    coulomb_friction_n: float  # Fc
+    stribeck_friction_n: float  # Fs
+    stribeck_velocity_m_s: float  # vs
+    friction_sign_velocity_m_s: float  # v_eps of the smooth sign tanh(v/v_eps)
+    clearance_m: float  # total joint clearance (0: rigid joint, one body)
+    joint_stiffness_n_m: float  # contact stiffness of the joint
+    joint_damping_n_s_m: float  # contact damping of the joint
+    # accelerometer
+    accel_highpass_rad_s: float  # ωa, AC-coupling corner (0: DC coupled)
+
+
+class PlantState(NamedTuple):
+    """State of one actuator channel (also the type of its time derivative)."""
+
+    spool: float  # u, normalised spool position
+    spool_rate_1_s: float  # u̇
+    piston_displacement_m: float  # y
+    piston_velocity_m_s: float  # v
+    p1_pa: float  # P1
+    p2_pa: float  # P2
+    displacement_m: float  # yt, table
+    velocity_m_s: float  # vt, table
+    accel_highpass_state_m_s: float  # z, accelerometer AC coupling
 
 
 @njit(cache=True)
@@ -103,41 +115,40 @@ def signed_sqrt(dp, dp_lam):
 
 
 @njit(cache=True)
-def friction_force(v, prm):
+def friction_force(v, s):
     """Coulomb + Stribeck seal friction with a smooth sign (0 when both levels are 0).
 
     F = tanh(v/v_eps) [Fc + Fs exp(−(v/vs)²)]
     """
-    fc = prm[P_FC]
-    fs = prm[P_FS]
+    fc = s.coulomb_friction_n
+    fs = s.stribeck_friction_n
     if fc == 0.0 and fs == 0.0:
         return 0.0
-    r = v / prm[P_VS]
-    return np.tanh(v / prm[P_VEPS]) * (fc + fs * np.exp(-r * r))
+    r = v / s.stribeck_velocity_m_s
+    return np.tanh(v / s.friction_sign_velocity_m_s) * (fc + fs * np.exp(-r * r))
 
 
 @njit(cache=True)
-def plant_derivative(x, ucmd, prm, dx):
-    """Right-hand side ẋ = f(x, u_cmd) of one actuator channel; writes ``dx``.
+def plant_derivative(x, ucmd, s):
+    """Right-hand side ẋ = f(x, u_cmd) of one actuator channel, as a :class:`PlantState`.
 
     ``ucmd`` is the normalised valve command (V/command_full_scale_v + null bias).
     """
     # ---------------------------------------------------------------- servo valve, eq (1)
-    if prm[P_SPOOL_DIRECT] != 0.0:
-        dx[X_SPOOL] = 0.0
-        dx[X_SPOOL_RATE] = 0.0
+    if s.spool_prescribed:
+        d_spool = 0.0
+        d_spool_rate = 0.0
     else:
-        wv = prm[P_OMEGA_V]
+        wv = s.valve_omega_rad_s
         # ü = ωv² (u_cmd − u) − 2 ζv ωv u̇
-        dx[X_SPOOL] = x[X_SPOOL_RATE]
-        dx[X_SPOOL_RATE] = wv * wv * (ucmd - x[X_SPOOL]) - 2.0 * prm[P_ZETA_V] * wv * x[
-            X_SPOOL_RATE
-        ]
-    u = x[X_SPOOL]
-    if prm[P_SATURATE] != 0.0:
+        d_spool = x.spool_rate_1_s
+        d_spool_rate = wv * wv * (ucmd - x.spool) - 2.0 * s.valve_damping * wv * x.spool_rate_1_s
+    # effective opening u_e: the spool within its stops, less the overlap
+    u = x.spool
+    if s.spool_saturates:
         u = min(1.0, max(-1.0, u))
     # overlap: no opening inside ±deadband, opening shifted by the deadband outside it
-    db = prm[P_DEADBAND]
+    db = s.spool_overlap
     if db > 0.0:
         if u > db:
             u -= db
@@ -147,12 +158,12 @@ def plant_derivative(x, ucmd, prm, dx):
             u = 0.0
 
     # ---------------------------------------------------------------- orifice flows, §5
-    p1 = x[X_P1]
-    p2 = x[X_P2]
-    ps = prm[P_PS]
-    pr = prm[P_PR]
-    g = prm[P_FLOW_COEF]
-    lam = prm[P_DP_LAMINAR]
+    p1 = x.p1_pa
+    p2 = x.p2_pa
+    ps = s.supply_pressure_pa
+    pr = s.return_pressure_pa
+    g = s.flow_coef
+    lam = s.laminar_dp_pa
     if u >= 0.0:
         # Q = Qr u √(Δp_land/(Δp_r/2)): supply → chamber 1, chamber 2 → return
         q1 = g * u * signed_sqrt(ps - p1, lam)
@@ -161,108 +172,167 @@ def plant_derivative(x, ucmd, prm, dx):
         # mirrored: chamber 1 → return, supply → chamber 2 (u < 0 makes both negative)
         q1 = g * u * signed_sqrt(p1 - pr, lam)
         q2 = g * u * signed_sqrt(ps - p2, lam)
-    kc = prm[P_KC]
+    kc = s.null_leakage_m3_s_pa
     # laminar null leakage of both lands of each chamber: QL = −Kc PL at null, eq (2)
     q1 += kc * (ps - p1) - kc * (p1 - pr)
     q2 -= kc * (ps - p2) - kc * (p2 - pr)
 
     # ---------------------------------------------------------------- mechanics, eq (6)
-    ap = prm[P_AP]
-    y = x[X_POS]
-    v = x[X_VEL]
+    ap = s.piston_area_m2
+    y = x.piston_displacement_m
+    v = x.piston_velocity_m_s
     pl = p1 - p2
-    ff = friction_force(v, prm)
-    stroke = prm[P_STROKE]
+    ff = friction_force(v, s)
+    # end stops: a stiff spring-damper beyond ±half stroke
+    stroke = s.half_stroke_m
     fstop = 0.0
     if y > stroke:
-        fstop = prm[P_KSTOP] * (y - stroke) + prm[P_CSTOP] * v
+        fstop = s.stop_stiffness_n_m * (y - stroke) + s.stop_damping_n_s_m * v
     elif y < -stroke:
-        fstop = prm[P_KSTOP] * (y + stroke) + prm[P_CSTOP] * v
-    clearance = prm[P_CLEARANCE]
-    if clearance == 0.0:
+        fstop = s.stop_stiffness_n_m * (y + stroke) + s.stop_damping_n_s_m * v
+    if s.clearance_m == 0.0:
         # mt ÿ = Ap PL − Bp ẏ − K y − Ff − Fstop ; the table moves with the rod
-        a = (ap * pl - prm[P_BP] * v - prm[P_K] * y - ff - fstop) / prm[P_MASS_ROD]
-        dx[X_POS] = v
-        dx[X_VEL] = a
-        dx[X_TABLE_POS] = v
-        dx[X_TABLE_VEL] = a
+        a = (ap * pl - s.damping_n_s_m * v - s.stiffness_n_m * y - ff - fstop) / s.rod_mass_kg
+        d_table_pos = v
         a_table = a
     else:
-        yt = x[X_TABLE_POS]
-        vt = x[X_TABLE_VEL]
+        yt = x.displacement_m
+        vt = x.velocity_m_s
         gap = y - yt
-        half = 0.5 * clearance
+        half = 0.5 * s.clearance_m
         # joint force: stiff spring-damper outside the dead zone ±clearance/2
         fj = 0.0
         if gap > half:
-            fj = prm[P_KJ] * (gap - half) + prm[P_CJ] * (v - vt)
+            fj = s.joint_stiffness_n_m * (gap - half) + s.joint_damping_n_s_m * (v - vt)
         elif gap < -half:
-            fj = prm[P_KJ] * (gap + half) + prm[P_CJ] * (v - vt)
+            fj = s.joint_stiffness_n_m * (gap + half) + s.joint_damping_n_s_m * (v - vt)
         # m_rod ÿ = Ap PL − Ff − Fstop − Fj ; m_table ÿt = Fj − Bp ẏt − K yt
-        dx[X_POS] = v
-        dx[X_VEL] = (ap * pl - ff - fstop - fj) / prm[P_MASS_ROD]
-        a_table = (fj - prm[P_BP] * vt - prm[P_K] * yt) / prm[P_MASS_TABLE]
-        dx[X_TABLE_POS] = vt
-        dx[X_TABLE_VEL] = a_table
+        a = (ap * pl - ff - fstop - fj) / s.rod_mass_kg
+        d_table_pos = vt
+        a_table = (fj - s.damping_n_s_m * vt - s.stiffness_n_m * yt) / s.table_mass_kg
 
     # ---------------------------------------------------------------- chambers, eq (5)
-    beta = prm[P_BETA]
-    half_vt = 0.5 * prm[P_VT]
-    leak_in = prm[P_CIP] * pl
-    cep = prm[P_CEP]
+    beta = s.bulk_modulus_pa
+    half_vt = 0.5 * s.total_volume_m3
+    leak_in = s.internal_leakage_m3_s_pa * pl
+    cep = s.external_leakage_m3_s_pa
     # Ṗ1 = βe/(Vt/2 + Ap y) (Q1 − Ap ẏ − Cip PL − Cep P1)
-    dx[X_P1] = beta / (half_vt + ap * y) * (q1 - ap * v - leak_in - cep * p1)
+    d_p1 = beta / (half_vt + ap * y) * (q1 - ap * v - leak_in - cep * p1)
     # Ṗ2 = βe/(Vt/2 − Ap y) (−Q2 + Ap ẏ + Cip PL − Cep P2)
-    dx[X_P2] = beta / (half_vt - ap * y) * (-q2 + ap * v + leak_in - cep * p2)
+    d_p2 = beta / (half_vt - ap * y) * (-q2 + ap * v + leak_in - cep * p2)
 
     # ---------------------------------------------------------------- accelerometer AC coupling
     # a_hp = a − ωa z with ż = a − ωa z  ⇔  a_hp = s/(s + ωa) a
-    dx[X_HP] = a_table - prm[P_OMEGA_HP] * x[X_HP]
+    d_hp = a_table - s.accel_highpass_rad_s * x.accel_highpass_state_m_s
+    return PlantState(
+        spool=d_spool,
+        spool_rate_1_s=d_spool_rate,
+        piston_displacement_m=v,
+        piston_velocity_m_s=a,
+        p1_pa=d_p1,
+        p2_pa=d_p2,
+        displacement_m=d_table_pos,
+        velocity_m_s=a_table,
+        accel_highpass_state_m_s=d_hp,
+    )
+
+
+# inline="always": folded into rk4_step by numba itself, which compiles faster than
+# separate functions that LLVM then inlines
+@njit(cache=True, inline="always")
+def _add_scaled(x, c, k):
+    """x + c k, field by field (c a scalar, k a derivative)."""
+    return PlantState(
+        x.spool + c * k.spool,
+        x.spool_rate_1_s + c * k.spool_rate_1_s,
+        x.piston_displacement_m + c * k.piston_displacement_m,
+        x.piston_velocity_m_s + c * k.piston_velocity_m_s,
+        x.p1_pa + c * k.p1_pa,
+        x.p2_pa + c * k.p2_pa,
+        x.displacement_m + c * k.displacement_m,
+        x.velocity_m_s + c * k.velocity_m_s,
+        x.accel_highpass_state_m_s + c * k.accel_highpass_state_m_s,
+    )
+
+
+@njit(cache=True, inline="always")
+def _weighted_slope(k1, k2, k3, k4):
+    """k1 + 2 k2 + 2 k3 + k4, field by field."""
+    return PlantState(
+        k1.spool + 2.0 * k2.spool + 2.0 * k3.spool + k4.spool,
+        k1.spool_rate_1_s + 2.0 * k2.spool_rate_1_s + 2.0 * k3.spool_rate_1_s
+        + k4.spool_rate_1_s,
+        k1.piston_displacement_m + 2.0 * k2.piston_displacement_m
+        + 2.0 * k3.piston_displacement_m + k4.piston_displacement_m,
+        k1.piston_velocity_m_s + 2.0 * k2.piston_velocity_m_s + 2.0 * k3.piston_velocity_m_s
+        + k4.piston_velocity_m_s,
+        k1.p1_pa + 2.0 * k2.p1_pa + 2.0 * k3.p1_pa + k4.p1_pa,
+        k1.p2_pa + 2.0 * k2.p2_pa + 2.0 * k3.p2_pa + k4.p2_pa,
+        k1.displacement_m + 2.0 * k2.displacement_m + 2.0 * k3.displacement_m
+        + k4.displacement_m,
+        k1.velocity_m_s + 2.0 * k2.velocity_m_s + 2.0 * k3.velocity_m_s + k4.velocity_m_s,
+        k1.accel_highpass_state_m_s + 2.0 * k2.accel_highpass_state_m_s
+        + 2.0 * k3.accel_highpass_state_m_s + k4.accel_highpass_state_m_s,
+    )
 
 
 @njit(cache=True)
-def rk4_step(x, ucmd, prm, h, work):
-    """One classical Runge-Kutta step of length ``h`` in place; ``work`` is (5, N_STATE)."""
-    k1 = work[0]
-    k2 = work[1]
-    k3 = work[2]
-    k4 = work[3]
-    xt = work[4]
-    n = x.shape[0]
-    plant_derivative(x, ucmd, prm, k1)
-    for i in range(n):
-        xt[i] = x[i] + 0.5 * h * k1[i]
-    plant_derivative(xt, ucmd, prm, k2)
-    for i in range(n):
-        xt[i] = x[i] + 0.5 * h * k2[i]
-    plant_derivative(xt, ucmd, prm, k3)
-    for i in range(n):
-        xt[i] = x[i] + h * k3[i]
-    plant_derivative(xt, ucmd, prm, k4)
+def rk4_step(x, ucmd, s, h):
+    """One classical Runge-Kutta step of length ``h`` from ``x``; returns the new state."""
+    k1 = plant_derivative(x, ucmd, s)
+    k2 = plant_derivative(_add_scaled(x, 0.5 * h, k1), ucmd, s)
+    k3 = plant_derivative(_add_scaled(x, 0.5 * h, k2), ucmd, s)
+    k4 = plant_derivative(_add_scaled(x, h, k3), ucmd, s)
     # x ← x + h/6 (k1 + 2 k2 + 2 k3 + k4)
-    for i in range(n):
-        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    return _add_scaled(x, h / 6.0, _weighted_slope(k1, k2, k3, k4))
 
 
 @njit(cache=True)
-def clamp_state(x, prm):
-    """Hard limits applied to the state after each step.
+def clamp_state(x, s):
+    """``x`` within the hard limits applied after each step.
 
     Pressures are clamped to [0, Ps] (cavitation / relief); the spool, if saturating, to
     [−1, 1] with its rate zeroed when it pushes outward (the spool hits its end stop).
     """
-    ps = prm[P_PS]
-    x[X_P1] = min(ps, max(0.0, x[X_P1]))
-    x[X_P2] = min(ps, max(0.0, x[X_P2]))
-    if prm[P_SATURATE] != 0.0:
-        if x[X_SPOOL] > 1.0:
-            x[X_SPOOL] = 1.0
-            if x[X_SPOOL_RATE] > 0.0:
-                x[X_SPOOL_RATE] = 0.0
-        elif x[X_SPOOL] < -1.0:
-            x[X_SPOOL] = -1.0
-            if x[X_SPOOL_RATE] < 0.0:
-                x[X_SPOOL_RATE] = 0.0
+    ps = s.supply_pressure_pa
+    spool = x.spool
+    rate = x.spool_rate_1_s
+    if s.spool_saturates:
+        if spool > 1.0:
+            spool = 1.0
+            if rate > 0.0:
+                rate = 0.0
+        elif spool < -1.0:
+            spool = -1.0
+            if rate < 0.0:
+                rate = 0.0
+    return PlantState(
+        spool=spool,
+        spool_rate_1_s=rate,
+        piston_displacement_m=x.piston_displacement_m,
+        piston_velocity_m_s=x.piston_velocity_m_s,
+        p1_pa=min(ps, max(0.0, x.p1_pa)),
+        p2_pa=min(ps, max(0.0, x.p2_pa)),
+        displacement_m=x.displacement_m,
+        velocity_m_s=x.velocity_m_s,
+        accel_highpass_state_m_s=x.accel_highpass_state_m_s,
+    )
+
+
+@njit(cache=True)
+def with_spool(x, spool):
+    """``x`` with the spool set to ``spool`` (a prescribed spool, open-loop tests)."""
+    return PlantState(
+        spool=spool,
+        spool_rate_1_s=x.spool_rate_1_s,
+        piston_displacement_m=x.piston_displacement_m,
+        piston_velocity_m_s=x.piston_velocity_m_s,
+        p1_pa=x.p1_pa,
+        p2_pa=x.p2_pa,
+        displacement_m=x.displacement_m,
+        velocity_m_s=x.velocity_m_s,
+        accel_highpass_state_m_s=x.accel_highpass_state_m_s,
+    )
 
 
 @njit(cache=True)

@@ -5,181 +5,172 @@ Timing of one control period k (t_k = k dt, dt = 1/fs):
 1. sample the sensors on the plant state x(t_k) (noise, ADC quantisation);
 2. run the controller → drive[k], clip to ±limit, DAC-quantise;
 3. push drive[k] into the delay line; the valve receives drive[k − delay] (held, ZOH);
-4. integrate the plant over [t_k, t_{k+1}) with ``n_sub`` RK4 steps.
+4. integrate the plant over [t_k, t_{k+1}) with ``substeps`` RK4 steps.
 
 Everything recorded at index k refers to t_k. No allocation inside the loop.
+
+The kernel reads a :class:`LoopSettings` (the plant's, the sensors' and the controllers'
+settings, the timing), a :class:`SensorNoise` and writes a :class:`LoopRecord` of named
+rows; the plant and the controllers come from their packages' public kernels
+(:mod:`ehss.plant.kernels`, :mod:`ehss.control.kernels`).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from ehss.control._kernels import TVC_DG, TVC_KG, TVC_WG, pid_step, tvc_step
-from ehss.plant._kernels import (
-    N_STATE,
-    P_AP,
-    P_OMEGA_HP,
-    P_PS,
-    P_SATURATE,
-    P_SPOOL_DIRECT,
-    P_STROKE,
-    X_HP,
-    X_P1,
-    X_P2,
-    X_POS,
-    X_SPOOL,
-    X_TABLE_POS,
-    X_TABLE_VEL,
-    X_VEL,
+from ehss.control.kernels import PidSettings, PidState, TvcSettings, TvcState, pid_step, tvc_step
+from ehss.plant.kernels import (
+    PlantSettings,
     adc,
     clamp_state,
     friction_force,
     plant_derivative,
     rk4_step,
+    with_spool,
 )
 
-__all__ = ["closed_loop", "LOOP_IDS", "ROWS"]
+__all__ = [
+    "LOOP_IDS",
+    "LoopRecord",
+    "LoopSettings",
+    "SensorNoise",
+    "SensorSettings",
+    "closed_loop",
+]
 
-# loops
-LOOP_POSITION = 0
-LOOP_ACCELERATION = 1
-LOOP_FORCE = 2
-LOOP_OPEN = 3  # the reference is the valve command in volts (or the spool if direct)
-LOOP_IDS = {"position": 0, "acceleration": 1, "force": 2, "open": 3}
+# loops (the values of LoopSettings.loop)
+POSITION = 0
+ACCELERATION = 1
+FORCE = 2
+OPEN = 3  # the reference is the valve command in volts (or the spool if prescribed)
+LOOP_IDS = {"position": POSITION, "acceleration": ACCELERATION, "force": FORCE, "open": OPEN}
 
-# sensor vector layout
-S_LVDT_RANGE = 0
-S_LVDT_LSB = 1
-S_ACCEL_RANGE = 2
-S_ACCEL_LSB = 3
-S_FORCE_RANGE = 4
-S_FORCE_LSB = 5
-S_DAC_LSB = 6
-S_FULL_SCALE_V = 7  # command at full spool
-S_NULL_BIAS = 8
-N_SEN = 9
 
-# output rows
-R_DRIVE = 0
-R_VALVE_CMD = 1
-R_SPOOL = 2
-R_P1 = 3
-R_P2 = 4
-R_POS = 5
-R_VEL = 6
-R_ACC = 7
-R_FORCE = 8
-R_PISTON = 9
-R_LVDT = 10
-R_ACCEL_M = 11
-R_FORCE_M = 12
-R_AUX = 13  # generated acceleration a_d (acceleration loop), else the reference
-R_DRIVE_SAT = 14
-R_SPOOL_SAT = 15
-R_STROKE = 16
-R_PRESSURE = 17
-N_ROWS = 18
-ROWS = (
-    "drive_v",
-    "valve_command_v",
-    "spool",
-    "p1_pa",
-    "p2_pa",
-    "displacement_m",
-    "velocity_m_s",
-    "acceleration_m_s2",
-    "force_n",
-    "piston_displacement_m",
-    "lvdt_m",
-    "accel_m_s2",
-    "force_cell_n",
-    "aux",
-    "drive_saturated",
-    "spool_saturated",
-    "stroke_end",
-    "pressure_limit",
-)
+class SensorSettings(NamedTuple):
+    """Sensor ranges and quantisation, and the valve command's scaling."""
+
+    lvdt_range_m: float  # LVDT clipped to ±range
+    lvdt_lsb_m: float  # LVDT quantisation step (0: none)
+    accel_range_m_s2: float
+    accel_lsb_m_s2: float
+    force_range_n: float
+    force_lsb_n: float
+    dac_lsb_v: float  # drive quantisation step over ±10 V (0: none)
+    command_full_scale_v: float  # command at full spool
+    null_bias: float  # spool offset at zero command, fraction of full spool
+
+
+class LoopSettings(NamedTuple):
+    """Everything the loop kernel needs besides the signals.
+
+    A PID starts with ``drive0_v`` in its integral, so that its first output holds the
+    drive already in the delay line (bumpless start, e.g. on a static force).
+    """
+
+    loop: int  # POSITION, ACCELERATION, FORCE or OPEN
+    plant: PlantSettings
+    sensors: SensorSettings
+    pid: PidSettings  # controller of the position and force loops (else unused)
+    tvc: TvcSettings  # controller of the acceleration loop (else unused)
+    substeps: int  # RK4 steps per control period
+    step_s: float  # h, length of one RK4 step
+    delay_samples: int  # control periods between the controller and the valve
+    drive0_v: float  # drive in the delay line before the first output, and a PID's integral
+
+
+class SensorNoise(NamedTuple):
+    """Additive sensor noise per control period, SI units, each shape (n,)."""
+
+    lvdt_m: np.ndarray
+    accel_m_s2: np.ndarray
+    force_n: np.ndarray
+
+
+class LoopRecord(NamedTuple):
+    """Rows written by :func:`closed_loop`, each shape (n,), sampled at t_k."""
+
+    drive_v: np.ndarray  # controller output after clipping and the DAC
+    valve_command_v: np.ndarray  # drive reaching the valve after the delay
+    spool: np.ndarray
+    p1_pa: np.ndarray
+    p2_pa: np.ndarray
+    displacement_m: np.ndarray  # table
+    velocity_m_s: np.ndarray  # table
+    acceleration_m_s2: np.ndarray  # table
+    force_n: np.ndarray  # rod force Ap PL − Ff
+    piston_displacement_m: np.ndarray
+    lvdt_m: np.ndarray  # measured
+    accel_m_s2: np.ndarray  # measured
+    force_cell_n: np.ndarray  # measured
+    aux: np.ndarray  # generated acceleration a_d (acceleration loop), else the reference
+    drive_saturated: np.ndarray  # 0/1
+    spool_saturated: np.ndarray  # 0/1
+    stroke_end: np.ndarray  # 0/1
+    pressure_limit: np.ndarray  # 0/1
 
 
 @njit(cache=True)
-def closed_loop(loop, ref, prm, sen, ctl, x0, cst0, drive0, noise, n_sub, h, delay, out):
-    """Simulate ``ref.shape[0]`` control periods; fills ``out`` (N_ROWS, n).
+def closed_loop(ref, noise, x0, s, rec):
+    """Simulate ``ref.shape[0]`` control periods; fills ``rec``, returns the final state.
 
     Parameters
     ----------
-    loop : int
-        LOOP_* id.
     ref : float64[n]
         Reference per control period (m, m/s², N, or V / spool for the open loop).
-    prm : float64[N_PRM]
-        Plant parameters (``ehss.plant._kernels`` layout).
-    sen : float64[N_SEN]
-        Sensor ranges, LSBs (0 = no quantisation), DAC LSB, command full scale, null bias.
-    ctl : float64
-        Controller coefficients (PID or TVC layout; unused in the open loop).
-    x0 : float64[N_STATE]
+    noise : SensorNoise
+        Sensor noise per period (LVDT, accelerometer, load cell) in SI units.
+    x0 : PlantState
         Initial plant state.
-    cst0 : float64[5]
-        Initial controller state.
-    drive0 : float
-        Drive held in the delay line before the first output.
-    noise : float64[3, n]
-        Sensor noise (LVDT, accelerometer, load cell) in SI units.
-    n_sub, h, delay : int, float, int
-        RK4 steps per period, their length, delay in periods.
-    out : float64[N_ROWS, n]
+    s : LoopSettings
+    rec : LoopRecord
+        Preallocated rows of length n.
     """
-    n = ref.shape[0]
-    x = x0.copy()
-    cst = cst0.copy()
-    work = np.empty((5, N_STATE))
-    dx = np.empty(N_STATE)
-    nbuf = delay + 1
-    buf = np.full(nbuf, drive0)
-    ap = prm[P_AP]
-    stroke = prm[P_STROKE]
-    ps = prm[P_PS]
-    w_hp = prm[P_OMEGA_HP]
-    spool_direct = prm[P_SPOOL_DIRECT] != 0.0
-    saturate = prm[P_SATURATE] != 0.0
-    # both coefficient layouts end with the output limit (PID_LIMIT, TVC_LIMIT)
-    limit = ctl[ctl.shape[0] - 1]
-    for k in range(n):
+    p = s.plant
+    sen = s.sensors
+    ap = p.piston_area_m2
+    ps = p.supply_pressure_pa
+    limit = s.tvc.output_limit_v if s.loop == ACCELERATION else s.pid.output_limit_v
+    x = x0
+    nbuf = s.delay_samples + 1
+    buf = np.full(nbuf, s.drive0_v)
+    pid = PidState(s.drive0_v, 0.0, 0.0)
+    tvc = TvcState(0.0, 0.0, 0.0, 0.0, 0.0)
+    for k in range(ref.shape[0]):
         # ------------------------------------------------------------ true signals at t_k
-        plant_derivative(x, 0.0, prm, dx)
-        a_table = dx[X_TABLE_VEL]
-        pl = x[X_P1] - x[X_P2]
+        a_table = plant_derivative(x, 0.0, p).velocity_m_s
         # load cell: rod force Ap PL − Ff
-        f_true = ap * pl - friction_force(x[X_VEL], prm)
+        f_true = ap * (x.p1_pa - x.p2_pa) - friction_force(x.piston_velocity_m_s, p)
         # accelerometer AC coupling: a_hp = a − ωa z
-        a_hp = a_table - w_hp * x[X_HP]
+        a_hp = a_table - p.accel_highpass_rad_s * x.accel_highpass_state_m_s
 
         # ------------------------------------------------------------ sensors
-        ym = adc(x[X_POS] + noise[0, k], sen[S_LVDT_RANGE], sen[S_LVDT_LSB])
-        am = adc(a_hp + noise[1, k], sen[S_ACCEL_RANGE], sen[S_ACCEL_LSB])
-        fm = adc(f_true + noise[2, k], sen[S_FORCE_RANGE], sen[S_FORCE_LSB])
+        ym = adc(x.piston_displacement_m + noise.lvdt_m[k], sen.lvdt_range_m, sen.lvdt_lsb_m)
+        am = adc(a_hp + noise.accel_m_s2[k], sen.accel_range_m_s2, sen.accel_lsb_m_s2)
+        fm = adc(f_true + noise.force_n[k], sen.force_range_n, sen.force_lsb_n)
         if k == 0:
-            # no derivative kick on the first sample
-            cst[2] = ym if loop != LOOP_FORCE else fm
-            if loop == LOOP_ACCELERATION:
-                cst[3] = ym
-                cst[4] = am
+            # no derivative kick on the first sample: the previous measurements are these;
+            # the generator and the velocity estimate v̂ start from rest
+            pid = PidState(pid.integral_v, 0.0, fm if s.loop == FORCE else ym)
+            tvc = TvcState(rd_m=0.0, vd_m_s=0.0, v_hat_m_s=0.0, y_prev_m=ym, a_prev_m_s2=am)
 
         # ------------------------------------------------------------ controller
-        aux = ref[k]
-        if loop == LOOP_POSITION:
-            u = pid_step(ref[k] - ym, ym, cst, ctl)
-        elif loop == LOOP_FORCE:
-            u = pid_step(ref[k] - fm, fm, cst, ctl)
-        elif loop == LOOP_ACCELERATION:
-            # generated acceleration a_d (before the generator state is advanced)
-            aux = ctl[TVC_KG] * ref[k] - ctl[TVC_WG] * cst[1] - ctl[TVC_DG] * cst[0]
-            u = tvc_step(ref[k], ym, am, cst, ctl)
+        r = ref[k]
+        aux = r
+        if s.loop == POSITION:
+            u, pid = pid_step(r - ym, ym, pid, s.pid)
+        elif s.loop == FORCE:
+            u, pid = pid_step(r - fm, fm, pid, s.pid)
+        elif s.loop == ACCELERATION:
+            # aux: the generated acceleration a_d, eq (10)
+            u, aux, tvc = tvc_step(r, ym, am, tvc, s.tvc)
         else:
-            u = ref[k]
+            u = r
         sat = 0.0
-        if loop != LOOP_OPEN:
+        if s.loop != OPEN:
             if u > limit:
                 u = limit
                 sat = 1.0
@@ -187,41 +178,41 @@ def closed_loop(loop, ref, prm, sen, ctl, x0, cst0, drive0, noise, n_sub, h, del
                 u = -limit
                 sat = 1.0
             # DAC over ±10 V
-            u = adc(u, 10.0, sen[S_DAC_LSB])
+            u = adc(u, 10.0, sen.dac_lsb_v)
 
         # ------------------------------------------------------------ delay line + ZOH
         buf[k % nbuf] = u
         applied = buf[(k + 1) % nbuf]
-        if spool_direct:
-            x[X_SPOOL] = applied
+        if p.spool_prescribed:
+            # the drive is the spool position itself, held over the period
+            x = with_spool(x, applied)
             ucmd = applied
         else:
-            ucmd = applied / sen[S_FULL_SCALE_V] + sen[S_NULL_BIAS]
+            ucmd = applied / sen.command_full_scale_v + sen.null_bias
 
         # ------------------------------------------------------------ record t_k
-        out[R_DRIVE, k] = u
-        out[R_VALVE_CMD, k] = applied
-        out[R_SPOOL, k] = x[X_SPOOL]
-        out[R_P1, k] = x[X_P1]
-        out[R_P2, k] = x[X_P2]
-        out[R_POS, k] = x[X_TABLE_POS]
-        out[R_VEL, k] = x[X_TABLE_VEL]
-        out[R_ACC, k] = a_table
-        out[R_FORCE, k] = f_true
-        out[R_PISTON, k] = x[X_POS]
-        out[R_LVDT, k] = ym
-        out[R_ACCEL_M, k] = am
-        out[R_FORCE_M, k] = fm
-        out[R_AUX, k] = aux
-        out[R_DRIVE_SAT, k] = sat
-        out[R_SPOOL_SAT, k] = 1.0 if (saturate and abs(x[X_SPOOL]) >= 1.0) else 0.0
-        out[R_STROKE, k] = 1.0 if abs(x[X_POS]) > stroke else 0.0
-        p1 = x[X_P1]
-        p2 = x[X_P2]
-        out[R_PRESSURE, k] = 1.0 if (p1 <= 0.0 or p2 <= 0.0 or p1 >= ps or p2 >= ps) else 0.0
+        rec.drive_v[k] = u
+        rec.valve_command_v[k] = applied
+        rec.spool[k] = x.spool
+        rec.p1_pa[k] = x.p1_pa
+        rec.p2_pa[k] = x.p2_pa
+        rec.displacement_m[k] = x.displacement_m
+        rec.velocity_m_s[k] = x.velocity_m_s
+        rec.acceleration_m_s2[k] = a_table
+        rec.force_n[k] = f_true
+        rec.piston_displacement_m[k] = x.piston_displacement_m
+        rec.lvdt_m[k] = ym
+        rec.accel_m_s2[k] = am
+        rec.force_cell_n[k] = fm
+        rec.aux[k] = aux
+        rec.drive_saturated[k] = sat
+        rec.spool_saturated[k] = 1.0 if (p.spool_saturates and abs(x.spool) >= 1.0) else 0.0
+        rec.stroke_end[k] = 1.0 if abs(x.piston_displacement_m) > p.half_stroke_m else 0.0
+        p1 = x.p1_pa
+        p2 = x.p2_pa
+        rec.pressure_limit[k] = 1.0 if (p1 <= 0.0 or p2 <= 0.0 or p1 >= ps or p2 >= ps) else 0.0
 
         # ------------------------------------------------------------ plant over one period
-        for _ in range(n_sub):
-            rk4_step(x, ucmd, prm, h, work)
-            clamp_state(x, prm)
+        for _ in range(s.substeps):
+            x = clamp_state(rk4_step(x, ucmd, p, s.step_s), p)
     return x

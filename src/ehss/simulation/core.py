@@ -1,7 +1,10 @@
 """Closed-loop simulation of one actuator channel with its digital controller.
 
-:func:`simulate` validates the inputs, packs the parameters, draws the sensor noise and
-runs the whole loop (plant, sensors, controller, delay) in one numba kernel
+:func:`simulate` validates the inputs, packs the parameters into the kernel's typed
+settings (:class:`~ehss.plant.kernels.PlantSettings`, the controllers'
+:class:`~ehss.control.kernels.PidSettings` and :class:`~ehss.control.kernels.TvcSettings`,
+the sensors' and the timing), draws the sensor noise and runs the whole loop (plant,
+sensors, controller, delay) in one numba kernel
 (:func:`ehss.simulation._kernels.closed_loop`). The result is a :class:`SimulationResult`.
 """
 
@@ -16,14 +19,14 @@ from typing import Any
 import numpy as np
 
 from ehss._checks import as_signal
-from ehss.control import _kernels as CK
 from ehss.control.discrete import pid_coefficients, tvc_coefficients
+from ehss.control.kernels import PidSettings, TvcSettings
 from ehss.errors import ParameterError
 from ehss.params import RigParams, preset
-from ehss.plant import _kernels as PK
+from ehss.plant.kernels import PlantState
 from ehss.plant.model import (
     apply_initial_state,
-    plant_parameter_vector,
+    plant_settings,
     rest_state,
     static_force_state,
 )
@@ -189,21 +192,33 @@ def with_control_rate(params: RigParams, fs: float | None) -> RigParams:
     return dataclasses.replace(params, timing=dataclasses.replace(timing, control_rate_hz=fs))
 
 
-def _sensor_vector(params: RigParams) -> np.ndarray:
+#: Settings of a controller that the loop does not run (the kernel never reads them).
+_NOT_RUN_PID = PidSettings._make(math.nan for _ in PidSettings._fields)
+_NOT_RUN_TVC = TvcSettings._make(math.nan for _ in TvcSettings._fields)
+
+
+def _sensor_settings(params: RigParams) -> SK.SensorSettings:
     s, v = params.sensors, params.valve
-    sen = np.zeros(SK.N_SEN)
-    sen[SK.S_LVDT_RANGE] = s.lvdt_range_m
-    sen[SK.S_ACCEL_RANGE] = s.accel_range_m_s2
-    sen[SK.S_FORCE_RANGE] = s.force_range_n
+    lvdt_lsb = accel_lsb = force_lsb = dac_lsb = 0.0  # 0: no quantisation
     if s.quantize:
         # LSB = 2·range / 2^bits over ±10 V
-        sen[SK.S_LVDT_LSB] = 2.0 * s.lvdt_range_m / 2.0**s.adc_bits
-        sen[SK.S_ACCEL_LSB] = 2.0 * s.accel_range_m_s2 / 2.0**s.adc_bits
-        sen[SK.S_FORCE_LSB] = 2.0 * s.force_range_n / 2.0**s.adc_bits
-        sen[SK.S_DAC_LSB] = 20.0 / 2.0**s.dac_bits
-    sen[SK.S_FULL_SCALE_V] = v.command_full_scale_v
-    sen[SK.S_NULL_BIAS] = v.null_bias
-    return sen
+        lvdt_lsb = 2.0 * s.lvdt_range_m / 2.0**s.adc_bits
+        accel_lsb = 2.0 * s.accel_range_m_s2 / 2.0**s.adc_bits
+        force_lsb = 2.0 * s.force_range_n / 2.0**s.adc_bits
+        dac_lsb = 20.0 / 2.0**s.dac_bits
+    settings = SK.SensorSettings(
+        lvdt_range_m=s.lvdt_range_m,
+        lvdt_lsb_m=lvdt_lsb,
+        accel_range_m_s2=s.accel_range_m_s2,
+        accel_lsb_m_s2=accel_lsb,
+        force_range_n=s.force_range_n,
+        force_lsb_n=force_lsb,
+        dac_lsb_v=dac_lsb,
+        command_full_scale_v=v.command_full_scale_v,
+        null_bias=v.null_bias,
+    )
+    # the kernel is compiled for float64 fields, whatever type a value was given in
+    return SK.SensorSettings._make(float(x) for x in settings)
 
 
 def _new_seed(seed: int | None) -> int:
@@ -248,6 +263,59 @@ def _check_initial_state(initial_state: Any) -> Mapping[str, float] | None:
     return checked
 
 
+def _kernel_inputs(
+    loop: str,
+    values: np.ndarray,
+    params: RigParams,
+    *,
+    seed: int,
+    initial_state: Mapping[str, float] | None,
+    spool_direct: bool,
+    stiffness_n_m: float,
+) -> tuple[PlantState, SK.SensorNoise, SK.LoopSettings]:
+    """Initial plant state, sensor noise and settings of the loop kernel for one run."""
+    timing = params.timing
+    h = 1.0 / timing.internal_rate_hz
+    plant = plant_settings(
+        params, stiffness_n_m=stiffness_n_m, internal_dt_s=h, spool_direct=spool_direct
+    )
+    dt = timing.dt_s
+    # one compiled kernel serves every loop: the controller a loop does not run is NaN
+    pid = _NOT_RUN_PID
+    tvc = _NOT_RUN_TVC
+    if loop in ("position", "force"):
+        pid = pid_coefficients(params.force if loop == "force" else params.position, dt)
+    elif loop == "acceleration":
+        tvc = tvc_coefficients(params.acceleration, dt)
+    drive0 = 0.0
+    x0 = rest_state(params)
+    if loop == "force" and initial_state is None and values[0] != 0.0 and stiffness_n_m > 0.0:
+        # start in equilibrium on the first reference value (bumpless: the integrator
+        # holds the drive that keeps the valve open against the leakage)
+        x0, drive0 = static_force_state(params, float(values[0]), plant)
+    elif loop == "open" and spool_direct:
+        x0 = x0._replace(spool=float(values[0]))
+    x0 = apply_initial_state(x0, initial_state)
+
+    rng = np.random.default_rng(seed)
+    s = params.sensors
+    sigma = np.array([s.lvdt_noise_m, s.accel_noise_m_s2, s.force_noise_n])
+    noise = rng.standard_normal((3, values.size)) * sigma[:, None]
+
+    settings = SK.LoopSettings(
+        loop=SK.LOOP_IDS[loop],
+        plant=plant,
+        sensors=_sensor_settings(params),
+        pid=pid,
+        tvc=tvc,
+        substeps=int(timing.substeps),
+        step_s=float(h),
+        delay_samples=int(timing.delay_samples),
+        drive0_v=float(drive0),
+    )
+    return x0, SK.SensorNoise._make(noise), settings
+
+
 def _run(
     loop: str,
     reference: Any,
@@ -270,68 +338,23 @@ def _run(
     seed = _new_seed(seed)
     timing = params.timing
     fs = timing.control_rate_hz
-    n_sub = timing.substeps
-    h = 1.0 / timing.internal_rate_hz
     n = values.size
 
     if stiffness_n_m is None:
         stiffness_n_m = (
             params.load.specimen_stiffness_n_m if loop == "force" else params.load.stiffness_n_m
         )
-    prm = plant_parameter_vector(
-        params, stiffness_n_m=stiffness_n_m, internal_dt_s=h, spool_direct=spool_direct
+    x0, noise, settings = _kernel_inputs(
+        loop, values, params, seed=seed, initial_state=initial_state,
+        spool_direct=spool_direct, stiffness_n_m=stiffness_n_m,
     )
-    sen = _sensor_vector(params)
-
-    cst0 = np.zeros(max(CK.N_PID_STATE, CK.N_TVC_STATE))
-    drive0 = 0.0
-    x0 = rest_state(params)
-    dt = timing.dt_s
-    if loop == "position":
-        ctl = pid_coefficients(params.position, dt)
-    elif loop == "force":
-        ctl = pid_coefficients(params.force, dt)
-        if initial_state is None and values[0] != 0.0 and stiffness_n_m > 0.0:
-            # start in equilibrium on the first reference value (bumpless: the integrator
-            # holds the drive that keeps the valve open against the leakage)
-            x0, drive0 = static_force_state(params, float(values[0]), prm)
-            cst0[0] = drive0
-    elif loop == "acceleration":
-        ctl = tvc_coefficients(params.acceleration, dt)
-    else:
-        ctl = np.array([math.inf])
-        if spool_direct:
-            x0[PK.X_SPOOL] = values[0]
-    x0 = apply_initial_state(x0, initial_state)
-
-    rng = np.random.default_rng(seed)
-    s = params.sensors
-    sigma = np.array([s.lvdt_noise_m, s.accel_noise_m_s2, s.force_noise_n])
-    noise = np.ascontiguousarray(rng.standard_normal((3, n)) * sigma[:, None])
-
-    out = np.empty((SK.N_ROWS, n))
-    SK.closed_loop(
-        SK.LOOP_IDS[loop],
-        values,
-        prm,
-        sen,
-        ctl,
-        x0,
-        cst0,
-        drive0,
-        noise,
-        n_sub,
-        h,
-        timing.delay_samples,
-        out,
-    )
-    rows = dict(zip(SK.ROWS, out, strict=True))
+    record = SK.LoopRecord._make(np.empty((len(SK.LoopRecord._fields), n)))
+    SK.closed_loop(values, noise, x0, settings, record)
+    rows = record._asdict()
     aux = rows.pop("aux")
     signals: dict[str, np.ndarray] = {}
-    for name in SK.ROWS:
-        if name == "aux":
-            continue
-        signals[name] = rows[name]
+    for name, row in rows.items():
+        signals[name] = row
         if name == "p2_pa":
             signals["load_pressure_pa"] = rows["p1_pa"] - rows["p2_pa"]
     if loop == "acceleration":

@@ -34,7 +34,8 @@ def simulate_open_loop(
         Held (ZOH) over each period of ``fs``: the normalised spool position u
         (``drive_kind="spool"``, the valve dynamics of eq (1) are bypassed) or the valve
         command in volts (``drive_kind="command_v"``, through eq (1)). No DAC
-        quantisation, clipping or delay is applied to it.
+        quantisation or clipping is applied to it; it reaches the valve after
+        ``params.timing.delay_samples`` periods, as a closed loop's drive does.
     params : RigParams, optional
         Parameter set (default preset ``"default"``).
     fs : float, optional
