@@ -26,7 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="compute a checked, compensated drive from an identified closed-loop model",
         description="Invert an identified closed-loop model inside the band it was validated "
         "over (exact stable inversion by default) and apply it to a reference file, or "
-        "correct the drive of a previous run. The drive is checked before anything is "
+        "correct the drive of a previous run. Outside that band the drive is the reference "
+        "itself. A model identified from a decimated record (the `ehss identify` default "
+        "for oversampled records) is applied at the reference's rate, an integer multiple "
+        "of the model's. The drive is checked before anything is "
         "written: its gain against the reference's and, with a parameter set or limits, the "
         "rig's limits. Writes columns t, reference, drive (and a JSON sidecar with the "
         "checks and the per-run log); replay with `ehss simulate --loop L --reference "
