@@ -19,7 +19,9 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from concurrent.futures import Executor
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -34,6 +36,7 @@ from ehss.experiments.loop_identification import (
     loop_record,
     simplest_passing,
 )
+from ehss.experiments.pool import collect, submit
 from ehss.experiments.steps import StepTest, step_tests
 from ehss.frequency import FrequencyResponse
 from ehss.identification import OrderSelection, select_order
@@ -266,6 +269,7 @@ def run_programme(
     settings: ProgrammeSettings | None = None,
     *,
     progress: Progress | None = None,
+    executor: Executor | None = None,
 ) -> ProgrammeResult:
     """Run the whole programme and return every number and record the report needs.
 
@@ -277,11 +281,27 @@ def run_programme(
         Seed, durations, orders and signal sizes.
     progress : callable, optional
         Called with a short text before each stage.
+    executor : Executor, optional
+        Where the compensation demonstrations run while this process runs the step
+        tests and identifications (:func:`ehss.experiments.pool.process_pool`). Each
+        part has its own seed, so the result is the same as without it.
     """
     params = preset("default") if params is None else params
     settings = ProgrammeSettings() if settings is None else settings
     say = progress or (lambda _msg: None)
     t0 = time.perf_counter()
+    demo_names = ("position", "acceleration") if settings.compensation else ()
+    demo_calls = {
+        name: partial(demonstrate, name, params=params, seed=settings.seed + 10 + k,
+                      duration_s=settings.compensation_duration_s)
+        for k, name in enumerate(demo_names)
+    }
+    pending = {}
+    if executor is not None:
+        # Started first: they run beside the whole of the identification below.
+        for name, call in demo_calls.items():
+            say(f"{name} loop: feed-forward compensation (second process)")
+            pending[name] = submit(executor, call)
     say("step tests (Fig. 12)")
     steps = step_tests(params, duration_s=settings.step_duration_s, seed=settings.seed)
     loops: dict[str, LoopResult] = {}
@@ -289,15 +309,13 @@ def run_programme(
         say(f"{name} loop: simulate, identify, validate")
         loops[name] = _run_loop(setup, params, settings, settings.seed + 1 + k)
     demos: dict[str, CompensationDemo] = {}
-    if settings.compensation:
-        for k, name in enumerate(("position", "acceleration")):
+    for name in demo_names:
+        if name in pending:
+            say(f"{name} loop: feed-forward compensation, waiting for the second process")
+            demos[name] = collect(pending[name])
+        else:
             say(f"{name} loop: feed-forward compensation")
-            demos[name] = demonstrate(
-                name,
-                params=params,
-                seed=settings.seed + 10 + k,
-                duration_s=settings.compensation_duration_s,
-            )
+            demos[name] = demo_calls[name]()
     return ProgrammeResult(
         params=params,
         settings=settings,
