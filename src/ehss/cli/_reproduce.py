@@ -29,8 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="seconds of each identification record (default 40)")
     p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
                    help="processes to use, this one included: the compensation "
-                   "demonstrations and their figures run in a second one (default 2 "
-                   "where the machine has two cores or more; the report is the same)")
+                   "demonstrations and some figures run in a second one (default 2 where "
+                   "the machine has two cores or more; the report is the same; use 1 when "
+                   "other jobs keep the cores busy)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
 
