@@ -174,6 +174,15 @@ def test_bad_duration_and_unwritable_out(tmp_path, capsys):
     assert f.read_text() == "x"
 
 
+@pytest.mark.parametrize("jobs", ["0", "two"])
+def test_jobs_must_be_a_count_of_processes(tmp_path, capsys, jobs):
+    with pytest.raises(SystemExit) as exc:
+        main(["reproduce", "--out", str(tmp_path / "r"), "--jobs", jobs, "--quiet"])
+    assert exc.value.code == 2
+    assert "--jobs" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
 @pytest.mark.slow
 def test_compensation_meets_its_targets(report_dir):
     summary = json.loads((report_dir / "summary.json").read_text())

@@ -27,8 +27,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of every random signal (default 0)")
     p.add_argument("--duration", type=float, default=40.0, metavar="S",
                    help="seconds of each identification record (default 40)")
+    p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
+                   help="processes to use, this one included: the compensation "
+                   "demonstrations and some figures run in a second one (default 2 where "
+                   "the machine has two cores or more; the report is the same; use 1 when "
+                   "other jobs keep the cores busy)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
+
+
+def _jobs(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
@@ -40,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from ehss.cli._dataargs import report_warnings
     from ehss.errors import DataError
     from ehss.experiments import ProgrammeSettings, run_programme
+    from ehss.experiments.pool import default_jobs, process_pool
     from ehss.params import load_params, preset
     from ehss.report import write_report
 
@@ -53,16 +69,19 @@ def run(args: argparse.Namespace) -> int:
     # The programme's linear algebra is on single records and small matrices, where
     # handing work to BLAS threads costs far more than it saves (a norm of 12 000
     # samples: 3 ms with threads on a busy two-core machine, 3 µs without).
-    with console.status("starting") as status, threadpool_limits(limits=1, user_api="blas"):
+    # The workers of the pool keep BLAS to one thread too (ehss.experiments.pool).
+    jobs = default_jobs() if args.jobs is None else args.jobs
+    with (console.status("starting") as status, threadpool_limits(limits=1, user_api="blas"),
+          process_pool(jobs) as executor):
 
         def progress(msg: str) -> None:
             console.log(msg)
             status.update(msg)
 
         with report_warnings("reproduce"):
-            result = run_programme(params, settings, progress=progress)
-        status.update("writing the report")
-        html_path = write_report(result, out)
+            result = run_programme(params, settings, progress=progress, executor=executor)
+            status.update("writing the report")
+            html_path = write_report(result, out, executor=executor)
     console.log(f"done in {time.perf_counter() - t0:.1f} s")
     lines = []
     for name, r in result.loops.items():

@@ -19,9 +19,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from concurrent.futures import Executor
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
+from scipy.signal import lfilter
 
 from ehss import signals
 from ehss.control.known import known_factors
@@ -34,9 +37,10 @@ from ehss.experiments.loop_identification import (
     loop_record,
     simplest_passing,
 )
+from ehss.experiments.pool import collect, submit
 from ehss.experiments.steps import StepTest, step_tests
 from ehss.frequency import FrequencyResponse
-from ehss.identification import OrderSelection, select_order
+from ehss.identification import OrderSelection, rels, select_order
 from ehss.params import GRAVITY_M_S2, RigParams, preset
 from ehss.simulation import SimulationResult, simulate
 
@@ -261,11 +265,28 @@ def _trim(sim: SimulationResult, skip: int) -> SimulationResult:
     )
 
 
+def _compile_shared_kernels(params: RigParams) -> None:
+    """Compile (or load from numba's cache) the kernels both strands of the programme use
+    that the step tests have not: the closed loop on a writable reference (the step
+    tests' references are read-only arrays, a type of their own to numba), and RELS
+    and RML, by a short fit each.
+
+    The record is a noise-free first-order ARMAX response, so the fits are well posed;
+    the kernels' argument types, and so the compiled code, are those of any record.
+    """
+    simulate("position", np.zeros(10), params=params, seed=0)
+    u = np.random.default_rng(0).standard_normal(200)
+    y = lfilter([0.0, 0.5], [1.0, -0.5], u)
+    for method in ("rels", "rml"):
+        rels(u, y, na=1, nb=0, nc=1, method=method)
+
+
 def run_programme(
     params: RigParams | None = None,
     settings: ProgrammeSettings | None = None,
     *,
     progress: Progress | None = None,
+    executor: Executor | None = None,
 ) -> ProgrammeResult:
     """Run the whole programme and return every number and record the report needs.
 
@@ -277,27 +298,44 @@ def run_programme(
         Seed, durations, orders and signal sizes.
     progress : callable, optional
         Called with a short text before each stage.
+    executor : Executor, optional
+        Where the compensation demonstrations run while this process runs the step
+        tests and identifications (:func:`ehss.experiments.pool.process_pool`). Each
+        part has its own seed, so the result is the same as without it.
     """
     params = preset("default") if params is None else params
     settings = ProgrammeSettings() if settings is None else settings
     say = progress or (lambda _msg: None)
     t0 = time.perf_counter()
+    demo_names = ("position", "acceleration") if settings.compensation else ()
+    demo_calls = {
+        name: partial(demonstrate, name, params=params, seed=settings.seed + 10 + k,
+                      duration_s=settings.compensation_duration_s)
+        for k, name in enumerate(demo_names)
+    }
     say("step tests (Fig. 12)")
     steps = step_tests(params, duration_s=settings.step_duration_s, seed=settings.seed)
+    pending = {}
+    if executor is not None and demo_calls:
+        # The step tests have compiled most of the kernels the demonstrations use; the
+        # rest are compiled here: with an empty numba cache, the two processes would
+        # otherwise both compile them at once, twice the work for the same code.
+        _compile_shared_kernels(params)
+        for name, call in demo_calls.items():
+            say(f"{name} loop: feed-forward compensation (second process)")
+            pending[name] = submit(executor, call)
     loops: dict[str, LoopResult] = {}
     for k, (name, setup) in enumerate(settings.setups.items()):
         say(f"{name} loop: simulate, identify, validate")
         loops[name] = _run_loop(setup, params, settings, settings.seed + 1 + k)
     demos: dict[str, CompensationDemo] = {}
-    if settings.compensation:
-        for k, name in enumerate(("position", "acceleration")):
+    for name in demo_names:
+        if name in pending:
+            say(f"{name} loop: feed-forward compensation, waiting for the second process")
+            demos[name] = collect(pending[name])
+        else:
             say(f"{name} loop: feed-forward compensation")
-            demos[name] = demonstrate(
-                name,
-                params=params,
-                seed=settings.seed + 10 + k,
-                duration_s=settings.compensation_duration_s,
-            )
+            demos[name] = demo_calls[name]()
     return ProgrammeResult(
         params=params,
         settings=settings,

@@ -7,13 +7,31 @@ out and drawn once when saved.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from matplotlib.figure import Figure
 
-from ehss.experiments import ACCEPTANCE, LoopResult, StepTest
-from ehss.plots import bode_compare, fixed_layout, plot_series, theta_convergence, time_compare
+from ehss.experiments import ACCEPTANCE, CompensationDemo, LoopResult, StepTest, plot_demo
+from ehss.plots import (
+    bode_compare,
+    fixed_layout,
+    plot_series,
+    png_bytes,
+    theta_convergence,
+    time_compare,
+)
 
-__all__ = ["step_figure", "loop_figure", "convergence_figure", "LOOP_UNITS", "REPORT_DPI"]
+__all__ = [
+    "step_figure",
+    "loop_figure",
+    "convergence_figure",
+    "compensation_figure",
+    "render_png",
+    "LOOP_UNITS",
+    "REPORT_DPI",
+]
 
 #: Resolution of the report's PNG figures.
 REPORT_DPI = 110
@@ -113,3 +131,20 @@ def convergence_figure(loops: dict[str, LoopResult]) -> Figure:
         ax.get_legend().remove() if ax.get_legend() is not None else None
     fig.suptitle("Convergence of the RELS estimates θ̂ = [a, b, c] (eqs 20–22)")
     return fig
+
+
+def compensation_figure(demo: CompensationDemo) -> Figure:
+    """Figs 16–17: :func:`ehss.experiments.plot_demo`'s 2 × 2 panels, laid out fixed."""
+    fig = plot_demo(demo)
+    # A fixed layout for the 2 × 2 panels: saved with one draw, no layout engine.
+    fixed_layout(fig, left=0.85, right=0.15, bottom=0.5, top=0.35, wspace=0.95, hspace=0.75)
+    return fig
+
+
+def render_png(make: Callable[..., Figure], /, *args: Any, **kwargs: Any) -> bytes:
+    """``make(*args, **kwargs)`` as PNG bytes at :data:`REPORT_DPI`.
+
+    A module-level function of picklable arguments, so that a figure can be drawn in
+    another process (:func:`ehss.experiments.pool.submit`).
+    """
+    return png_bytes(make(*args, **kwargs), dpi=REPORT_DPI)

@@ -8,6 +8,8 @@ import html
 import json
 import shutil
 import tempfile
+from collections.abc import Callable
+from concurrent.futures import Executor, Future
 from pathlib import Path
 from typing import Any
 
@@ -22,11 +24,16 @@ from ehss.experiments import (
     ModelCheck,
     ProgrammeResult,
 )
-from ehss.experiments.compensation_demo import plot_demo
+from ehss.experiments.pool import collect, submit
 from ehss.identification import ArmaxModel
 from ehss.params import params_to_dict
-from ehss.plots import fixed_layout, png_bytes
-from ehss.report.figures import REPORT_DPI, convergence_figure, loop_figure, step_figure
+from ehss.report.figures import (
+    compensation_figure,
+    convergence_figure,
+    loop_figure,
+    render_png,
+    step_figure,
+)
 from ehss.report.paper_models import PRINTED_MODELS, printed_model_findings
 
 __all__ = ["write_report", "summary_dict"]
@@ -449,15 +456,55 @@ def _inline(text: str) -> str:
     return "".join(f"<em>{p}</em>" if i % 2 else p for i, p in enumerate(parts))
 
 
-def _png(fig: Figure) -> bytes:
-    return png_bytes(fig, dpi=REPORT_DPI)
+#: One figure to draw: file name, the function that makes it, its arguments.
+_Job = tuple[str, Callable[..., Figure], tuple[Any, ...], dict[str, Any]]
 
 
-def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
+def _draw_figures(
+    result: ProgrammeResult, executor: Executor | None
+) -> tuple[dict[str, bytes], dict[str, Future]]:
+    """Every figure of the report as PNG bytes by file name, and those still being drawn.
+
+    With an ``executor``, the compensation figures and the last loop's figure are drawn
+    there (about 2.5 s of drawing on each side) while this process draws the others;
+    take them with :func:`ehss.experiments.pool.collect`.
+    """
+    here: list[_Job] = [("fig12_steps.png", step_figure, (result.steps,), {})]
+    for name, r in result.loops.items():
+        fname, title = FIGURE_TITLES[name]
+        here.append((fname, loop_figure, (r,), {"title": title}))
+    there: list[_Job] = [(COMPENSATION_FIGURES[name], compensation_figure, (demo,), {})
+                         for name, demo in result.compensation.items()]
+    if len(result.loops) > 1:
+        there.append(here.pop())
+    here.append((CONVERGENCE_FIGURE, convergence_figure, (result.loops,), {}))
+    pending: dict[str, Future] = {}
+    if executor is None:
+        here += there
+    else:
+        pending = {fname: submit(executor, render_png, make, *args, **kwargs)
+                   for fname, make, args, kwargs in there}
+    figures = {fname: render_png(make, *args, **kwargs) for fname, make, args, kwargs in here}
+    return figures, pending
+
+
+def write_report(
+    result: ProgrammeResult, out_dir: str | Path, *, executor: Executor | None = None
+) -> Path:
     """Write every output of the programme into ``out_dir``; return the HTML path.
 
     Everything is first written into a temporary folder beside ``out_dir`` and moved into
     place only when complete, so a failure never leaves a half-written report.
+
+    Parameters
+    ----------
+    result : ProgrammeResult
+        From :func:`ehss.experiments.run_programme`.
+    out_dir : str or Path
+        Folder to write (created; files of the same names in it are replaced).
+    executor : Executor, optional
+        A second process to draw part of the figures in
+        (:func:`ehss.experiments.pool.process_pool`); the files are the same without it.
     """
     from ehss.io import write_csv
 
@@ -469,26 +516,17 @@ def write_report(result: ProgrammeResult, out_dir: str | Path) -> Path:
         raise DataError(f"cannot write the report into {str(out_dir)!r}: it is a file")
 
     summary = summary_dict(result)
-    figures = {"fig12_steps.png": _png(step_figure(result.steps))}
-    for name, r in result.loops.items():
-        fname, title = FIGURE_TITLES[name]
-        figures[fname] = _png(loop_figure(r, title=title))
-    figures[CONVERGENCE_FIGURE] = _png(convergence_figure(result.loops))
-    for name, demo in result.compensation.items():
-        fig = plot_demo(demo)
-        # A fixed layout for the 2 × 2 panels: saved with one draw, no layout engine.
-        fixed_layout(fig, left=0.85, right=0.15, bottom=0.5, top=0.35, wspace=0.95,
-                     hspace=0.75)
-        figures[COMPENSATION_FIGURES[name]] = _png(fig)
+    figures, pending = _draw_figures(result, executor)
     md = _markdown(result, summary)
 
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
     try:
         (tmp / "data").mkdir()
-        for fname, data in figures.items():
-            (tmp / fname).write_bytes(data)
         for name, r in result.loops.items():
             write_csv(tmp / "data" / f"{name}.csv", r.sim.to_columns())
+        figures.update({fname: collect(future) for fname, future in pending.items()})
+        for fname, data in figures.items():
+            (tmp / fname).write_bytes(data)
         models = {name: _model_entry(r.paper) for name, r in result.loops.items()}
         (tmp / "models.json").write_text(json.dumps(models, indent=2), encoding="utf-8")
         best = {

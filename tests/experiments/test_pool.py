@@ -1,0 +1,71 @@
+"""A second process gives the same results, warnings and errors as this one."""
+
+from __future__ import annotations
+
+import multiprocessing
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+from ehss.errors import EhssWarning, ParameterError
+from ehss.experiments import demonstrate
+from ehss.experiments.pool import collect, default_jobs, process_pool, submit
+from ehss.report.figures import compensation_figure, render_png
+
+
+@pytest.fixture(scope="module")
+def pool():
+    with process_pool(2) as executor:
+        yield executor
+
+
+def test_one_job_is_this_process_and_bad_counts_are_refused():
+    with process_pool(1) as executor:
+        assert executor is None
+    with pytest.raises(ParameterError, match="jobs=0 must be at least 1"), process_pool(0):
+        pass
+    with pytest.raises(TypeError, match="jobs must be an int"), process_pool(2.0):
+        pass
+    assert 1 <= default_jobs() <= 2
+
+
+def test_warnings_come_back_and_meet_this_process_filters(pool):
+    future = submit(pool, warnings.warn, "drive near its limit", EhssWarning)
+    with pytest.warns(EhssWarning, match="drive near its limit"):
+        assert collect(future) is None
+
+
+def test_errors_come_back_as_themselves(pool):
+    with pytest.raises(ParameterError, match="loop='valve' must be one of"):
+        collect(submit(pool, demonstrate, "valve"))
+
+
+def test_leaving_by_an_error_stops_the_workers_at_once():
+    others = set(multiprocessing.active_children())  # the module's pool, for one
+    with pytest.raises(KeyboardInterrupt), process_pool(2) as executor:
+        workers = [p for p in multiprocessing.active_children() if p not in others]
+        assert len(workers) == 1
+        submit(executor, time.sleep, 600.0)
+        raise KeyboardInterrupt
+    # Awaited, the sleeping worker would still be alive here (for ten minutes).
+    for process in workers:
+        process.join(timeout=60.0)
+        assert not process.is_alive()
+
+
+@pytest.mark.slow
+def test_demonstration_and_its_figure_are_bit_identical_in_a_second_process(pool):
+    # The shortest demonstration the function accepts (4 s records, one learning
+    # iteration): the claim is that where a part runs changes no bit, whatever its length.
+    kw = {"seed": 5, "duration_s": 4.0, "iterations": 1}
+    here = demonstrate("position", **kw)
+    there = collect(submit(pool, demonstrate, "position", **kw))
+    assert there.figures() == here.figures()
+    for name in here.references:
+        np.testing.assert_array_equal(there.outputs_with[name], here.outputs_with[name])
+        np.testing.assert_array_equal(there.drives[name], here.drives[name])
+    np.testing.assert_array_equal(there.h1_with, here.h1_with)
+    png_there = collect(submit(pool, render_png, compensation_figure, here))
+    assert png_there == render_png(compensation_figure, here)
