@@ -349,6 +349,10 @@ def _run(
         spool_direct=spool_direct, stiffness_n_m=stiffness_n_m,
     )
     record = SK.LoopRecord._make(np.empty((len(SK.LoopRecord._fields), n)))
+    if not values.flags.writeable:
+        # numba types a read-only array apart from a writable one and would compile the
+        # loop kernel a second time (seconds) for it; a copy costs microseconds
+        values = values.copy()
     SK.closed_loop(values, noise, x0, settings, record)
     rows = record._asdict()
     aux = rows.pop("aux")
