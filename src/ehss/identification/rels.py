@@ -160,20 +160,21 @@ def _settings(
 
 def _new_state(
     settings: _k.RelsSettings, theta0_scaled: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, _k.RelsState]:
-    """(storage, counters, views): θ̂ = θ0, P = P(0), regressors and counters zero."""
+) -> tuple[np.ndarray, _k.RelsState]:
+    """(block, views): θ̂ = θ0, P = P(0), regressors and counters zero."""
     s = settings
-    storage = np.zeros(_k.storage_size(s.na, s.nb, s.nc, s.delay))
-    counters = np.zeros(_k.N_COUNTERS, dtype=np.int64)
-    views = _k.state_views(storage, s.na, s.nb, s.nc, s.delay)
+    block = _k.new_block(settings)
+    views = _k.state_views(block)
     views.theta[:] = theta0_scaled
     nab = s.na + s.nb + 1
     views.P[:] = np.diag(np.r_[np.full(nab, s.alpha), np.full(s.nc, s.alpha_c)])
-    return storage, counters, views
+    return block, views
 
 
-def _counters(counters: np.ndarray) -> dict[str, int]:
-    return {name: int(v) for name, v in zip(_k.COUNTER_NAMES, counters, strict=True)}
+def _counters(block: np.ndarray) -> dict[str, int]:
+    """The counters of the estimator in ``block``, by name."""
+    counts = block[_k.N_SETTINGS : _k.NOISE_VAR]
+    return {name: int(v) for name, v in zip(_k.COUNTER_NAMES, counts, strict=True)}
 
 
 def _model_from_state(
@@ -351,13 +352,13 @@ def rels(
     err = np.empty(u.size)
     xi = np.empty(u.size)
     hist = np.empty((0, n))
-    totals = np.zeros(_k.N_COUNTERS, dtype=np.int64)
+    totals = dict.fromkeys(_k.COUNTER_NAMES, 0)
     for _ in range(passes):
-        storage, counters, views = _new_state(settings, theta_s)
-        _k.rels_run(settings, storage, counters, us, ys, err, xi, hist, 1)
-        totals += counters
+        block, views = _new_state(settings, theta_s)
+        _k.rels_run(block, us, ys, err, xi, hist, 1)
+        totals = {key: totals[key] + v for key, v in _counters(block).items()}
         theta_s = views.theta.copy()
-    totals_d = _counters(totals)
+    totals_d = dict(totals)
     totals_d.pop("n_samples")
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
     meta = {
@@ -406,9 +407,11 @@ class RelsEstimator:
 
     Notes
     -----
-    :meth:`update` and :meth:`update_many` run the same compiled step as :func:`rels`
-    (one sample per call, or a loop over the block); one :meth:`update` costs about
-    one numba dispatch. :attr:`P` is in scaled units.
+    :meth:`update` and :meth:`update_many` run the same compiled loop as :func:`rels`
+    (a run of one sample per call, or of the whole block); :attr:`P` is in scaled
+    units. :meth:`update` calls the kernel compiled for its one signature directly
+    (numba's ``Dispatcher.compile`` returns that entry point), so a call does not pay
+    the dispatcher's typing of its arguments.
 
     Examples
     --------
@@ -463,7 +466,7 @@ class RelsEstimator:
         if history_every is not None:
             history_every = _order("history_every", history_every, 1)
         self._every = history_every
-        self._kernel = _k.rels_update
+        self._kernel = _k.rels_update.compile(_k.RELS_UPDATE_SIGNATURE)
         self.reset()
 
     # ---------------------------------------------------------------- state
@@ -474,10 +477,7 @@ class RelsEstimator:
             na, nb, nc, delay, self._lam, self._alpha, self._alpha_c, self._trace_bound,
             self._c_radius, self._method,
         )
-        self._storage, self._counters, self._views = _new_state(
-            self._settings, self._theta0 / self._dvec
-        )
-        self._settings_array = _k.settings_array(self._settings)
+        self._block, self._views = _new_state(self._settings, self._theta0 / self._dvec)
         self._hist: list[np.ndarray] = []
         self._since = 0
         if self._every is not None:
@@ -494,12 +494,11 @@ class RelsEstimator:
     @property
     def enabled(self) -> bool:
         """True while the estimator adapts (see :meth:`freeze`)."""
-        return self._settings.enabled
+        return bool(self._block[_k.ENABLED])
 
     @enabled.setter
     def enabled(self, value: bool) -> None:
-        self._settings = self._settings._replace(enabled=bool(value))
-        self._settings_array = _k.settings_array(self._settings)
+        _k.set_enabled(self._block, bool(value))
 
     # ---------------------------------------------------------------- updates
     def update(self, u_k: float, y_k: float) -> float:
@@ -518,8 +517,7 @@ class RelsEstimator:
         """
         if type(u_k) is not float or type(y_k) is not float:
             u_k, y_k = _sample("u_k", u_k), _sample("y_k", y_k)
-        e = self._kernel(self._storage, self._counters, self._settings_array,
-                         u_k * self._inv_us, y_k * self._inv_ys)
+        e = self._kernel(self._block, u_k * self._inv_us, y_k * self._inv_ys)
         if e != e:
             raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
         return e * self._ys
@@ -538,8 +536,8 @@ class RelsEstimator:
         err = np.empty(u.size)
         xi = np.empty(u.size)
         if self._every is None:
-            _k.rels_run(self._settings, self._storage, self._counters, u * self._inv_us,
-                        y * self._inv_ys, err, xi, np.empty((0, self._n)), 1)
+            _k.rels_run(self._block, u * self._inv_us, y * self._inv_ys, err, xi,
+                        np.empty((0, self._n)), 1)
         else:
             # the kernel records every `every` samples from its own start: run the
             # first (every − since) samples separately to keep the phase
@@ -549,9 +547,9 @@ class RelsEstimator:
             rest = u.size - first
             hist = np.empty((rest // self._every, self._n))
             if rest:
-                _k.rels_run(self._settings, self._storage, self._counters,
-                            u[first:] * self._inv_us, y[first:] * self._inv_ys,
-                            err[first:], xi[first:], hist, self._every)
+                _k.rels_run(self._block, u[first:] * self._inv_us,
+                            y[first:] * self._inv_ys, err[first:], xi[first:], hist,
+                            self._every)
             self._hist.extend(list(hist * self._dvec))
             self._since = rest % self._every
         with np.errstate(over="ignore"):  # |e| near float max times y_scale > 1
@@ -578,7 +576,7 @@ class RelsEstimator:
     @property
     def counters(self) -> dict[str, int]:
         """n_samples, resets, c_projections, trace_scalings, skipped."""
-        return _counters(self._counters)
+        return _counters(self._block)
 
     @property
     def model(self) -> ArmaxModel:
@@ -593,9 +591,9 @@ class RelsEstimator:
             "c_radius": self._c_radius,
             "u_scale": self._us,
             "y_scale": self._ys,
-            **_counters(self._counters),
+            **_counters(self._block),
         }
         return _model_from_state(
             self._views, na, nb, nc, delay, self._dt, self._us, self._ys,
-            float(self._views.noise_var[0]), meta,
+            float(self._block[_k.NOISE_VAR]), meta,
         )
