@@ -156,8 +156,13 @@ def set_enabled(block: np.ndarray, enabled: bool) -> None:
 
 
 def state_views(block: np.ndarray) -> RelsState:
-    """The named state arrays of ``block`` (views: writing them writes the block)."""
-    return RelsState(*views(block))
+    """The named state arrays of ``block`` (views: writing them writes the block).
+
+    Runs :func:`views` as the plain Python function it is written as (numpy slicing
+    gives the same views), so that the layout is defined once and nothing is compiled
+    for Python callers.
+    """
+    return RelsState(*views.py_func(block))
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
