@@ -201,7 +201,7 @@ def views(block):
 
 
 # ---------------------------------------------------------------- small helpers
-@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, _nrt=False)
 def _dot(p, q):
     """pᵀq (any summation order: FASTMATH lets LLVM vectorise it)."""
     s = 0.0
@@ -210,7 +210,7 @@ def _dot(p, q):
     return s
 
 
-@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _push_input(u_line, psi, u, na, nb, delay):
     """u_line[j] = u(k−j); ψ̂'s u-part becomes u(k−d)..u(k−d−nb)."""
     for j in range(u_line.shape[0] - 1, 0, -1):
@@ -220,7 +220,7 @@ def _push_input(u_line, psi, u, na, nb, delay):
         psi[na + j] = u_line[delay + j]
 
 
-@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, _nrt=False)
 def _filter_regressor(psi_f, psi, theta, o):
     """RML: ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc), into row 0.
 
@@ -236,7 +236,7 @@ def _filter_regressor(psi_f, psi, theta, o):
             psi_f[0, i] -= cj * psi_f[j, i]
 
 
-@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _shift_regressors(psi, psi_f, na, nc, rml, y, xi):
     """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: _push_input);
     RML: ψ_f(k) becomes ψ_f((k+1)−1) (rows move down by one)."""
@@ -256,7 +256,7 @@ def _shift_regressors(psi, psi_f, na, nc, rml, y, xi):
 
 
 # ---------------------------------------------------------------- the C check
-@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _c_within(theta, o, nc, radius, cw):
     """True if all roots of z^nc + c1 z^(nc−1) + … + c_nc lie strictly inside ``radius``.
 
@@ -380,7 +380,7 @@ def _project_c(c, radius, work):
 
 
 # ---------------------------------------------------------------- eqs (21)–(22)
-@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, _nrt=False)
 def _gain(P, r, g):
     """g = P r for symmetric P, as g += P[j, :] r_j (row axpys, which vectorise)."""
     n = r.shape[0]
@@ -392,7 +392,7 @@ def _gain(P, r, g):
             g[i] += P[j, i] * rj
 
 
-@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, _nrt=False)
 def _update_P_and_gain(P, w, inv_lam, r, g):
     """(22) P(k−1) = P(k−2)/λ − w wᵀ and, in the same pass, g = P(k−1) r(k).
 
