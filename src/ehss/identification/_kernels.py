@@ -364,9 +364,9 @@ def _project_c(c, radius, work):
             zr, zi = zr * (radius / r), zi * (radius / r)
         re[i], im[i] = zr, zi
     # rebuild the monic polynomial Π (z − z_i): p_j ← p_j − z_i p_{j−1}
-    pr[:] = 0.0
-    pi[:] = 0.0
-    pr[0] = 1.0
+    for j in range(nc + 1):
+        pr[j] = 1.0 if j == 0 else 0.0
+        pi[j] = 0.0
     for i in range(nc):
         for j in range(i + 1, 0, -1):
             pr[j], pi[j] = (pr[j] - (re[i] * pr[j - 1] - im[i] * pi[j - 1]),
@@ -375,8 +375,9 @@ def _project_c(c, radius, work):
     for j in range(nc):
         c[j] = pr[j + 1]
         finite = finite and np.isfinite(c[j])
-    if not finite:  # Ĉ beyond float64 (adversarial data): C = 1
-        c[:] = 0.0
+    for j in range(nc):
+        if not finite:  # Ĉ beyond float64 (adversarial data): C = 1
+            c[j] = 0.0
 
 
 # ---------------------------------------------------------------- eqs (21)–(22)
