@@ -105,6 +105,8 @@ class RelsSettings(NamedTuple):
     c_radius: float  # roots of Ĉ kept inside this radius
     rml: bool  # True: RML (needs nc > 0), False: RELS
     enabled: bool  # False: θ̂ and P frozen, regressors still run
+    u_scale: float = 1.0  # streaming (rels_update): u/u_scale is what the step sees
+    y_scale: float = 1.0  # streaming: y/y_scale likewise, e returned times y_scale
 
 
 #: block[SETTINGS] holds the RelsSettings fields in order (booleans as 0.0 / 1.0)
@@ -171,7 +173,7 @@ def settings_of(block):
     """The :class:`RelsSettings` stored at the start of ``block``."""
     return RelsSettings(int(block[0]), int(block[1]), int(block[2]), int(block[3]),
                         block[4], block[5], block[6], block[7], block[8],
-                        block[9] != 0.0, block[10] != 0.0)
+                        block[9] != 0.0, block[10] != 0.0, block[11], block[12])
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -632,16 +634,21 @@ RELS_UPDATE_SIGNATURE = (types.float64[::1], types.float64, types.float64)
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def rels_update(block, u, y):
-    """Streaming entry point: one sample (scaled), a run of one; returns e(k).
+    """Streaming entry point: one sample in physical units, a run of one; returns e(k)
+    in physical units.
 
-    Returns NaN only if ``u`` or ``y`` is not finite, in which case the state is
-    left untouched; the Python wrapper turns that into a DataError.
+    The step sees u/u_scale and y/y_scale (the settings' streaming scales, applied
+    here so that the Python wrapper has nothing to do per sample). Returns NaN only
+    if the scaled ``u`` or ``y`` is not finite, in which case the state is left
+    untouched; the Python wrapper turns that into a DataError.
     """
-    if not (np.isfinite(u) and np.isfinite(y)):
+    u_scaled = u * (1.0 / block[11])  # u / u_scale
+    y_scaled = y * (1.0 / block[12])  # y / y_scale
+    if not (np.isfinite(u_scaled) and np.isfinite(y_scaled)):
         return np.nan
     io = block[block.size - 4 :]  # the last view of the block (see views)
-    io[0] = u
-    io[1] = y
+    io[0] = u_scaled
+    io[1] = y_scaled
     one = io[0:1]  # hist_every: its length, a value numba does not specialise on
     rels_run(block, one, io[1:2], io[2:3], io[3:4], io.reshape((4, 1))[:0], one.size)
-    return io[2]
+    return io[2] * block[12]

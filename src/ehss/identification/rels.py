@@ -148,13 +148,14 @@ def _theta_scale(na: int, nb: int, nc: int, u_scale: float, y_scale: float) -> n
 def _settings(
     na: int, nb: int, nc: int, delay: int, lam: float, alpha: float, alpha_c: float,
     trace_bound: float, c_radius: float, method: str, enabled: bool = True,
+    u_scale: float = 1.0, y_scale: float = 1.0,
 ) -> _k.RelsSettings:
     """The kernel's settings, as plain Python scalars (one compiled signature)."""
     return _k.RelsSettings(
         na=int(na), nb=int(nb), nc=int(nc), delay=int(delay), lam=float(lam),
         alpha=float(alpha), alpha_c=float(alpha_c), trace_max=float(trace_bound),
         c_radius=float(c_radius), rml=bool(method == "rml" and nc > 0),
-        enabled=bool(enabled),
+        enabled=bool(enabled), u_scale=float(u_scale), y_scale=float(y_scale),
     )
 
 
@@ -475,7 +476,7 @@ class RelsEstimator:
         na, nb, nc, delay = self._orders
         self._settings = _settings(
             na, nb, nc, delay, self._lam, self._alpha, self._alpha_c, self._trace_bound,
-            self._c_radius, self._method,
+            self._c_radius, self._method, u_scale=self._us, y_scale=self._ys,
         )
         self._block, self._views = _new_state(self._settings, self._theta0 / self._dvec)
         self._hist: list[np.ndarray] = []
@@ -517,10 +518,10 @@ class RelsEstimator:
         """
         if type(u_k) is not float or type(y_k) is not float:
             u_k, y_k = _sample("u_k", u_k), _sample("y_k", y_k)
-        e = self._kernel(self._block, u_k * self._inv_us, y_k * self._inv_ys)
+        e = self._kernel(self._block, u_k, y_k)  # scales u_k, y_k and e itself
         if e != e:
             raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
-        return e * self._ys
+        return e
 
     def _update_with_history(self, u_k: float, y_k: float) -> float:
         e = RelsEstimator.update(self, u_k, y_k)
