@@ -57,7 +57,8 @@ for method, lam in (("rels", 1.0), ("rels", 0.99), ("rml", 1.0)):
         def make():
             s = R._settings(na, nb, nc, 1, lam, 1e6, 1e6, n * 1e6, 0.99, method)
             block, _ = R._new_state(s, np.zeros(n))
-            return lambda uu, yy, e, x: K.rels_run(block, uu, yy, e, x, np.empty((0, n)), 1)
+            return lambda uu, yy, e, x: K.rels_run(block, uu, yy, e, x, np.empty((0, n)),
+                                                   1, True)
     elif hasattr(K, "RelsSettings"):  # one step function, typed settings
         def make():
             s = R._settings(na, nb, nc, 1, lam, 1e6, 1e6, n * 1e6, 0.99, method)

@@ -14,7 +14,7 @@ from .systems import armax_data, system
 
 def _block(block, u, y, n):
     err, xi = np.empty(u.size), np.empty(u.size)
-    K.rels_run(block, u, y, err, xi, np.empty((0, n)), 1)
+    K.rels_run(block, u, y, err, xi, np.empty((0, n)), 1, True)
     return err, xi
 
 

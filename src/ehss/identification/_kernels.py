@@ -50,9 +50,10 @@ boundary costs time to type and unbox, and the block is the only array it passes
 P is read twice per sample: by the gain g(k) = P(k−1) r(k) and by the update (22)
 that makes P(k). The loop applies the update of sample k−1 at the start of sample k,
 in the same pass over P that forms g(k), so that P is read and written once per
-sample; between samples it keeps w = g √(1/(λ den)) of the pending update. A run
-(a whole record, or one streaming sample) ends by applying the last pending update,
-so that between runs the block always holds P(k).
+sample; between samples it keeps w = g √(1/(λ den)) of the pending update. A batch
+run ends by applying the last pending update (``settle``), so that the block then
+holds P(k); a streaming sample leaves it pending for the next one (one pass over P
+per sample), and readers of P settle it first with a run of no samples.
 
 Safeguards (all kept from the paper's reading in PAPER.md §3)
 ------------------------------------------------------------
@@ -120,9 +121,12 @@ TRACE_SCALINGS = 3  # P scaled down to tr P = trace_max
 SKIPPED = 4  # samples that did not update θ̂ (frozen, non-finite or overflowing step)
 COUNTER_NAMES = ("n_samples", "resets", "c_projections", "trace_scalings", "skipped")
 COUNTERS = slice(N_SETTINGS, N_SETTINGS + len(COUNTER_NAMES))
-#: block[NOISE_VAR]: running mean of ξ̂²; the state arrays follow
+#: block[NOISE_VAR]: running mean of ξ̂²
 NOISE_VAR = COUNTERS.stop
-HEADER = NOISE_VAR + 1
+#: block[PENDING]: 1.0 while the (22) of the last sample is not applied (see above)
+PENDING = NOISE_VAR + 1
+#: the state arrays follow the header
+HEADER = PENDING + 1
 
 
 class RelsState(NamedTuple):
@@ -592,7 +596,7 @@ def _sample(s, block, counters, st, pending, u, y):
 
 # ---------------------------------------------------------------- entry points
 @njit(cache=True, error_model="numpy", _nrt=False)
-def rels_run(block, u, y, err, xi_out, hist, hist_every):
+def rels_run(block, u, y, err, xi_out, hist, hist_every, settle):
     """Run the estimator in ``block`` over a record (batch RELS or RML).
 
     Parameters
@@ -604,14 +608,17 @@ def rels_run(block, u, y, err, xi_out, hist, hist_every):
     hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
         (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
     hist_every : int ≥ 1
+    settle : bool
+        Apply the last sample's pending (22) at the end, so that the block holds
+        P(k) (True for every caller but the streaming step; a run of no samples with
+        ``settle`` only does that).
     """
     s = settings_of(block)
     counters = block[N_SETTINGS:NOISE_VAR]
     st = views(block)
     theta, P, psi, g, w, u_line, c_work, psi_f, io = st
-    # (22) of the previous sample not yet applied (w holds it): none yet. (False as a
-    # runtime value: a literal False would make numba compile _sample once more.)
-    pending = counters[COUNT] < 0.0
+    # (22) of the previous sample not yet applied (w holds it)
+    pending = block[PENDING] != 0.0
     countdown = hist_every
     row = 0
     for k in range(u.shape[0]):
@@ -623,9 +630,11 @@ def rels_run(block, u, y, err, xi_out, hist, hist_every):
                 for i in range(hist.shape[1]):
                     hist[row, i] = theta[i]
                 row += 1
-    # the last pending (22), so that between runs the block holds P(k)
-    r = psi_f[0] if s.rml else psi
-    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
+    if settle and pending:  # the last pending (22): the block holds P(k)
+        r = psi_f[0] if s.rml else psi
+        _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
+        pending = False
+    block[PENDING] = 1.0 if pending else 0.0
 
 
 #: the one signature of :func:`rels_update`: (block, u, y)
@@ -649,6 +658,10 @@ def rels_update(block, u, y):
     io = block[block.size - 4 :]  # the last view of the block (see views)
     io[0] = u_scaled
     io[1] = y_scaled
-    one = io[0:1]  # hist_every: its length, a value numba does not specialise on
-    rels_run(block, one, io[1:2], io[2:3], io[3:4], io.reshape((4, 1))[:0], one.size)
+    # no history (hist_every: the run's length) and no settle; both passed as values
+    # computed at run time, since a literal would make numba compile rels_run again
+    one = io[0:1]
+    no_settle = one.size == 0
+    rels_run(block, one, io[1:2], io[2:3], io[3:4], io.reshape((4, 1))[:0], one.size,
+             no_settle)
     return io[2] * block[12]

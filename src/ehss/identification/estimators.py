@@ -170,9 +170,9 @@ def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: 
     no_hist = np.empty((0, n))
     # adaptation held while the regressors fill (as RelsEstimator.freeze), then on
     _k.set_enabled(block, False)
-    _k.rels_run(block, us[:warm], ys[:warm], err[:warm], xi[:warm], no_hist, 1)
+    _k.rels_run(block, us[:warm], ys[:warm], err[:warm], xi[:warm], no_hist, 1, True)
     _k.set_enabled(block, True)
-    _k.rels_run(block, us[warm:], ys[warm:], err[warm:], xi[warm:], no_hist, 1)
+    _k.rels_run(block, us[warm:], ys[warm:], err[warm:], xi[warm:], no_hist, 1, True)
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
     counts = _counters(block)
     counts.pop("n_samples", None)

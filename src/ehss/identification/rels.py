@@ -356,7 +356,7 @@ def rels(
     totals = dict.fromkeys(_k.COUNTER_NAMES, 0)
     for _ in range(passes):
         block, views = _new_state(settings, theta_s)
-        _k.rels_run(block, us, ys, err, xi, hist, 1)
+        _k.rels_run(block, us, ys, err, xi, hist, 1, True)
         totals = {key: totals[key] + v for key, v in _counters(block).items()}
         theta_s = views.theta.copy()
     totals_d = dict(totals)
@@ -538,7 +538,7 @@ class RelsEstimator:
         xi = np.empty(u.size)
         if self._every is None:
             _k.rels_run(self._block, u * self._inv_us, y * self._inv_ys, err, xi,
-                        np.empty((0, self._n)), 1)
+                        np.empty((0, self._n)), 1, True)
         else:
             # the kernel records every `every` samples from its own start: run the
             # first (every − since) samples separately to keep the phase
@@ -550,13 +550,19 @@ class RelsEstimator:
             if rest:
                 _k.rels_run(self._block, u[first:] * self._inv_us,
                             y[first:] * self._inv_ys, err[first:], xi[first:], hist,
-                            self._every)
+                            self._every, True)
             self._hist.extend(list(hist * self._dvec))
             self._since = rest % self._every
         with np.errstate(over="ignore"):  # |e| near float max times y_scale > 1
             return err * self._ys
 
     # ---------------------------------------------------------------- results
+    def _settle(self) -> None:
+        """Apply the last sample's pending P update (a run of no samples)."""
+        empty = np.empty(0)
+        _k.rels_run(self._block, empty, empty, empty, empty, np.empty((0, self._n)), 1,
+                    True)
+
     @property
     def theta(self) -> np.ndarray:
         """Current θ̂ = [a1..a_na, b0..b_nb, c1..c_nc] in physical units (a copy)."""
@@ -565,6 +571,7 @@ class RelsEstimator:
     @property
     def P(self) -> np.ndarray:  # noqa: N802 - the paper's symbol
         """Current P(k) (a copy, in the scaled units the estimator works in)."""
+        self._settle()
         return self._views.P.copy()
 
     @property
@@ -577,12 +584,14 @@ class RelsEstimator:
     @property
     def counters(self) -> dict[str, int]:
         """n_samples, resets, c_projections, trace_scalings, skipped."""
+        self._settle()  # the pending P update's guards may count
         return _counters(self._block)
 
     @property
     def model(self) -> ArmaxModel:
         """The current estimate as an :class:`ArmaxModel` (no stability warning)."""
         na, nb, nc, delay = self._orders
+        self._settle()
         meta = {
             "method": f"{self._method}-streaming",
             "forgetting": self._lam,
