@@ -53,7 +53,13 @@ R = importlib.import_module("ehss.identification.rels")
 na, nb, nc, n = 6, 6, 4, 17
 out = {}
 for method, lam in (("rels", 1.0), ("rels", 0.99), ("rml", 1.0)):
-    if hasattr(K, "RelsSettings"):  # one step function, typed settings
+    if hasattr(K, "new_block"):  # one loop, the estimator in one block
+        def make():
+            s = R._settings(na, nb, nc, 1, lam, 1e6, 1e6, n * 1e6, 0.99, method)
+            block, _ = R._new_state(s, np.zeros(n))
+            return lambda uu, yy, e, x: K.rels_run(block, uu, yy, e, x, np.empty((0, n)),
+                                                   1, True)
+    elif hasattr(K, "RelsSettings"):  # one step function, typed settings
         def make():
             s = R._settings(na, nb, nc, 1, lam, 1e6, 1e6, n * 1e6, 0.99, method)
             storage, counters, _ = R._new_state(s, np.zeros(n))

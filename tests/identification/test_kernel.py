@@ -38,10 +38,10 @@ def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=
     ac = alpha if alpha_c is None else alpha_c
     tb = (na + nb + 1) * alpha + nc * ac if trace_bound is None else trace_bound
     settings = _settings(na, nb, nc, delay, lam, alpha, ac, tb, c_radius, method)
-    storage, counters, views = _new_state(settings, np.zeros(n))
+    block, views = _new_state(settings, np.zeros(n))
     err, xi = np.empty(u.size), np.empty(u.size)
-    K.rels_run(settings, storage, counters, u, y, err, xi, np.empty((0, n)), 1)
-    return views.theta.copy(), views.P.copy(), err, xi, _counters(counters), views
+    K.rels_run(block, u, y, err, xi, np.empty((0, n)), 1, True)
+    return views.theta.copy(), views.P.copy(), err, xi, _counters(block), views
 
 
 def _assert_close_to_exact(got, ref64, exact, name):
@@ -160,13 +160,15 @@ def test_rml_reset_clears_filtered_history(rng):
     u, y = u / np.std(u), y / np.std(y)
     n = na + nb + 1 + nc
     settings = _settings(na, nb, nc, d, 1.0, 1e3, 1e3, n * 1e3, 0.99, "rml")
-    storage, counters, views = _new_state(settings, np.zeros(n))
+    block, views = _new_state(settings, np.zeros(n))
     err, xi = np.empty(300), np.empty(300)
-    K.rels_run(settings, storage, counters, u[:300], y[:300], err, xi, np.empty((0, n)), 1)
+    K.rels_run(block, u[:300], y[:300], err, xi, np.empty((0, n)), 1, True)
     assert np.any(views.psi_f[1:] != 0.0)  # the filter carries history
     views.P[:] = -np.eye(n)  # indefinite: ψ_fᵀPψ_f < 0 on the next sample
-    K.rels_update(storage, counters, K.settings_array(settings), u[300], y[300])
-    assert counters[K.RESETS] == 1
+    K.rels_update(block, u[300], y[300])
+    empty = np.empty(0)  # a run of no samples applies the pending P update
+    K.rels_run(block, empty, empty, empty, empty, np.empty((0, n)), 1, True)
+    assert _counters(block)["resets"] == 1
     # after the reset ψ_f(300) = ψ̂(300) (zero history), now shifted into row 1
     psi_300 = np.r_[-y[299], -y[298], u[299], u[298], xi[299], xi[298]]
     assert_allclose(views.psi_f[1], psi_300, rtol=0, atol=0)
@@ -201,31 +203,41 @@ def test_schur_cohn_matches_roots(c):
         assert K._c_within(theta, 2, c.size, radius, np.zeros(c.size + 1)) == expect
 
 
-def test_settings_round_trip_through_their_array():
+def test_settings_round_trip_through_the_block():
     s = _settings(3, 2, 1, 2, 0.99, 1e6, 1e2, 5e6, 0.9, "rml", enabled=False)
-    assert K.settings_from_array(K.settings_array(s)) == s
+    block = K.new_block(s)
+    assert K.settings_of(block) == s
+    K.set_enabled(block, True)
+    assert K.settings_of(block) == s._replace(enabled=True)
 
 
-def test_state_views_cover_the_storage_once():
-    # every float of the block belongs to exactly one named view, in order
-    na, nb, nc, d = 3, 2, 2, 2
-    storage = np.arange(K.storage_size(na, nb, nc, d), dtype=float)
-    views = K.state_views(storage, na, nb, nc, d)
+def test_state_views_cover_the_block_once():
+    # after the header (settings, counters, noise variance) every float of the block
+    # belongs to exactly one named view, in order
+    s = _settings(3, 2, 2, 2, 1.0, 1e6, 1e6, 8e6, 0.99, "rels")
+    block = K.new_block(s)
+    block[K.HEADER :] = np.arange(block.size - K.HEADER)
+    views = K.state_views(block)
     flat = np.concatenate([v.ravel() for v in views])
-    assert_allclose(flat, storage, rtol=0, atol=0)
+    assert_allclose(flat, block[K.HEADER :], rtol=0, atol=0)
 
 
 def test_poly_roots_match_numpy(rng):
     # simple roots: the iteration converges quadratically, to a few eps of the roots'
     # magnitude like np.roots' eigenvalues (1e-12 leaves 4 digits of margin); a double
     # root is ill-conditioned for any method: ~√eps ≈ 1.5e-8, 1e-7 allowed
+    def roots(c):
+        re, im = np.empty(c.size), np.empty(c.size)
+        K._poly_roots(c, re, im)
+        return re + 1j * im
+
     for nc in range(1, 9):
         for _ in range(20):
             c = rng.standard_normal(nc) * rng.choice([0.1, 1.0, 3.0])
-            got = K._poly_roots(c)
+            got = roots(c)
             ref = np.roots(np.r_[1.0, c])
             scale = max(1.0, np.max(np.abs(ref)))
             for z in ref:
                 assert np.min(np.abs(got - z)) <= 1e-12 * scale
-    double = K._poly_roots(np.array([-1.8, 0.81]))  # (z − 0.9)²
+    double = roots(np.array([-1.8, 0.81]))  # (z − 0.9)²
     assert_allclose(double, [0.9, 0.9], atol=1e-7)

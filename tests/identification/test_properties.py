@@ -12,10 +12,9 @@ from ehss.identification.rels import RelsEstimator, _new_state, _settings
 from .systems import armax_data, system
 
 
-def _block(state, u, y, n):
-    settings, storage, counters = state
+def _block(block, u, y, n):
     err, xi = np.empty(u.size), np.empty(u.size)
-    K.rels_run(settings, storage, counters, u, y, err, xi, np.empty((0, n)), 1)
+    K.rels_run(block, u, y, err, xi, np.empty((0, n)), 1, True)
     return err, xi
 
 
@@ -26,8 +25,7 @@ def test_p_spd_and_bounded_through_a_million_samples_of_constant_input(level, se
     na, nb, nc, n = 2, 1, 1, 5
     alpha = 1e3
     settings = _settings(na, nb, nc, 1, 0.99, alpha, alpha, n * alpha, 0.99, "rels")
-    storage, counters, views = _new_state(settings, np.zeros(n))
-    state = (settings, storage, counters)
+    state, views = _new_state(settings, np.zeros(n))
     a, b, c = system(2)
     u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=40.0)
     _block(state, u, y, n)

@@ -1,11 +1,10 @@
 """Numba kernels of recursive extended least squares (RELS), eqs (19)–(22), and RML.
 
-One step function, :func:`_step`, runs one sample; the streaming estimator calls it
-through :func:`rels_update` (one sample per call) and the batch functions through
-:func:`rels_run` (a loop over the record). The kernels do no validation:
-:mod:`ehss.identification.rels` does.
+One loop, :func:`rels_run`, runs the estimator over a record; the streaming estimator
+calls it through :func:`rels_update`, a run of one sample. So the per-sample code
+exists once. The kernels do no validation: :mod:`ehss.identification.rels` does.
 
-Two estimators share the step, selected by ``RelsSettings.rml``:
+Two estimators share the loop, selected by ``RelsSettings.rml``:
 
 * RELS (the paper's eqs 19–22): the gain and the P update are driven by ψ̂(k);
 * RML: recursive maximum likelihood, i.e. the recursive prediction-error method for
@@ -25,8 +24,9 @@ paper              code        meaning
 θ̂(k)               theta       [a1..a_na, b0..b_nb, c1..c_nc], n entries
 ψ̂(k)               psi         [−y(k−1)..−y(k−na), u(k−d)..u(k−d−nb),
                                ξ̂(k−1)..ξ̂(k−nc)]
+r(k)               r           regressor of (21)–(22): ψ̂(k) (RELS), ψ_f(k) (RML)
 P(k)               P           covariance-like gain matrix, shape (n, n)
-P(k−1)ψ̂(k)         g           shared by eqs (21) and (22)
+P(k−1) r(k)        g           shared by eqs (21) and (22)
 λ (printed "r")    lam         forgetting factor
 α, α_c             alpha,      P(0) = diag(α … α, α_c … α_c): α for the a- and
                    alpha_c     b-parts, α_c for the c-part (α_c = α is the paper's αI)
@@ -34,17 +34,27 @@ P(k−1)ψ̂(k)         g           shared by eqs (21) and (22)
 ψ_f(k−j)           psi_f[j]    RML: ψ̂ filtered through 1/Ĉ(q⁻¹), j = 0..nc
 =================  ==========  ==============================================
 
-State
------
-The settings are a :class:`RelsSettings` (orders and scalars, immutable); the state is
-a :class:`RelsState` of named arrays, and the counters an int64 array indexed by
-:data:`COUNT`, :data:`RESETS`, :data:`C_PROJECTIONS`, :data:`TRACE_SCALINGS` and
-:data:`SKIPPED`. The arrays of a :class:`RelsState` are views into one float64
-block (:func:`storage_size`, :func:`state_views`): every argument crossing the
-Python → numba boundary costs time to type and unbox (≈ 0.1 µs an array, ≈ 2 µs a
-NamedTuple), so the streaming estimator passes three arrays per sample: the block,
-the counters and the settings packed in field order (:func:`settings_array`). Inside
-the kernels only the named views and the settings' fields are used.
+The block
+---------
+An estimator lives in one float64 array, its *block*: the settings (a
+:class:`RelsSettings`, fields in order), the counters (indices :data:`COUNT`,
+:data:`RESETS`, :data:`C_PROJECTIONS`, :data:`TRACE_SCALINGS`, :data:`SKIPPED`), the
+running noise variance, the pending flag (below), then the state arrays. Inside the
+kernels nothing else is read by index: :func:`settings_of` gives the settings as a
+:class:`RelsSettings` and :func:`views` the state as named arrays (the one definition
+of the layout). One array is what makes the streaming call cheap: every argument
+crossing the Python → numba boundary costs time to unbox, and the block is the only
+array it passes.
+
+(22) one sample late
+--------------------
+P is read twice per sample: by the gain g(k) = P(k−1) r(k) and by the update (22)
+that makes P(k). The loop applies the update of sample k−1 at the start of sample k,
+in the same pass over P that forms g(k), so that P is read and written once per
+sample; between samples it keeps w = g √(1/(λ den)) of the pending update. A batch
+run ends by applying the last pending update (``settle``), so that the block then
+holds P(k); a streaming sample leaves it pending for the next one (one pass over P
+per sample), and readers of P settle it first with a run of no samples.
 
 Safeguards (all kept from the paper's reading in PAPER.md §3)
 ------------------------------------------------------------
@@ -56,6 +66,20 @@ Safeguards (all kept from the paper's reading in PAPER.md §3)
 * Ĉ(q⁻¹) is kept inside ``c_radius`` (Rouché bound, then an exact Schur–Cohn test;
   roots reflected and shrunk only when it left);
 * a step K e that would overflow is skipped and counted.
+
+Compilation
+-----------
+The kernels allocate nothing (work space is in the block), so they are compiled
+without numba's reference counting (``_nrt=False``): arrays are borrowed from the
+caller for the duration of a call, and a sample no longer pays the atomic increments
+and decrements that every array crossing a call costs (about fifty a sample before,
+a third of its time). The per-sample path (:func:`_sample` and the three steps it
+calls) is inlined by numba into the loop (``inline="always"``); the small leaf
+helpers are compiled once and called (inlining them too was ≈ 10 % faster but cost
+3–5 s of cold compile); the rare paths (:func:`_restart`, :func:`_project_c`) stay
+separate calls. No complex arithmetic (slow to compile), no fastmath (measured: no
+gain). Literal constants are never passed to a kernel: numba would compile the
+callee once more for each literal. BENCHMARKS.md has the measurements.
 """
 
 from __future__ import annotations
@@ -63,25 +87,16 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 __all__: list[str] = []  # private module: the public API is in rels.py
-
-#: indices of the int64 counters array
-COUNT = 0  # samples processed
-RESETS = 1  # P reset to P(0)
-C_PROJECTIONS = 2  # Ĉ moved back inside c_radius
-TRACE_SCALINGS = 3  # P scaled down to tr P = trace_max
-SKIPPED = 4  # samples that did not update θ̂ (frozen, non-finite or overflowing step)
-N_COUNTERS = 5
-COUNTER_NAMES = ("n_samples", "resets", "c_projections", "trace_scalings", "skipped")
 
 #: δ = EPS_FLOOR · n · tr P is added to P's diagonal after each update when λ < 1
 EPS_FLOOR = 8.0 * 2.220446049250313e-16
 
 
 class RelsSettings(NamedTuple):
-    """Orders and scalar settings of one estimator (immutable while it runs)."""
+    """Orders and scalar settings of one estimator, the first entries of its block."""
 
     na: int
     nb: int
@@ -94,53 +109,109 @@ class RelsSettings(NamedTuple):
     c_radius: float  # roots of Ĉ kept inside this radius
     rml: bool  # True: RML (needs nc > 0), False: RELS
     enabled: bool  # False: θ̂ and P frozen, regressors still run
+    u_scale: float = 1.0  # streaming (rels_update): u/u_scale is what the step sees
+    y_scale: float = 1.0  # streaming: y/y_scale likewise, e returned times y_scale
+
+
+#: block[SETTINGS] holds the RelsSettings fields in order (booleans as 0.0 / 1.0)
+N_SETTINGS = len(RelsSettings._fields)
+ENABLED = RelsSettings._fields.index("enabled")
+#: counters, block[COUNTERS]: indices into that slice
+COUNT = 0  # samples processed
+RESETS = 1  # P reset to P(0)
+C_PROJECTIONS = 2  # Ĉ moved back inside c_radius
+TRACE_SCALINGS = 3  # P scaled down to tr P = trace_max
+SKIPPED = 4  # samples that did not update θ̂ (frozen, non-finite or overflowing step)
+COUNTER_NAMES = ("n_samples", "resets", "c_projections", "trace_scalings", "skipped")
+COUNTERS = slice(N_SETTINGS, N_SETTINGS + len(COUNTER_NAMES))
+#: block[NOISE_VAR]: running mean of ξ̂²
+NOISE_VAR = COUNTERS.stop
+#: block[PENDING]: 1.0 while the (22) of the last sample is not applied (see above)
+PENDING = NOISE_VAR + 1
+#: the state arrays follow the header
+HEADER = PENDING + 1
 
 
 class RelsState(NamedTuple):
-    """The estimator's arrays (views into one float64 block, see :func:`state_views`)."""
+    """The estimator's arrays, views into its block (see :func:`views`)."""
 
     theta: np.ndarray  # θ̂, shape (n,)
     P: np.ndarray  # P, shape (n, n)
     psi: np.ndarray  # ψ̂ of the next sample (u-part filled on its arrival), (n,)
-    g: np.ndarray  # work: P r, (n,)
+    g: np.ndarray  # P r, (n,)
+    w: np.ndarray  # pending (22): P(k) = P(k−1)/λ − w wᵀ, (n,)
     u_line: np.ndarray  # u_line[j] = u(k−j), (delay + nb + 1,)
-    c_work: np.ndarray  # work of the Schur–Cohn test, (nc + 1,)
+    c_work: np.ndarray  # work of the C check and projection, (4 (nc + 1),)
     psi_f: np.ndarray  # RML: rows ψ_f(k), ψ_f(k−1)..ψ_f(k−nc), (nc + 1, n)
-    noise_var: np.ndarray  # running mean of ξ̂², (1,)
+    io: np.ndarray  # the streaming sample: u, y in; e, ξ̂ out, (4,)
 
 
-def storage_size(na: int, nb: int, nc: int, delay: int) -> int:
-    """Length of the float64 block that holds a :class:`RelsState`."""
+def block_size(na: int, nb: int, nc: int, delay: int) -> int:
+    """Length of the float64 block of an estimator with these orders."""
     n = na + nb + 1 + nc
-    return n + n * n + n + n + (delay + nb + 1) + (nc + 1) + (nc + 1) * n + 1
+    return HEADER + n + n * n + 3 * n + (delay + nb + 1) + 4 * (nc + 1) + (nc + 1) * n + 4
 
 
-@njit(cache=True, error_model="numpy")
-def state_views(storage, na, nb, nc, delay):
-    """The :class:`RelsState` views into ``storage`` (the one definition of the layout)."""
+def new_block(settings: RelsSettings) -> np.ndarray:
+    """A zeroed block holding ``settings`` (θ̂ = 0, P = 0: the caller sets P(0))."""
+    s = settings
+    block = np.zeros(block_size(s.na, s.nb, s.nc, s.delay))
+    block[:N_SETTINGS] = [float(v) for v in settings]
+    return block
+
+
+def set_enabled(block: np.ndarray, enabled: bool) -> None:
+    """Freeze (False) or resume (True) adaptation of the estimator in ``block``."""
+    block[ENABLED] = 1.0 if enabled else 0.0
+
+
+def state_views(block: np.ndarray) -> RelsState:
+    """The named state arrays of ``block`` (views: writing them writes the block).
+
+    Runs :func:`views` as the plain Python function it is written as (numpy slicing
+    gives the same views), so that the layout is defined once and nothing is compiled
+    for Python callers.
+    """
+    return RelsState(*views.py_func(block))
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def settings_of(block):
+    """The :class:`RelsSettings` stored at the start of ``block``."""
+    return RelsSettings(int(block[0]), int(block[1]), int(block[2]), int(block[3]),
+                        block[4], block[5], block[6], block[7], block[8],
+                        block[9] != 0.0, block[10] != 0.0, block[11], block[12])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def views(block):
+    """The state arrays of ``block``, in :class:`RelsState` order (the layout)."""
+    na, nb, nc, delay = int(block[0]), int(block[1]), int(block[2]), int(block[3])
     n = na + nb + 1 + nc
     nu = delay + nb + 1
-    o = 0
-    theta = storage[o : o + n]
+    o = HEADER
+    theta = block[o : o + n]
     o += n
-    P = storage[o : o + n * n].reshape((n, n))
+    P = block[o : o + n * n].reshape((n, n))
     o += n * n
-    psi = storage[o : o + n]
+    psi = block[o : o + n]
     o += n
-    g = storage[o : o + n]
+    g = block[o : o + n]
     o += n
-    u_line = storage[o : o + nu]
+    w = block[o : o + n]
+    o += n
+    u_line = block[o : o + nu]
     o += nu
-    c_work = storage[o : o + nc + 1]
-    o += nc + 1
-    psi_f = storage[o : o + (nc + 1) * n].reshape((nc + 1, n))
+    c_work = block[o : o + 4 * (nc + 1)]
+    o += 4 * (nc + 1)
+    psi_f = block[o : o + (nc + 1) * n].reshape((nc + 1, n))
     o += (nc + 1) * n
-    noise_var = storage[o : o + 1]
-    return RelsState(theta, P, psi, g, u_line, c_work, psi_f, noise_var)
+    io = block[o : o + 4]
+    return theta, P, psi, g, w, u_line, c_work, psi_f, io
 
 
 # ---------------------------------------------------------------- small helpers
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _dot(p, q):
     """pᵀq, in four partial sums.
 
@@ -163,17 +234,7 @@ def _dot(p, q):
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True, error_model="numpy")
-def _reset_P(P, nab, alpha, alpha_c):
-    """P = P(0) = diag(α (first nab entries), α_c (the rest))."""
-    n = P.shape[0]
-    for i in range(n):
-        for j in range(n):
-            P[i, j] = 0.0
-        P[i, i] = alpha if i < nab else alpha_c
-
-
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _push_input(u_line, psi, u, na, nb, delay):
     """u_line[j] = u(k−j); ψ̂'s u-part becomes u(k−d)..u(k−d−nb)."""
     for j in range(u_line.shape[0] - 1, 0, -1):
@@ -183,7 +244,7 @@ def _push_input(u_line, psi, u, na, nb, delay):
         psi[na + j] = u_line[delay + j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _filter_regressor(psi_f, psi, theta, o):
     """RML: ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc), into row 0.
 
@@ -199,25 +260,10 @@ def _filter_regressor(psi_f, psi, theta, o):
             psi_f[0, i] -= cj * psi_f[j, i]
 
 
-@njit(cache=True, error_model="numpy")
-def _shift_rows(psi_f):
-    """RML: ψ_f(k) becomes ψ_f((k+1)−1): rows move down by one."""
-    for j in range(psi_f.shape[0] - 1, 0, -1):
-        for i in range(psi_f.shape[1]):
-            psi_f[j, i] = psi_f[j - 1, i]
-
-
-@njit(cache=True, error_model="numpy")
-def _clear(a):
-    """a = 0 for a 2-D array (RML: the filter 1/Ĉ restarts from rest)."""
-    for i in range(a.shape[0]):
-        for j in range(a.shape[1]):
-            a[i, j] = 0.0
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _shift_regressor(psi, na, nc, y, xi):
-    """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: _push_input)."""
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _shift_regressors(psi, psi_f, na, nc, rml, y, xi):
+    """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: _push_input);
+    RML: ψ_f(k) becomes ψ_f((k+1)−1) (rows move down by one)."""
     for i in range(na - 1, 0, -1):
         psi[i] = psi[i - 1]
     psi[0] = -y
@@ -226,20 +272,15 @@ def _shift_regressor(psi, na, nc, y, xi):
         psi[o + i] = psi[o + i - 1]
     if nc > 0:
         psi[o] = xi
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _innovation_variance(nv, xi, count, lam):
-    """Running mean of ξ̂² over the last min(k, 1/(1−λ)) samples (kept if not finite)."""
-    cnt = float(count)
-    if lam < 1.0 and cnt * (1.0 - lam) > 1.0:
-        cnt = 1.0 / (1.0 - lam)
-    new = nv + (xi * xi - nv) / cnt
-    return new if np.isfinite(new) else nv
+    if not rml:
+        return
+    for j in range(psi_f.shape[0] - 1, 0, -1):
+        for i in range(psi_f.shape[1]):
+            psi_f[j, i] = psi_f[j - 1, i]
 
 
 # ---------------------------------------------------------------- the C check
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _c_within(theta, o, nc, radius, cw):
     """True if all roots of z^nc + c1 z^(nc−1) + … + c_nc lie strictly inside ``radius``.
 
@@ -259,113 +300,112 @@ def _c_within(theta, o, nc, radius, cw):
         return True
     if not np.isfinite(s):
         return False
-    # Schur–Cohn / Levinson step-down of the monic polynomial [1, q1..qm]
+    # Schur–Cohn / Levinson step-down of the monic polynomial [1, q1..qm]:
+    # q_i ← (q_i − k q_{m−i}) / (1 − k²), i = 1..m−1, in place (pairwise)
     for m in range(nc, 0, -1):
         k = cw[m]
         if abs(k) >= 1.0:
             return False
-        _step_down(cw, m, k)
+        den = 1.0 - k * k
+        i = 1
+        j = m - 1
+        while i <= j:
+            qi = cw[i]
+            qj = cw[j]
+            cw[i] = (qi - k * qj) / den
+            cw[j] = (qj - k * qi) / den
+            i += 1
+            j -= 1
     return True
 
 
-@njit(cache=True, error_model="numpy")
-def _step_down(cw, m, k):
-    """q_i ← (q_i − k q_{m−i}) / (1 − k²), i = 1..m−1, in place (pairwise)."""
-    den = 1.0 - k * k
-    i = 1
-    j = m - 1
-    while i < j:
-        qi = cw[i]
-        qj = cw[j]
-        cw[i] = (qi - k * qj) / den
-        cw[j] = (qj - k * qi) / den
-        i += 1
-        j -= 1
-    if i == j:
-        cw[i] = (cw[i] - k * cw[i]) / den
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _poly_roots(c, re, im):
+    """Roots of z^nc + c1 z^(nc−1) + … + c_nc, as re + j im, by the Weierstrass
+    (Durand–Kerner) iteration z_i ← z_i − C(z_i) / Π_{j≠i} (z_i − z_j).
 
-
-@njit(cache=True, error_model="numpy")
-def _horner(c, z):
-    """z^nc + c1 z^(nc−1) + … + c_nc at the complex point z."""
-    acc = 1.0 + 0.0j
-    for j in range(c.shape[0]):
-        acc = acc * z + c[j]
-    return acc
-
-
-@njit(cache=True, error_model="numpy")
-def _poly_roots(c):
-    """Roots of z^nc + c1 z^(nc−1) + … + c_nc by the Weierstrass (Durand–Kerner)
-    iteration z_i ← z_i − C(z_i) / Π_{j≠i} (z_i − z_j), started on the powers of
-    0.4 + 0.9j scaled to the Cauchy bound 1 + max|c_j|; it converges for any start off
-    the symmetric ones (quadratically to simple roots, linearly to multiple ones, hence
-    up to 1000 sweeps; nc is small and this runs only when Ĉ left the disc).
+    Started on the powers of 0.4 + 0.9j scaled to the Cauchy bound 1 + max|c_j|; it
+    converges for any start off the symmetric ones (quadratically to simple roots,
+    linearly to multiple ones, hence up to 1000 sweeps; nc is small and this runs only
+    when Ĉ left the disc). Complex numbers are written as (real, imaginary) pairs.
     """
     nc = c.shape[0]
     bound = 1.0
     for j in range(nc):
         bound = max(bound, 1.0 + abs(c[j]))
-    roots = np.empty(nc, dtype=np.complex128)
-    if not np.isfinite(bound):
-        roots[:] = np.nan
-        return roots
+    zr, zi = bound, 0.0  # bound (0.4 + 0.9j)^i
     for i in range(nc):
-        roots[i] = bound * (0.4 + 0.9j) ** i
+        re[i], im[i] = zr, zi
+        zr, zi = 0.4 * zr - 0.9 * zi, 0.9 * zr + 0.4 * zi
     for _ in range(1000):
         change = 0.0
         for i in range(nc):
-            den = 1.0 + 0.0j
+            zr, zi = re[i], im[i]
+            pr, pi = 1.0, 0.0  # C(z_i) by Horner
+            dr, di = 1.0, 0.0  # Π_{j≠i} (z_i − z_j)
             for j in range(nc):
+                pr, pi = pr * zr - pi * zi + c[j], pr * zi + pi * zr
                 if j != i:
-                    den *= roots[i] - roots[j]
-            delta = _horner(c, roots[i]) / den
-            roots[i] -= delta
-            change = max(change, abs(delta))
-        if change <= 2.220446049250313e-16 * bound:
+                    ar, ai = zr - re[j], zi - im[j]
+                    dr, di = dr * ar - di * ai, dr * ai + di * ar
+            m2 = dr * dr + di * di  # C(z_i) / Π = p d̄ / |d|²
+            xr, xi = (pr * dr + pi * di) / m2, (pi * dr - pr * di) / m2
+            re[i] = zr - xr
+            im[i] = zi - xi
+            change = max(change, np.sqrt(xr * xr + xi * xi))
+        if not change > 2.220446049250313e-16 * bound:  # converged, or NaN
             break
-    return roots
 
 
-@njit(cache=True, error_model="numpy")
-def _project_c(c, radius):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _project_c(c, radius, work):
     """Move the roots of C(z) = z^nc + c1 z^(nc−1) + … inside ``radius``, in place.
 
     Roots outside the unit circle are reflected (z → 1/z̄, which keeps |C(e^{jω})| up to
     a constant: the spectral factor of the same noise spectrum), then any root still
     beyond ``radius`` is shrunk radially onto it (as MATLAB's recursive estimators do).
-    This allocates, and runs only when :func:`_c_within` failed.
+    ``work`` has 4 (nc + 1) entries. Runs only when :func:`_c_within` failed.
     """
     nc = c.shape[0]
-    # roots of the polynomial scaled to z = σ w, σ = max_j |c_j|^(1/j) ≥ 1, whose
+    re, im = work[:nc], work[nc : 2 * nc]
+    pr, pi = work[2 * nc : 3 * nc + 1], work[3 * nc + 1 : 4 * nc + 2]
+    # roots of the polynomial scaled to z = σ v, σ = max_j |c_j|^(1/j) ≥ 1, whose
     # coefficients c_j / σ^j are at most 1 in size (no overflow in the iteration)
     sigma = 1.0
     for j in range(nc):
         sigma = max(sigma, abs(c[j]) ** (1.0 / (j + 1)))
-    scaled = np.empty(nc)
     for j in range(nc):
-        scaled[j] = c[j] / sigma ** (j + 1)
-    roots = _poly_roots(scaled) * sigma
+        c[j] = c[j] / sigma ** (j + 1)
+    _poly_roots(c, re, im)
     for i in range(nc):
-        if abs(roots[i]) > 1.0:
-            roots[i] = 1.0 / np.conj(roots[i])
-        r = abs(roots[i])
+        zr, zi = re[i] * sigma, im[i] * sigma
+        r2 = zr * zr + zi * zi
+        if r2 > 1.0:  # 1/z̄ = z / |z|²
+            zr, zi = zr / r2, zi / r2
+            r2 = 1.0 / r2
+        r = np.sqrt(r2)
         if r > radius:
-            roots[i] = roots[i] * (radius / r)
-    # rebuild the monic polynomial Π (z − z_i)
-    poly = np.zeros(nc + 1, dtype=np.complex128)
-    poly[0] = 1.0
+            zr, zi = zr * (radius / r), zi * (radius / r)
+        re[i], im[i] = zr, zi
+    # rebuild the monic polynomial Π (z − z_i): p_j ← p_j − z_i p_{j−1}
+    for j in range(nc + 1):
+        pr[j] = 1.0 if j == 0 else 0.0
+        pi[j] = 0.0
     for i in range(nc):
         for j in range(i + 1, 0, -1):
-            poly[j] = poly[j] - roots[i] * poly[j - 1]
+            pr[j], pi[j] = (pr[j] - (re[i] * pr[j - 1] - im[i] * pi[j - 1]),
+                            pi[j] - (re[i] * pi[j - 1] + im[i] * pr[j - 1]))
+    finite = True
     for j in range(nc):
-        c[j] = poly[j + 1].real
-    if not np.all(np.isfinite(c)):  # Ĉ beyond float64 (adversarial data): C = 1
-        c[:] = 0.0
+        c[j] = pr[j + 1]
+        finite = finite and np.isfinite(c[j])
+    for j in range(nc):
+        if not finite:  # Ĉ beyond float64 (adversarial data): C = 1
+            c[j] = 0.0
 
 
-# ---------------------------------------------------------------- eqs (20)–(22)
-@njit(cache=True, error_model="numpy", inline="always")
+# ---------------------------------------------------------------- eqs (21)–(22)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _gain(P, r, g):
     """g = P r for symmetric P, as g += P[j, :] r_j (row axpys, which vectorise)."""
     n = r.shape[0]
@@ -377,132 +417,158 @@ def _gain(P, r, g):
             g[i] += P[j, i] * rj
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _denominator(s, counters, P, g, r, psi_f, psi, theta):
-    """g = P(k−1) r and den = λ + rᵀ P(k−1) r of eq (21), with the definiteness guard.
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _update_P_and_gain(P, w, inv_lam, r, g):
+    """(22) P(k−1) = P(k−2)/λ − w wᵀ and, in the same pass, g = P(k−1) r(k).
 
-    r is ψ̂(k) (RELS) or ψ_f(k) (RML). rᵀPr ≥ 0 whenever P is positive semi-definite;
-    rᵀPr < 0 proves that P lost definiteness through rounding (a tiny positive den
-    would then give a huge gain). That, or overflow, resets P = P(0) (RML: and
-    restarts the filter 1/Ĉ, so that r = ψ_f(k) = ψ̂(k)) before g and den are formed
-    again.
-    """
-    _gain(P, r, g)
-    q = _dot(r, g)
-    den = s.lam + q
-    if q >= 0.0 and np.isfinite(den):
-        return den
-    counters[RESETS] += 1
-    _reset_P(P, s.na + s.nb + 1, s.alpha, s.alpha_c)
-    if s.rml:
-        _clear(psi_f)
-        _filter_regressor(psi_f, psi, theta, s.na + s.nb + 1)  # ψ_f(k) = ψ̂(k)
-    _gain(P, r, g)
-    return s.lam + _dot(r, g)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _step_is_safe(s, den, e):
-    """True if (20)–(22) may run: den positive and finite, and the step K e finite.
-
-    A huge e with a small den could overflow θ̂. For positive semi-definite P,
-    |g_i| = |e_iᵀ P r| ≤ √(P_ii · rᵀPr) ≤ √(tr P · (den − λ)) (Cauchy–Schwarz), and
-    tr P never exceeds max(trace_max, tr P(0)) (P starts or restarts at P(0), and
-    the trace bound scales it down), so |K e| ≤ √(t_max (den − λ)) |e| / den: a
-    scalar bound, no pass over g.
-    """
-    if not (den > 0.0 and np.isfinite(den)):
-        return False
-    nab = s.na + s.nb + 1
-    t_max = max(s.trace_max, nab * s.alpha + s.nc * s.alpha_c)
-    return np.isfinite(np.sqrt(t_max * (den - s.lam)) * (abs(e) / den))
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _update_P(s, counters, P, g, psi_f, den):
-    """(22) with its guards; P(k) from P(k−1), g = P(k−1) r and den.
+    Returns (tr P, min P_ii) for the guards of :func:`_bring_P_up_to_date`.
 
     Textbook: P(k) = [I − K rᵀ] P(k−1) / λ, NOT used: rounding makes it drift from
     symmetry and, with λ < 1, diverge. Since K rᵀ P = g gᵀ / den for symmetric P,
     the symmetric rank-1 form P(k) = (P(k−1) − g gᵀ / den) / λ is used, each entry as
-    P_ij / λ − w_i w_j with w = g √(1/(den λ)): IEEE products commute, so entries
-    (i, j) and (j, i) get identical values and P stays exactly symmetric.
-
-    Then, with λ < 1, the diagonal floor δ = 8 n eps tr P: the rank-1 downdate
-    cancels, its rounding error is about n eps ‖P‖, and with forgetting and poor
-    excitation the excited direction of P shrinks to ~(1−λ)/|r|² while the others
-    grow, so that error could make the small eigenvalue negative; next to the
-    forgetting δ is negligible. (At λ = 1 P only shrinks and rounding stays benign; a
-    floor proportional to the large early tr P would act like process noise and bias
-    the least-squares limit, so none.) A non-positive diagonal entry or a non-finite
-    trace resets P = P(0); a trace above trace_max (wind-up under poor excitation,
-    P growing like λ^−k in unexcited directions) scales P down to it.
+    P_ij / λ − w_i w_j with w = g √(1/(den λ)): the same expression for entries (i, j)
+    and (j, i), so P stays exactly symmetric. Each new row i is added, times r_i,
+    into g (g = Σ_i P[i, :] r_i for symmetric P), so P is read once for both.
     """
     n = P.shape[0]
-    inv_lam = 1.0 / s.lam
-    root = np.sqrt(inv_lam / den)
-    for i in range(n):
-        g[i] *= root  # g becomes w
+    for j in range(n):
+        g[j] = 0.0
     tr = 0.0
     dmin = np.inf
     for i in range(n):
-        wi = g[i]
+        wi = w[i]
+        ri = r[i]
         for j in range(n):
-            P[i, j] = P[i, j] * inv_lam - wi * g[j]
+            p = P[i, j] * inv_lam - wi * w[j]
+            P[i, j] = p
+            g[j] += p * ri
         tr += P[i, i]
         dmin = min(dmin, P[i, i])
+    return tr, dmin
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _restart(s, counters, P, psi_f, psi, theta, r, g):
+    """P = P(0) = diag(α (a- and b-part), α_c (c-part)), counted as a reset, and
+    g = P(0) r. RML: the filter 1/Ĉ restarts from rest (ψ_f history zeroed), so
+    r = ψ_f(k) = ψ̂(k). Rare (a guard failed), hence not inlined."""
+    n = P.shape[0]
+    nab = s.na + s.nb + 1
+    counters[RESETS] += 1
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = 0.0
+        P[i, i] = s.alpha if i < nab else s.alpha_c
+    if s.rml:
+        for j in range(1, psi_f.shape[0]):
+            for i in range(n):
+                psi_f[j, i] = 0.0
+        _filter_regressor(psi_f, psi, theta, nab)
+    _gain(P, r, g)
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending):
+    """Apply the pending (22), if any, with its guards, and form g = P(k−1) r(k).
+
+    Guards after (22): with λ < 1, the diagonal floor δ = 8 n eps tr P: the rank-1
+    downdate cancels, its rounding error is about n eps ‖P‖, and with forgetting and
+    poor excitation the excited direction of P shrinks to ~(1−λ)/|r|² while the
+    others grow, so that error could make the small eigenvalue negative; next to the
+    forgetting δ is negligible. (At λ = 1 P only shrinks and rounding stays benign; a
+    floor proportional to the large early tr P would act like process noise and bias
+    the least-squares limit, so none.) A non-positive diagonal entry or a non-finite
+    trace resets P = P(0), as if at the end of the previous sample (RML: ψ_f(k) is
+    filtered again from rest, = ψ̂(k)); a trace above trace_max (wind-up under poor
+    excitation, P growing like λ^−k in unexcited directions) scales P down to it.
+    g follows each change of P: (P + δ I) r = g + δ r, (f P) r = f g.
+    """
+    if not pending:
+        _gain(P, r, g)
+        return
+    n = P.shape[0]
+    tr, dmin = _update_P_and_gain(P, w, 1.0 / s.lam, r, g)
     if s.lam < 1.0:
         delta = EPS_FLOOR * n * tr
         for i in range(n):
             P[i, i] += delta
+            g[i] += delta * r[i]
         tr += n * delta
     if not (dmin > 0.0 and np.isfinite(tr)):
-        counters[RESETS] += 1
-        _reset_P(P, s.na + s.nb + 1, s.alpha, s.alpha_c)
-        if s.rml:
-            _clear(psi_f)
+        _restart(s, counters, P, psi_f, psi, theta, r, g)
     elif tr > s.trace_max:
         counters[TRACE_SCALINGS] += 1
         f = s.trace_max / tr
         for i in range(n):
+            g[i] *= f
             for j in range(n):
                 P[i, j] *= f
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _update_theta(s, counters, theta, g, psi, c_work, y, e, den):
-    """(20)–(21) and (19) for an accepted sample; returns ξ̂(k).
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _denominator(s, counters, P, r, g, psi_f, psi, theta):
+    """den = λ + rᵀ P(k−1) r of eq (21), with the definiteness guard; g = P(k−1) r.
 
-    Also keeps Ĉ inside c_radius (it reads θ̂ only, so it may precede (22)), else the
-    ξ̂ feedback of the c-part can blow up.
+    rᵀPr ≥ 0 whenever P is positive semi-definite; rᵀPr < 0 proves that P lost
+    definiteness through rounding (a tiny positive den would then give a huge gain).
+    That, or overflow, resets P = P(0) (RML: and restarts the filter 1/Ĉ, so that
+    r = ψ_f(k) = ψ̂(k)) before g and den are formed again.
     """
+    q = _dot(r, g)
+    den = s.lam + q
+    if q >= 0.0 and np.isfinite(den):
+        return den
+    _restart(s, counters, P, psi_f, psi, theta, r, g)
+    return s.lam + _dot(r, g)
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _update_theta(s, counters, theta, g, w, psi, c_work, y, e, den):
+    """(20)–(21) and (19), and the w of the sample's pending (22); returns (moved,
+    ξ̂(k)), moved False if the step K e would overflow (then nothing changed).
+
+    The overflow bound: for positive semi-definite P, |g_i| = |e_iᵀ P r| ≤
+    √(P_ii · rᵀPr) ≤ √(tr P · (den − λ)) (Cauchy–Schwarz), and tr P never exceeds
+    t_max = max(trace_max, tr P(0)) (P starts or restarts at P(0), and the trace
+    bound scales it down), so |K e| ≤ √(t_max (den − λ)) |e| / den: a scalar bound,
+    no pass over g. Ĉ is kept inside c_radius (it reads θ̂ only, so it may precede
+    (22)), else the ξ̂ feedback of the c-part can blow up.
+    """
+    inv_den = 1.0 / den
+    nab = s.na + s.nb + 1
+    t_max = max(s.trace_max, nab * s.alpha + s.nc * s.alpha_c)
+    if not np.isfinite(np.sqrt(t_max * (den - s.lam)) * (abs(e) * inv_den)):
+        return False, e
     # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
     # (RML: K = P ψ_f / (λ + ψ_fᵀ P ψ_f), e still with ψ̂)
-    inv_den = 1.0 / den
     step = e * inv_den
+    # (22), applied at the next sample: P(k) = P(k−1)/λ − w wᵀ, w = g √(1/(den λ))
+    root = np.sqrt(inv_den / s.lam)
     for i in range(theta.shape[0]):
         theta[i] += g[i] * step
-    if s.nc > 0 and not _c_within(theta, s.na + s.nb + 1, s.nc, s.c_radius, c_work):
-        _project_c(theta[s.na + s.nb + 1 :], s.c_radius)
+        w[i] = g[i] * root
+    if s.nc > 0 and not _c_within(theta, nab, s.nc, s.c_radius, c_work):
+        _project_c(theta[nab:], s.c_radius, c_work)
         counters[C_PROJECTIONS] += 1
         # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k), formed directly since the projection moved θ̂
-        return y - _dot(psi, theta)
+        return True, y - _dot(psi, theta)
     # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k) = e − (ψ̂ᵀ g / den) e, since θ̂ moved by g e/den;
     # for RELS ψ̂ᵀg = ψ̂ᵀPψ̂ = den − λ, so ξ̂ = e λ/den (no second dot product)
     if s.rml:
-        return e - _dot(psi, g) * step
-    return e * (s.lam * inv_den)
+        return True, e - _dot(psi, g) * step
+    return True, e * (s.lam * inv_den)
 
 
 # ---------------------------------------------------------------- one sample
-@njit(cache=True, error_model="numpy")
-def _step(s, counters, theta, P, psi, g, u_line, c_work, psi_f, noise_var, u, y):
-    """One RELS or RML sample with every safeguard; returns (e(k), ξ̂(k)).
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _sample(s, block, counters, st, pending, u, y):
+    """One RELS or RML sample with every safeguard; returns (e(k), ξ̂(k), pending).
 
     ``u``, ``y`` are scaled and finite (checked by the callers). e(k) = y(k) −
     ψ̂ᵀ(k)θ̂(k−1) is the a-priori error (0 if it overflows); ξ̂(k) is eq (19)
-    (0 if it overflows).
+    (0 if it overflows); ``pending``: θ̂ moved, and w holds its (22).
     """
+    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
     _push_input(u_line, psi, u, s.na, s.nb, s.delay)
     # ŷ(k|k−1) = ψ̂ᵀ(k) θ̂(k−1);  e(k) = y(k) − ŷ  (the bracket of eq 20)
     e = y - _dot(psi, theta)
@@ -510,91 +576,95 @@ def _step(s, counters, theta, P, psi, g, u_line, c_work, psi_f, noise_var, u, y)
     # r, the regressor of the gain and of (22): ψ̂(k) (RELS) or ψ_f(k) (RML)
     if s.rml:
         _filter_regressor(psi_f, psi, theta, s.na + s.nb + 1)
-        r = psi_f[0]
-    else:
-        r = psi
+    r = psi_f[0] if s.rml else psi
+    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
+    moved = False
     xi = e  # ξ̂(k) = e(k) whenever θ̂ is not updated (frozen or skipped)
-    den = 0.0
-    updated = False
     if s.enabled and np.isfinite(e):
-        den = _denominator(s, counters, P, g, r, psi_f, psi, theta)
-        updated = _step_is_safe(s, den, e)
-        if updated:
-            xi = _update_theta(s, counters, theta, g, psi, c_work, y, e, den)
-        else:
-            counters[SKIPPED] += 1
-    elif s.enabled:
+        den = _denominator(s, counters, P, r, g, psi_f, psi, theta)
+        if den > 0.0 and np.isfinite(den):
+            moved, xi = _update_theta(s, counters, theta, g, w, psi, c_work, y, e, den)
+    if s.enabled and not moved:
         counters[SKIPPED] += 1
     if not np.isfinite(xi):
         xi = 0.0
-    noise_var[0] = _innovation_variance(noise_var[0], xi, counters[COUNT], s.lam)
-    if s.rml:
-        _shift_rows(psi_f)
-    _shift_regressor(psi, s.na, s.nc, y, xi)
-    if updated:
-        _update_P(s, counters, P, g, psi_f, den)
-    return (e if np.isfinite(e) else 0.0), xi
+    # running mean of ξ̂² over the last min(k, 1/(1−λ)) samples (kept if not finite)
+    cnt = min(counters[COUNT], 1.0 / (1.0 - s.lam)) if s.lam < 1.0 else counters[COUNT]
+    nv = block[NOISE_VAR] + (xi * xi - block[NOISE_VAR]) / cnt
+    if np.isfinite(nv):
+        block[NOISE_VAR] = nv
+    _shift_regressors(psi, psi_f, s.na, s.nc, s.rml, y, xi)
+    return (e if np.isfinite(e) else 0.0), xi, moved
 
 
 # ---------------------------------------------------------------- entry points
-@njit(cache=True, error_model="numpy")
-def rels_run(s, storage, counters, u, y, err, xi_out, hist, hist_every):
-    """Run the estimator over a whole record (batch RELS or RML).
+@njit(cache=True, error_model="numpy", _nrt=False)
+def rels_run(block, u, y, err, xi_out, hist, hist_every, settle):
+    """Run the estimator in ``block`` over a record (batch RELS or RML).
 
     Parameters
     ----------
-    s : RelsSettings
-    storage : float64 block of a :class:`RelsState`, updated in place
-    counters : int64 (N_COUNTERS,), updated in place
+    block : float64 block of an estimator (:func:`new_block`), updated in place
     u, y : float64 (N,), scaled, finite
     err : float64 (N,) out, a-priori prediction errors e(k)
     xi_out : float64 (N,) out, a-posteriori residuals ξ̂(k) of eq (19)
     hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
         (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
     hist_every : int ≥ 1
+    settle : bool
+        Apply the last sample's pending (22) at the end, so that the block holds
+        P(k) (True for every caller but the streaming step; a run of no samples with
+        ``settle`` only does that).
     """
-    theta, P, psi, g, u_line, c_work, psi_f, noise_var = state_views(
-        storage, s.na, s.nb, s.nc, s.delay
-    )
+    s = settings_of(block)
+    counters = block[N_SETTINGS:NOISE_VAR]
+    st = views(block)
+    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
+    # (22) of the previous sample not yet applied (w holds it)
+    pending = block[PENDING] != 0.0
+    countdown = hist_every
     row = 0
     for k in range(u.shape[0]):
-        err[k], xi_out[k] = _step(s, counters, theta, P, psi, g, u_line, c_work, psi_f,
-                                  noise_var, u[k], y[k])
-        if (k + 1) % hist_every == 0 and row < hist.shape[0]:
-            for i in range(hist.shape[1]):
-                hist[row, i] = theta[i]
-            row += 1
+        err[k], xi_out[k], pending = _sample(s, block, counters, st, pending, u[k], y[k])
+        countdown -= 1
+        if countdown == 0:
+            countdown = hist_every
+            if row < hist.shape[0]:
+                for i in range(hist.shape[1]):
+                    hist[row, i] = theta[i]
+                row += 1
+    if settle and pending:  # the last pending (22): the block holds P(k)
+        r = psi_f[0] if s.rml else psi
+        _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
+        pending = False
+    block[PENDING] = 1.0 if pending else 0.0
 
 
-@njit(cache=True, error_model="numpy")
-def settings_from_array(a):
-    """The :class:`RelsSettings` whose fields, in order, are the entries of ``a``.
+#: the one signature of :func:`rels_update`: (block, u, y)
+RELS_UPDATE_SIGNATURE = (types.float64[::1], types.float64, types.float64)
 
-    The streaming entry point receives its settings as one float64 array (see the
-    module notes); :func:`settings_array` packs them.
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def rels_update(block, u, y):
+    """Streaming entry point: one sample in physical units, a run of one; returns e(k)
+    in physical units.
+
+    The step sees u/u_scale and y/y_scale (the settings' streaming scales, applied
+    here so that the Python wrapper has nothing to do per sample). Returns NaN only
+    if the scaled ``u`` or ``y`` is not finite, in which case the state is left
+    untouched; the Python wrapper turns that into a DataError.
     """
-    return RelsSettings(int(a[0]), int(a[1]), int(a[2]), int(a[3]), a[4], a[5], a[6],
-                        a[7], a[8], a[9] != 0.0, a[10] != 0.0)
-
-
-def settings_array(settings: RelsSettings) -> np.ndarray:
-    """``settings`` as a float64 array, fields in order (read by settings_from_array)."""
-    return np.array([float(v) for v in settings])
-
-
-@njit(cache=True, error_model="numpy")
-def rels_update(storage, counters, settings, u, y):
-    """Streaming entry point: one sample (scaled); returns the a-priori error e(k).
-
-    ``settings`` is :func:`settings_array` of a :class:`RelsSettings`: one array
-    crosses the Python → numba boundary instead of eleven scalars (see the module
-    notes). Returns NaN only if ``u`` or ``y`` is not finite, in which case the state
-    is left untouched; the Python wrapper turns that into a DataError.
-    """
-    if not (np.isfinite(u) and np.isfinite(y)):
+    u_scaled = u * (1.0 / block[11])  # u / u_scale
+    y_scaled = y * (1.0 / block[12])  # y / y_scale
+    if not (np.isfinite(u_scaled) and np.isfinite(y_scaled)):
         return np.nan
-    s = settings_from_array(settings)
-    theta, P, psi, g, u_line, c_work, psi_f, noise_var = state_views(
-        storage, s.na, s.nb, s.nc, s.delay
-    )
-    return _step(s, counters, theta, P, psi, g, u_line, c_work, psi_f, noise_var, u, y)[0]
+    io = block[block.size - 4 :]  # the last view of the block (see views)
+    io[0] = u_scaled
+    io[1] = y_scaled
+    # no history (hist_every: the run's length) and no settle; both passed as values
+    # computed at run time, since a literal would make numba compile rels_run again
+    one = io[0:1]
+    no_settle = one.size == 0
+    rels_run(block, one, io[1:2], io[2:3], io[3:4], io.reshape((4, 1))[:0], one.size,
+             no_settle)
+    return io[2] * block[12]

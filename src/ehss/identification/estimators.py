@@ -161,7 +161,7 @@ def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: 
     alpha = float(np.mean(np.diag(P0)))  # what a reset of P returns to (α I)
     settings = _settings(na, nb, nc, d, forgetting, alpha, alpha, float(np.trace(P0)),
                          _C_RADIUS, method)
-    storage, counters, views = _new_state(settings, theta_s)
+    block, views = _new_state(settings, theta_s)
     views.P[:] = P0
     r_c = float(np.max(np.abs(np.roots(start.c)))) if nc else 0.0
     settle = int(np.ceil(np.log(1e-3) / np.log(r_c))) if 0.0 < r_c < 1.0 else 0
@@ -169,12 +169,12 @@ def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: 
     err, xi = np.empty(u.size), np.empty(u.size)
     no_hist = np.empty((0, n))
     # adaptation held while the regressors fill (as RelsEstimator.freeze), then on
-    _k.rels_run(settings._replace(enabled=False), storage, counters, us[:warm], ys[:warm],
-                err[:warm], xi[:warm], no_hist, 1)
-    _k.rels_run(settings, storage, counters, us[warm:], ys[warm:], err[warm:], xi[warm:],
-                no_hist, 1)
+    _k.set_enabled(block, False)
+    _k.rels_run(block, us[:warm], ys[:warm], err[:warm], xi[:warm], no_hist, 1, True)
+    _k.set_enabled(block, True)
+    _k.rels_run(block, us[warm:], ys[warm:], err[warm:], xi[warm:], no_hist, 1, True)
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
-    counts = _counters(counters)
+    counts = _counters(block)
     counts.pop("n_samples", None)
     meta = {"method": method, "n_samples": int(u.size), "forgetting": forgetting,
             "init": "batch", "start_method": start.meta["method"], "warm_up": warm,
