@@ -145,6 +145,23 @@ def test_streaming_scales_and_history_phase(rng):
     assert est.model.dt == DT_S
 
 
+def test_history_of_blocks_shorter_than_its_interval(rng):
+    # a live stream hands over a few samples at a time: every 50th sample is recorded
+    # whatever the block size
+    a, b, _ = system(2)
+    u, y, _ = armax_data(rng, a, b, None, 1000)
+    ref = RelsEstimator(na=2, nb=b.size - 1, nc=0, delay=1, history_every=50)
+    ref.update_many(u, y)
+    est = RelsEstimator(na=2, nb=b.size - 1, nc=0, delay=1, history_every=50)
+    for i in range(0, u.size, 7):
+        est.update_many(u[i:i + 7], y[i:i + 7])
+    assert est.history.shape == ref.history.shape == (20, 4)
+    # the per-sample and the batch path run the same equations; they may order the P
+    # update's operations differently (a few ulp per sample, not amplified on this
+    # well-conditioned record)
+    assert_allclose(est.history, ref.history, rtol=1e-9, atol=1e-12)
+
+
 def test_freeze_holds_theta_and_reset(rng):
     est = RelsEstimator(na=2, nb=1, nc=1)
     u = rng.standard_normal(500)

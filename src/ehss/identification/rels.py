@@ -552,7 +552,8 @@ class RelsEstimator:
                             y[first:] * self._inv_ys, err[first:], xi[first:], hist,
                             self._every, True)
             self._hist.extend(list(hist * self._dvec))
-            self._since = rest % self._every
+            if rest:  # else the samples above counted themselves (_update_with_history)
+                self._since = rest % self._every
         with np.errstate(over="ignore"):  # |e| near float max times y_scale > 1
             return err * self._ys
 
