@@ -93,9 +93,11 @@ def wait_for_line(proc, word: str, timeout_s: float = 120.0) -> str:
 
 
 def _start_live(tmp_path, port, *extra):
+    # the receiver stops 2 s after the last datagram: four times the longest pause of
+    # the senders below (0.5 s), and time enough for a sender to be descheduled
     cmd = [sys.executable, "-m", "ehss", "live", "--udp", f"127.0.0.1:{port}",
            "--fields", FIELDS8, "--record", str(tmp_path / "rec.h5"), "--quiet",
-           "--idle-stop", "5", "--report", str(tmp_path / "report.json"), *extra]
+           "--idle-stop", "2", "--report", str(tmp_path / "report.json"), *extra]
     proc = subprocess.Popen(cmd, env=_env(), stderr=subprocess.PIPE, text=True)
     wait_for_line(proc, "ready")   # imports and compiled kernels loaded
     return proc
