@@ -314,3 +314,22 @@ def test_drive_file_iteration_rejects_other_rates(tmp_path, reference, capsys):
     assert main(["compensate", str(model), str(ref), "--update", str(run), "--out",
                  str(out)]) == 2
     assert "sampled at 500 Hz" in capsys.readouterr().err and not out.exists()
+
+
+def test_time_column_by_name_and_the_summary_line(tmp_path, reference, capsys):
+    model = _write_model(tmp_path / "m.json")
+    ref = tmp_path / "r.csv"
+    write_csv(ref, {"time_s": np.arange(reference.size) * DT, "ref_m": reference})
+    out = tmp_path / "drive.csv"
+    args = ["compensate", str(model), str(ref), "--column", "ref_m", "--out", str(out)]
+    # no column t: the sample rate is unknown, and the message names both ways to give it
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "--time-column" in err and "--fs" in err and not out.exists()
+    assert main([*args, "--time-column", "time_s"]) == 0
+    summary = capsys.readouterr().out.strip()
+    assert summary.startswith(f"{out}: {reference.size} samples at 1000 Hz, stable inverse "
+                              "within 0-100 Hz; drive/reference gain rms")
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["fs_hz"] == pytest.approx(1 / DT)
+    assert_allclose(read_columns(out, ["t"])["t"], np.arange(reference.size) * DT)

@@ -51,7 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="band limit of the inverse and of every update, Hz (default: the "
                    "band the model was validated over, `band_hz` in its file)")
     p.add_argument("--fs", type=float, metavar="HZ",
-                   help="sample rate if the file has no time column t")
+                   help="sample rate in Hz (needed when the file has no time column)")
+    p.add_argument("--time-column", default="t", metavar="COL",
+                   help="time column in seconds of the reference (and of the --update run), "
+                   "used for the sample rate if present (default: %(default)s)")
     p.add_argument("--fade", type=float, metavar="S",
                    help="fade the reference in and out over S seconds (raised cosine) when it "
                    "does not start or end at rest")
@@ -195,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     loop, params = _rig(args)
     offsets = None if args.ignore_offsets else model.offsets
     u0, y0 = offsets if offsets is not None else (0.0, 0.0)
-    table = read_columns(args.reference, [args.column])
+    table = read_columns(args.reference, [args.column], time_column=args.time_column)
     fs = sample_rate(table, args.fs)
     q = rate_factor(fs, model.dt)  # the model's rate, or a decimated one: DataError if not
     r = np.asarray(table[args.column], dtype=float)
@@ -267,6 +270,11 @@ def run(args: argparse.Namespace) -> int:
     }
     cols = {"t": t, "reference": r, "drive": drive, **columns}
     write_outputs(table_writers(out, cols, sidecar))
+    rate = "" if q == 1 else f" (model at fs/{q}, {1.0 / model.dt:g} Hz)"
+    gains = ("" if checked is None else
+             f"; drive/reference gain rms {checked.rms_gain:.3g}, peak {checked.peak_gain:.3g}")
+    print(f"{out}: {r.size} samples at {fs:g} Hz{rate}, {args.method} inverse within "
+          f"{band[0]:g}-{band[1]:g} Hz{gains}")
     return 0
 
 
@@ -277,7 +285,8 @@ def _update(args: argparse.Namespace, model: Any, r_dev: np.ndarray, fs: float,
     from ehss.compensation import update_drive
     from ehss.io import read_columns, sample_rate
 
-    run_table = read_columns(args.update, [args.drive_column, args.output_column])
+    run_table = read_columns(args.update, [args.drive_column, args.output_column],
+                             time_column=args.time_column)
     run_fs = sample_rate(run_table, args.fs)
     if abs(run_fs - fs) > 1e-9 * fs:
         raise DataError(f"{args.update!r} is sampled at {run_fs:g} Hz, the reference at "

@@ -245,7 +245,8 @@ def sample_rate(
             raise DataError(f"sample rate {fs=} Hz must be in [{lo_fs:g}, {hi_fs:g}] Hz")
     if t is None:
         if fs is None:
-            raise DataError(f"{where}no time column to get the sample rate from; pass --fs HZ")
+            raise DataError(f"{where}no time column to get the sample rate from; name it "
+                            f"with --time-column COL (seconds) or pass --fs HZ")
         return fs
     fs_t = _rate_from_time(t, where, name or "t", rtol)
     if fs is not None:
