@@ -76,8 +76,17 @@ def rig_or_replay(args: argparse.Namespace):
                           fs=args.fs, params=params, events=events, seed=args.seed)
     if args.event:
         raise ParameterError("--event applies to --rig only")
-    fields = parse_fields(args.fields) if args.fields else None
-    return replay_record(args.replay, fields=fields, fs=args.fs)
+    if not args.fields or "=" not in args.fields:
+        fields = parse_fields(args.fields) if args.fields else None
+        return replay_record(args.replay, fields=fields, fs=args.fs)
+    pairs = [item.partition("=") for item in args.fields.split(",")]
+    bad = [f + s for f, s, c in pairs if not s or not c.strip()]
+    if bad:
+        raise ParameterError(f"--fields {args.fields!r}: give every field as FIELD=COLUMN "
+                             f"(t=time_s,ref1=cmd,fb1=pos) or none; {bad[0]!r} is not")
+    fields = parse_fields(",".join(f for f, _, _ in pairs))
+    return replay_record(args.replay, fields=fields, fs=args.fs,
+                         columns=tuple(c.strip() for _, _, c in pairs))
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -103,7 +112,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "t, ref<k>, fb<k> columns")
     p.add_argument("--fields", metavar="t,ref1,fb1,...",
                    help="--udp: the fields of one sample, in wire order (required); "
-                   "--replay: the columns to take")
+                   "--replay: the columns to take, each as a field or as FIELD=COLUMN for a "
+                   "file with its own names (t=time_s,ref1=cmd,fb1=pos)")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate (default: the parameter set's, the file's, or from the "
                    "t field)")

@@ -30,7 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--rig", choices=("position", "acceleration", "force"),
                      help="the simulated rig (fields t, ref1, fb1, ...)")
     src.add_argument("--replay", metavar="FILE", type=InputFile, help="a recording or data file")
-    p.add_argument("--fields", metavar="t,ref1,fb1,...", help="--replay: columns to send")
+    p.add_argument("--fields", metavar="t,ref1,fb1,...",
+                   help="--replay: columns to send, each as a field or as FIELD=COLUMN "
+                   "(t=time_s,ref1=cmd,fb1=pos)")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate (default: the parameter set's or the file's)")
     p.add_argument("--samples-per-packet", type=int, default=None, metavar="N",

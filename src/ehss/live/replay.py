@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 
 import ehss
-from ehss.errors import DataError
+from ehss.errors import DataError, ParameterError
 from ehss.live.layout import RecordLayout
 
 __all__ = ["replay_record"]
@@ -29,6 +29,7 @@ def _is_live_recording(path: Path) -> bool:
 
 def replay_record(
     path: str | Path, *, fields: tuple[str, ...] | None = None, fs: float | None = None,
+    columns: tuple[str, ...] | None = None,
 ) -> tuple[RecordLayout, np.ndarray, float]:
     """Read a record to replay: ``(layout, samples, fs)``.
 
@@ -41,6 +42,10 @@ def replay_record(
         ``t``, ``ref<k>`` or ``fb<k>``).
     fs : float, optional
         Sample rate, Hz (default: from the recording or the ``t`` column).
+    columns : tuple of str, optional
+        Data files only: the file's column for each of ``fields`` (same length), so that
+        a record with its own names (``time_s``, ``cmd``, ``pos``) replays as ``t``,
+        ``ref1``, ``fb1`` (default: the fields' own names).
 
     Raises
     ------
@@ -48,6 +53,13 @@ def replay_record(
         Unreadable file, unknown column, no rate.
     """
     path = Path(path)
+    if columns is not None:
+        if fields is None or len(columns) != len(fields):
+            raise ParameterError("columns needs fields of the same length")
+        if _is_live_recording(path):
+            raise ParameterError(f"{str(path)!r} is an ehss live recording: its fields "
+                                 "keep their names (no FIELD=COLUMN)")
+        return _renamed(path, tuple(fields), tuple(columns), fs)
     if _is_live_recording(path):
         with h5py.File(path, "r", libver="latest", swmr=True) as h:
             names = tuple(json.loads(h.attrs["fields"]))
@@ -69,3 +81,13 @@ def replay_record(
     data = np.column_stack([table[n] for n in layout.fields])
     rate = ehss.sample_rate(table, fs)
     return layout, data, float(rate)
+
+
+def _renamed(path: Path, fields: tuple[str, ...], columns: tuple[str, ...],
+             fs: float | None) -> tuple[RecordLayout, np.ndarray, float]:
+    """A data file's ``columns`` replayed as ``fields``."""
+    layout = RecordLayout(fields)
+    time = columns[fields.index("t")] if "t" in fields else None
+    table = ehss.read_columns(path, list(columns), time_column=time)
+    data = np.column_stack([table[c] for c in columns])
+    return layout, data, float(ehss.sample_rate(table, fs))
