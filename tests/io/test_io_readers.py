@@ -238,6 +238,49 @@ def test_matrix_is_not_a_column(tmp_path):
         read_columns(path, ["m"])
 
 
+def _write_matrix(path, m):
+    """``m`` (rows = samples) as a user stores one matrix of signals in each format."""
+    suffix = path.suffix
+    if suffix == ".mat" and path.stem.endswith("73"):  # MATLAB v7.3: column-major
+        with h5py.File(path, "w", userblock_size=512) as fh:
+            fh.create_dataset("data", data=m.T).attrs["MATLAB_class"] = np.bytes_("double")
+        with open(path, "r+b") as fh:
+            fh.write(b"MATLAB 7.3 MAT-file".ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02IM")
+    elif suffix == ".mat":
+        scipy.io.savemat(path, {"data": m})
+    elif suffix == ".h5":
+        with h5py.File(path, "w") as fh:
+            fh.create_dataset("log/data", data=m)
+    else:
+        np.savez(path, data=m)
+
+
+@pytest.mark.parametrize("name", ["run.mat", "run73.mat", "run.h5", "run.npz"])
+def test_columns_of_a_stored_matrix_by_name_and_number(tmp_path, record, name):
+    m = np.column_stack([record["t"], record["u"], record["y"]])
+    path = tmp_path / name
+    _write_matrix(path, m)
+    var = "log/data" if name.endswith(".h5") else "data"
+    table = read_columns(path, [f"{var}:3", f"{var}:2"], time_column=f"{var}:1")
+    assert table.time_column == f"{var}:1"
+    assert_array_equal(table[f"{var}:2"], record["u"])  # MATLAB's data(:, 2)
+    assert_array_equal(table[f"{var}:3"], record["y"])
+    assert sample_rate(table) == pytest.approx(1000.0, rel=1e-12)
+    with pytest.raises(DataError, match=rf"'{var}:4': '{var}' has 3 columns \(257 rows"):
+        read_columns(path, [f"{var}:4"])
+    with pytest.raises(DataError, match=rf"no column '{var}:0'"):
+        read_columns(path, [f"{var}:0"])
+
+
+def test_a_vector_has_no_numbered_columns(tmp_path, record):
+    path = tmp_path / "run.npz"
+    np.savez(path, u=record["u"])
+    with pytest.raises(DataError, match=r"'u:1': 'u' is a 257 array, not a numeric matrix"):
+        read_columns(path, ["u:1"])
+    with pytest.raises(DataError, match=r"no column '2'.*NAME:K"):
+        read_columns(path, ["2"])
+
+
 # ----------------------------------------------------------------------------- sample rate
 
 

@@ -31,7 +31,8 @@ __all__ = [
 #: How columns are chosen, shown in --help.
 COLUMN_HELP = ("by header name or, in text files, by number counted from 1 (1 is the first "
                "column, as in MATLAB and awk); text files without a header row, such as "
-               "DaISy .dat records, are read by number")
+               "DaISy .dat records, are read by number; in .mat/.h5/.npz files NAME:K is "
+               "column K of the stored matrix NAME (MATLAB's NAME(:, K))")
 
 
 def add_record_arguments(p: argparse.ArgumentParser) -> None:

@@ -326,7 +326,8 @@ def _unknown_column(path: Path, name: str, available: list[str]) -> str:
         shown += f", ... ({len(available)} in all)"
     hint = ""
     if _column_number(name) is not None and path.suffix.lower() not in _TEXT_SUFFIXES:
-        hint = " (column numbers select columns of text files only; name the variable)"
+        hint = (" (column numbers select columns of text files only; name the variable, "
+                "or a column of a stored matrix as NAME:K, K counted from 1)")
     return f"{str(path)!r}: no column {name!r}; available: {shown or '(none)'}{hint}"
 
 
@@ -362,6 +363,42 @@ def _finish(path: Path, raw: _Raw) -> Table:
     return Table(path=path, columns=out)
 
 
+def _matrix_column(spec: str, available: list[str]) -> tuple[str, int] | None:
+    """``(NAME, K)`` if ``spec`` is ``NAME:K``, column K (from 1) of the stored matrix
+    NAME (MATLAB's ``NAME(:, K)``), and NAME is stored; else None."""
+    name, sep, k = spec.rpartition(":")
+    number = _column_number(k) if sep else None
+    if number is None or number < 1 or name not in available:
+        return None
+    return name, number
+
+
+def _stored(spec: str, available: list[str]) -> str:
+    """The stored variable that holds the column ``spec`` (itself, or NAME of NAME:K)."""
+    if spec in available:
+        return spec
+    m = _matrix_column(spec, available)
+    return spec if m is None else m[0]
+
+
+def _column(path: Path, spec: str, value, available: list[str]) -> np.ndarray:
+    """The column ``spec`` from its stored ``value``: a vector, or NAME:K of a matrix
+    whose rows are the samples."""
+    m = None if spec in available else _matrix_column(spec, available)
+    if m is None:
+        return _vector_or_error(path, spec, value)
+    name, k = m
+    a = np.asarray(value)
+    if a.dtype.kind not in "biuf" or a.ndim != 2:
+        shape = "x".join(str(n) for n in a.shape) or "scalar"
+        raise DataError(f"{str(path)!r}: {spec!r}: {name!r} is a {shape} array, not a "
+                        "numeric matrix with one column per signal")
+    if k > a.shape[1]:
+        raise DataError(f"{str(path)!r}: {spec!r}: {name!r} has {a.shape[1]} columns "
+                        f"({a.shape[0]} rows, one per sample)")
+    return a[:, k - 1].astype(np.float64)
+
+
 def _select(
     path: Path,
     available: list[str],
@@ -371,10 +408,11 @@ def _select(
     if wanted is None:
         return list(available)
     for name in wanted:
-        if name not in available:
+        if name not in available and _matrix_column(name, available) is None:
             raise DataError(_unknown_column(path, name, available))
     names = list(wanted)
-    if optional is not None and optional in available:
+    if optional is not None and (optional in available
+                                 or _matrix_column(optional, available) is not None):
         names.insert(0, optional)
     return names
 
@@ -645,8 +683,9 @@ def _pick(path: Path, flat: dict, wanted, optional) -> _Raw:
             if a is not None:
                 cols[name] = a
         return _Raw(cols)
-    names = _select(path, list(flat), wanted, optional)
-    return _Raw({n: _vector_or_error(path, n, flat[n]) for n in names})
+    available = list(flat)
+    names = _select(path, available, wanted, optional)
+    return _Raw({n: _column(path, n, flat[_stored(n, available)], available) for n in names})
 
 
 def _is_hdf5(path: Path, head: bytes | None = None) -> bool:
@@ -684,9 +723,8 @@ def _read_hdf5(path: Path, wanted, optional, *, transpose: bool) -> _Raw:
                     cols[name] = _load_ds(ds, transpose)
             return _Raw(cols)
         chosen = _select(path, names, wanted, optional)
-        return _Raw(
-            {n: _vector_or_error(path, n, _load_ds(fh[n], transpose)) for n in chosen}
-        )
+        return _Raw({n: _column(path, n, _load_ds(fh[_stored(n, names)], transpose), names)
+                     for n in chosen})
 
 
 _MATLAB_NUMERIC = {
@@ -728,7 +766,7 @@ def _read_npz(path: Path, wanted, optional) -> _Raw:
                     flat = {k: archive[k] for k in archive.files}
                 else:
                     names = _select(path, list(archive.files), wanted, optional)
-                    flat = {k: archive[k] for k in names}
+                    flat = {b: archive[b] for b in {_stored(n, archive.files) for n in names}}
             except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
                 raise DataError(f"{str(path)!r}: not a readable .npz file ({exc})") from None
     return _pick(path, flat, wanted, optional)
