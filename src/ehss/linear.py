@@ -43,6 +43,7 @@ __all__ = [
     "loop_gain",
     "Margins",
     "margins",
+    "closed_loop_radius",
     "response_at",
     "bandwidth_hz",
     "band_deviation_db",
@@ -535,6 +536,25 @@ def margins(loop_tf, *, f_max_hz: float | None = None) -> Margins:
             pm, f_gc = p, float(f[i] + frac * (f[i + 1] - f[i]))
     return Margins(gain_margin_db=gm_db, phase_margin_deg=pm, phase_crossover_hz=f_pc,
                    gain_crossover_hz=f_gc)
+
+
+def closed_loop_radius(params: RigParams, loop: str) -> float:
+    """Largest pole radius of the sampled ``loop`` closed around the rig of ``params``.
+
+    The loop gain L of :func:`loop_gain` (valve, plant, hold, delay and the controller,
+    broken at the valve command) closed by unity negative feedback, L/(1 + L): the
+    linearised loop is stable when the radius is below 1. A rig of other mass, valve or
+    actuator than the one its gains were designed for can leave it above 1
+    (:mod:`ehss.control.tuning` designs gains for it).
+
+    Examples
+    --------
+    >>> from ehss.params import preset
+    >>> closed_loop_radius(preset("default"), "position") < 1.0
+    True
+    """
+    gain = loop_gain(params, loop, discrete=True)
+    return float(np.max(np.abs(ct.poles(ct.feedback(gain, 1)))))
 
 
 def band_deviation_db(sys, f_lo_hz: float, f_hi_hz: float, *, n: int = 2000) -> tuple[float, float]:

@@ -1,30 +1,61 @@
-"""``ehss params``: print a parameter set with units, or save it as TOML."""
+"""``ehss params``: print a parameter set with units and its loops' stability, retune
+the loops for the rig it describes, or save it as TOML."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+from typing import Any
 
 from ehss.cli._outputs import InputFile, OutputFile
-from ehss.params import PRESETS, describe_params, load_params, preset, save_params
+from ehss.params import PRESETS, RigParams, describe_params, load_params, preset, save_params
 
-__all__ = ["register"]
+__all__ = ["register", "loop_check"]
+
+LOOPS = ("position", "acceleration", "force")
+#: the gain margin the loops are designed for (Table 2: at least 6 dB)
+REQUIRED_GM_DB = 6.0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "params",
-        help="print a parameter set with units (or save it as TOML)",
-        description="Print a parameter set with units and the derived quantities of the "
-        "linear model (ωh, ζh, Kh, ω0, ζ0, ωr, ωm, ζm, K0).",
+        help="print a parameter set with units and its loops' stability (or retune the "
+        "loops, or save it as TOML)",
+        description="Print a parameter set with units, the derived quantities of the "
+        "linear model (ωh, ζh, Kh, ω0, ζ0, ωr, ωm, ζm, K0) and the stability of the three "
+        "sampled loops (closed-loop pole radius, gain and phase margins of the linearised "
+        "loop). A rig of other mass, valve or actuator needs its own controller gains: "
+        "--tune designs them as the defaults were (6.5 dB gain margin on the sampled loop).",
+        epilog="example: ehss params --params heavy.toml --tune --save heavy_tuned.toml",
     )
     src = p.add_mutually_exclusive_group()
     src.add_argument("--preset", default="default", choices=sorted(PRESETS),
                      help="named parameter set (default: %(default)s)")
     src.add_argument("--params", metavar="FILE.toml", type=InputFile,
                      help="read a (partial) TOML parameter file")
+    p.add_argument("--tune", action="store_true",
+                   help="replace the position, acceleration (TVC) and force gains by a design "
+                   "for this rig (ehss.control.tuning, 6.5 dB gain margin)")
     p.add_argument("--save", metavar="FILE.toml", type=OutputFile,
-                   help="write the parameter set as TOML")
+                   help="write the parameter set (tuned, with --tune) as TOML")
     p.set_defaults(func=run)
+
+
+def loop_check(params: RigParams, loop: str) -> tuple[float, Any]:
+    """``(closed-loop pole radius, margins)`` of the linearised sampled ``loop``
+    (:func:`ehss.linear.closed_loop_radius`, :func:`ehss.linear.margins`)."""
+    from ehss import linear
+
+    margins = linear.margins(linear.loop_gain(params, loop, discrete=True))
+    return linear.closed_loop_radius(params, loop), margins
+
+
+def _tuned(params: RigParams) -> RigParams:
+    from ehss.control.tuning import tune_force, tune_position, tune_tvc
+
+    return dataclasses.replace(params, position=tune_position(params),
+                               acceleration=tune_tvc(params), force=tune_force(params))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -32,12 +63,25 @@ def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     params = load_params(args.params) if args.params else preset(args.preset)
+    if args.tune:
+        params = _tuned(params)
     if args.save:
         save_params(params, args.save)
+    console = Console(width=110)
     table = Table(title=f"ehss parameters: {params.name}", show_lines=False)
     for col in ("section", "parameter", "value", "unit"):
         table.add_column(col, justify="right" if col == "value" else "left")
     for row in describe_params(params):
         table.add_row(*row)
-    Console(width=110).print(table)
+    console.print(table)
+    loops = Table(title="sampled loops, linearised" + (" (tuned)" if args.tune else ""))
+    for col in ("loop", "pole radius", "gain margin", "phase margin", "verdict"):
+        loops.add_column(col, justify="left" if col in ("loop", "verdict") else "right")
+    for loop in LOOPS:
+        radius, m = loop_check(params, loop)
+        verdict = ("UNSTABLE" if radius >= 1.0 else
+                   f"below {REQUIRED_GM_DB:g} dB" if m.gain_margin_db < REQUIRED_GM_DB else "ok")
+        loops.add_row(loop, f"{radius:.4f}", f"{m.gain_margin_db:.2f} dB",
+                      f"{m.phase_margin_deg:.1f}°", verdict)
+    console.print(loops)
     return 0
