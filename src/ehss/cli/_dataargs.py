@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import re
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -174,14 +175,26 @@ def write_outputs(writers: dict[Path, Callable[[Path], None]]) -> None:
 
 @contextlib.contextmanager
 def report_warnings(command: str) -> Iterator[None]:
-    """Show EhssWarnings raised inside as one ``warning:`` line each on stderr."""
+    """Show EhssWarnings raised inside as one ``warning:`` line each on stderr.
+
+    Warnings that differ only in their numbers (the same check failing for many
+    candidate models) are shown once, with how many times they came.
+    """
     from ehss.errors import EhssWarning
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", EhssWarning)
         yield
+    first: dict[str, str] = {}
+    count: dict[str, int] = {}
     for w in caught:
         if issubclass(w.category, EhssWarning):
-            print(f"ehss {command}: warning: {w.message}", file=sys.stderr)
+            text = str(w.message)
+            key = re.sub(r"[-+]?\d[\d.]*(e[-+]?\d+)?", "#", text)
+            first.setdefault(key, text)
+            count[key] = count.get(key, 0) + 1
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    for key, text in first.items():
+        times = f" ({count[key]} times, the first shown)" if count[key] > 1 else ""
+        print(f"ehss {command}: warning: {text}{times}", file=sys.stderr)

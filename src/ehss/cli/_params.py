@@ -10,7 +10,7 @@ from typing import Any
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.params import PRESETS, RigParams, describe_params, load_params, preset, save_params
 
-__all__ = ["register", "loop_check"]
+__all__ = ["register", "loop_check", "warn_if_unstable"]
 
 LOOPS = ("position", "acceleration", "force")
 #: the gain margin the loops are designed for (Table 2: at least 6 dB)
@@ -49,6 +49,25 @@ def loop_check(params: RigParams, loop: str) -> tuple[float, Any]:
 
     margins = linear.margins(linear.loop_gain(params, loop, discrete=True))
     return linear.closed_loop_radius(params, loop), margins
+
+
+def warn_if_unstable(command: str, params: RigParams, loop: str,
+                     args: argparse.Namespace) -> bool:
+    """One line on stderr when ``loop``'s gains do not stabilise this rig (linearised);
+    True if so. The run goes on: the nonlinear rig then shows a limit cycle or drifts to
+    its limits, which is what such gains do, but not a response to its reference."""
+    import sys
+
+    radius, m = loop_check(params, loop)
+    if radius < 1.0:
+        return False
+    source = (f"--params {args.params}" if getattr(args, "params", None)
+              else f"--preset {getattr(args, 'preset', 'default')}")
+    print(f"ehss {command}: warning: the {loop} loop is unstable with these gains on this "
+          f"rig (linearised: closed-loop pole radius {radius:.4f}, gain margin "
+          f"{m.gain_margin_db:.2f} dB); `ehss params {source} --tune --save TUNED.toml` "
+          "designs gains for it", file=sys.stderr)
+    return True
 
 
 def _tuned(params: RigParams) -> RigParams:

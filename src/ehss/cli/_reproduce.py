@@ -53,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
     from ehss.cli._dataargs import report_warnings
+    from ehss.cli._params import warn_if_unstable
     from ehss.errors import DataError
     from ehss.experiments import ProgrammeSettings, run_programme
     from ehss.experiments.pool import default_jobs, process_pool
@@ -63,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise DataError(f"--out {str(out)!r} is a file, not a folder")
     params = load_params(args.params) if args.params else preset("default")
+    for loop in ("position", "acceleration", "force"):
+        warn_if_unstable("reproduce", params, loop, args)
     settings = ProgrammeSettings(seed=args.seed, duration_s=args.duration)
     console = Console(stderr=True, quiet=args.quiet)
     t0 = time.perf_counter()
@@ -89,16 +92,22 @@ def run(args: argparse.Namespace) -> int:
         verdict = "meets acceptance" if chk.passes else "does not meet acceptance"
         lines.append(
             f"{name:>12}: {chk.label}: max |dG| {chk.error.max_magnitude_db:.2f} dB, "
-            f"max dphi {chk.error.max_phase_deg:.2f} deg, held-out fit {chk.fit_pct:.1f} % "
+            f"max dphi {chk.error.max_phase_deg:.2f} deg, held-out fit {_pct(chk.fit_pct)} % "
             f"-> {verdict}"
         )
         if r.passing is not None:
             p = r.passing
             lines.append(
                 f"{'':>12}  {p.label}: {p.error.max_magnitude_db:.2f} dB, "
-                f"{p.error.max_phase_deg:.2f} deg, fit {p.fit_pct:.1f} % -> meets acceptance"
+                f"{p.error.max_phase_deg:.2f} deg, fit {_pct(p.fit_pct)} % -> meets acceptance"
             )
     print("\n".join(lines))
     print(f"report: {html_path}")
     sys.stdout.flush()
     return 0
+
+
+def _pct(x: float) -> str:
+    """A fit in %: one decimal, or three significant digits for a model that diverges
+    (a fit of −3.6e+33 %)."""
+    return f"{x:.1f}" if abs(x) < 1e4 else f"{x:.3g}"

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ehss.cli._outputs import InputFile, OutputFile, OutputTable
+from ehss.cli._params import warn_if_unstable
 from ehss.errors import ParameterError
 from ehss.params import GRAVITY_M_S2, PRESETS, RigParams, load_params, params_to_dict, preset
 
@@ -126,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
     checked = with_control_rate(params, fs)  # fs must divide the internal rate: fail before work
     _check_feasible(values, args.loop, checked, fs, step=kind == "step")
-    _warn_if_unstable(args, params)
+    warn_if_unstable("simulate", params, args.loop, args)
 
     expected_s = values.size / fs / _EXPECTED_REAL_TIME_FACTOR
     with _progress(expected_s, f"simulating {values.size / fs:.4g} s of the {args.loop} loop"):
@@ -147,26 +148,6 @@ def run(args: argparse.Namespace) -> int:
         note = ", ".join(f"{k} {v:.1%}" for k, v in hits.items())
         print(f"ehss simulate: warning: the test hit a limit ({note})", file=sys.stderr)
     return 0
-
-
-def _warn_if_unstable(args: argparse.Namespace, params: RigParams) -> None:
-    """One line on stderr when the loop's gains do not stabilise this rig (linearised).
-
-    The run is still written: the nonlinear rig then shows a limit cycle or drifts to its
-    limits, which is what such gains do, but not a response to the reference.
-    """
-    import sys
-
-    from ehss.cli._params import loop_check
-
-    radius, m = loop_check(params, args.loop)
-    if radius < 1.0:
-        return
-    source = f"--params {args.params}" if args.params else f"--preset {args.preset}"
-    print(f"ehss simulate: warning: the {args.loop} loop is unstable with these gains on this "
-          f"rig (linearised: closed-loop pole radius {radius:.4f}, gain margin "
-          f"{m.gain_margin_db:.2f} dB); `ehss params {source} --tune --save TUNED.toml` "
-          "designs gains for it", file=sys.stderr)
 
 
 def _check_feasible(values, loop: str, params: RigParams, fs: float, *, step: bool) -> None:

@@ -28,7 +28,7 @@ from scipy.signal import lfilter
 
 from ehss import signals
 from ehss.control.known import known_factors
-from ehss.errors import ParameterError
+from ehss.errors import DataError, ParameterError
 from ehss.experiments.compensation_demo import CompensationDemo, demonstrate
 from ehss.experiments.loop_identification import (
     ModelCheck,
@@ -41,6 +41,7 @@ from ehss.experiments.pool import collect, submit
 from ehss.experiments.steps import StepTest, step_tests
 from ehss.frequency import FrequencyResponse
 from ehss.identification import OrderSelection, rels, select_order
+from ehss.linear import closed_loop_radius
 from ehss.params import GRAVITY_M_S2, RigParams, preset
 from ehss.simulation import SimulationResult, simulate
 
@@ -161,6 +162,8 @@ class ProgrammeResult:
     loops: dict[str, LoopResult]
     compensation: dict[str, CompensationDemo]
     elapsed_s: float
+    #: loops whose compensation was not demonstrated, and why (an unstable loop)
+    compensation_skipped: dict[str, str] = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- references
@@ -307,7 +310,7 @@ def run_programme(
     settings = ProgrammeSettings() if settings is None else settings
     say = progress or (lambda _msg: None)
     t0 = time.perf_counter()
-    demo_names = ("position", "acceleration") if settings.compensation else ()
+    demo_names, skipped = _demonstrable(params, settings)
     demo_calls = {
         name: partial(demonstrate, name, params=params, seed=settings.seed + 10 + k,
                       duration_s=settings.compensation_duration_s)
@@ -330,12 +333,18 @@ def run_programme(
         loops[name] = _run_loop(setup, params, settings, settings.seed + 1 + k)
     demos: dict[str, CompensationDemo] = {}
     for name in demo_names:
-        if name in pending:
-            say(f"{name} loop: feed-forward compensation, waiting for the second process")
-            demos[name] = collect(pending[name])
-        else:
-            say(f"{name} loop: feed-forward compensation")
-            demos[name] = demo_calls[name]()
+        try:
+            if name in pending:
+                say(f"{name} loop: feed-forward compensation, waiting for the second "
+                    "process")
+                demos[name] = collect(pending[name])
+            else:
+                say(f"{name} loop: feed-forward compensation")
+                demos[name] = demo_calls[name]()
+        except (ParameterError, DataError) as exc:
+            # the compensation's own safety checks refused (an uninvertible model, a
+            # drive far beyond the reference): the report says so instead of a drive
+            skipped[name] = f"the compensation refused it: {exc}"
     return ProgrammeResult(
         params=params,
         settings=settings,
@@ -343,4 +352,27 @@ def run_programme(
         loops=loops,
         compensation=demos,
         elapsed_s=time.perf_counter() - t0,
+        compensation_skipped=skipped,
     )
+
+
+def _demonstrable(params: RigParams, settings: ProgrammeSettings
+                  ) -> tuple[tuple[str, ...], dict[str, str]]:
+    """The loops whose compensation is demonstrated, and the others with the reason.
+
+    A loop its gains leave unstable on this rig (linearised, sampled) runs into a limit
+    cycle: a model of that record is no closed loop to invert, so it is not demonstrated.
+    """
+    if not settings.compensation:
+        return (), {}
+    names: list[str] = []
+    skipped: dict[str, str] = {}
+    for name in ("position", "acceleration"):
+        radius = closed_loop_radius(params, name)
+        if radius < 1.0:
+            names.append(name)
+        else:
+            skipped[name] = (f"the {name} loop is unstable with these gains on this rig "
+                             f"(linearised closed-loop pole radius {radius:.4f}); "
+                             "`ehss params --tune` designs gains for it")
+    return tuple(names), skipped

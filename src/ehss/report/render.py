@@ -129,6 +129,7 @@ def summary_dict(result: ProgrammeResult) -> dict[str, Any]:
         "steps": {k: s.metrics.to_dict() for k, s in result.steps.items()},
         "loops": loops,
         "compensation": {k: d.figures() for k, d in result.compensation.items()},
+        "compensation_skipped": dict(result.compensation_skipped),
         "printed_models": printed_model_findings(),
         "settings": {
             "seed": result.settings.seed,
@@ -256,6 +257,8 @@ def _compensation_markdown(result: ProgrammeResult) -> list[str]:
             f"({d.improvement['earthquake']:.0f}×) | {'yes' if ok else 'no'} |"
         )
     lines.append("")
+    for name, why in result.compensation_skipped.items():
+        lines += [f"The {name} loop's compensation is not demonstrated: {why}.", ""]
     for name in result.compensation:
         lines += [f"![{name} compensation]({COMPENSATION_FIGURES[name]})", ""]
     if "acceleration" in result.compensation:
@@ -353,7 +356,7 @@ def _markdown(result: ProgrammeResult, summary: dict[str, Any]) -> str:
         f"![RELS convergence]({CONVERGENCE_FIGURE})",
         "",
     ]
-    if result.compensation:
+    if result.compensation or result.compensation_skipped:
         lines += _compensation_markdown(result)
     lines += [
         "## The paper's printed models",
