@@ -20,6 +20,7 @@ import dataclasses
 import math
 
 import numpy as np
+from scipy.optimize import brentq
 
 from ehss import linear
 from ehss.errors import ParameterError
@@ -191,7 +192,7 @@ def tune_tvc(
     Notes
     -----
     For each ωd the gains follow :func:`tvc_pole_placement`; the gain margin of the
-    discrete loop decreases monotonically with ωd, and ωd is found by bisection so that
+    discrete loop decreases monotonically with ωd, and ωd is found by Brent's method so that
     the margin equals ``gain_margin_db``.
 
     Why the 50 Hz band is out of reach: above ωh the acceleration feedback dominates and
@@ -227,14 +228,11 @@ def tune_tvc(
         )
     if gm(hi) >= gain_margin_db:
         return build(hi)
-    # bisection on log ωd: 28 halvings of a 4-decade interval → 4e-8 relative
-    for _ in range(28):
-        mid = math.sqrt(lo * hi)
-        if gm(mid) >= gain_margin_db:
-            lo = mid
-        else:
-            hi = mid
-    return build(lo)
+    # the margin falls monotonically and continuously with ωd: Brent's method on log ωd
+    # (about 10 margin evaluations instead of bisection's 28 for the same 4e-8)
+    log_wd = brentq(lambda x: gm(math.exp(x)) - gain_margin_db, math.log(lo), math.log(hi),
+                    xtol=4e-8, rtol=4e-8)
+    return build(math.exp(log_wd))
 
 
 def _round_sig(x: float, digits: int = 4) -> float:
