@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING
 
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.params import PRESETS, RigParams, describe_params, load_params, preset, save_params
+
+if TYPE_CHECKING:
+    from ehss.linear import Margins
 
 __all__ = ["register", "loop_check", "warn_if_unstable"]
 
@@ -42,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def loop_check(params: RigParams, loop: str) -> tuple[float, Any]:
+def loop_check(params: RigParams, loop: str) -> tuple[float, Margins]:
     """``(closed-loop pole radius, margins)`` of the linearised sampled ``loop``
     (:func:`ehss.linear.closed_loop_radius`, :func:`ehss.linear.margins`)."""
     from ehss import linear
@@ -51,18 +54,17 @@ def loop_check(params: RigParams, loop: str) -> tuple[float, Any]:
     return linear.closed_loop_radius(params, loop), margins
 
 
-def warn_if_unstable(command: str, params: RigParams, loop: str,
-                     args: argparse.Namespace) -> bool:
+def warn_if_unstable(command: str, params: RigParams, loop: str, source: str) -> bool:
     """One line on stderr when ``loop``'s gains do not stabilise this rig (linearised);
-    True if so. The run goes on: the nonlinear rig then shows a limit cycle or drifts to
-    its limits, which is what such gains do, but not a response to its reference."""
+    True if so. ``source`` is how the command was given the parameters (``--params
+    rig.toml``), for the ``ehss params`` command the line suggests. The run goes on: the
+    nonlinear rig then shows a limit cycle or drifts to its limits, which is what such
+    gains do, but not a response to its reference."""
     import sys
 
     radius, m = loop_check(params, loop)
     if radius < 1.0:
         return False
-    source = (f"--params {args.params}" if getattr(args, "params", None)
-              else f"--preset {getattr(args, 'preset', 'default')}")
     print(f"ehss {command}: warning: the {loop} loop is unstable with these gains on this "
           f"rig (linearised: closed-loop pole radius {radius:.4f}, gain margin "
           f"{m.gain_margin_db:.2f} dB); `ehss params {source} --tune --save TUNED.toml` "

@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"--out {str(out)!r} is a file, not a folder")
     params = load_params(args.params) if args.params else preset("default")
     for loop in ("position", "acceleration", "force"):
-        warn_if_unstable("reproduce", params, loop, args)
+        warn_if_unstable("reproduce", params, loop, f"--params {args.params}")
     settings = ProgrammeSettings(seed=args.seed, duration_s=args.duration)
     console = Console(stderr=True, quiet=args.quiet)
     t0 = time.perf_counter()

@@ -127,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
 
     checked = with_control_rate(params, fs)  # fs must divide the internal rate: fail before work
     _check_feasible(values, args.loop, checked, fs, step=kind == "step")
-    warn_if_unstable("simulate", params, args.loop, args)
+    source = f"--params {args.params}" if args.params else f"--preset {args.preset}"
+    warn_if_unstable("simulate", params, args.loop, source)
 
     expected_s = values.size / fs / _EXPECTED_REAL_TIME_FACTOR
     with _progress(expected_s, f"simulating {values.size / fs:.4g} s of the {args.loop} loop"):
