@@ -73,6 +73,11 @@ def test_a_heavy_rig_is_flagged_tuned_and_then_tracks(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "position loop is unstable" in err and "--tune" in err
     assert out.exists()
+    # and so does the simulated rig of ehss live
+    assert main(["live", "--rig", "position", "--params", str(heavy), "--duration", "1",
+                 "--speed", "inf", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "ehss live: warning: the position loop is unstable" in err
 
     tuned = tmp_path / "tuned.toml"
     assert main(["params", "--params", str(heavy), "--tune", "--save", str(tuned)]) == 0

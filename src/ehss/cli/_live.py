@@ -61,8 +61,10 @@ def _check_positive(name: str, value: float, *, allow_inf: bool = False) -> floa
     return check_real(value, name, lo=0.0, lo_open=True)
 
 
-def rig_or_replay(args: argparse.Namespace):
-    """``(layout, samples, fs)`` of ``--rig LOOP`` or ``--replay FILE``."""
+def rig_or_replay(args: argparse.Namespace, command: str):
+    """``(layout, samples, fs)`` of ``--rig LOOP`` or ``--replay FILE``; ``command``
+    names the command in a warning (a simulated loop its gains leave unstable)."""
+    from ehss.cli._params import warn_if_unstable
     from ehss.live.layout import parse_fields
     from ehss.live.replay import replay_record
     from ehss.live.rig import parse_event, rig_record
@@ -72,6 +74,8 @@ def rig_or_replay(args: argparse.Namespace):
         events = tuple(parse_event(e) for e in args.event)
         params = ehss.load_params(args.params) if args.params else ehss.preset(args.preset)
         _check_positive("--duration", args.duration)
+        source = f"--params {args.params}" if args.params else f"--preset {args.preset}"
+        warn_if_unstable(command, params, args.rig, source)
         return rig_record(args.rig, n_channels=args.channels, duration_s=args.duration,
                           fs=args.fs, params=params, events=events, seed=args.seed)
     if args.event:
@@ -225,7 +229,7 @@ def _source(args: argparse.Namespace):
             return UdpSource(layout, parse_address(args.udp), fs=args.fs, allow=allow)
         except ValueError as exc:
             raise ParameterError(f"--allow {args.allow!r}: {exc}") from None
-    layout, samples, fs = rig_or_replay(args)
+    layout, samples, fs = rig_or_replay(args, "live")
     return PacedSource(layout, samples, fs, speed=args.speed)
 
 

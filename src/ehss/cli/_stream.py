@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from ehss.live.udp import parse_address, stream_record
 
     address = parse_address(args.to)
-    layout, samples, fs = rig_or_replay(args)
+    layout, samples, fs = rig_or_replay(args, "stream")
     spp = args.samples_per_packet or max(1, round(fs / 1000.0))
     if spp < 1:
         raise ParameterError(f"--samples-per-packet={spp} must be >= 1")
