@@ -723,8 +723,9 @@ def _read_hdf5(path: Path, wanted, optional, *, transpose: bool) -> _Raw:
                     cols[name] = _load_ds(ds, transpose)
             return _Raw(cols)
         chosen = _select(path, names, wanted, optional)
-        return _Raw({n: _column(path, n, _load_ds(fh[_stored(n, names)], transpose), names)
-                     for n in chosen})
+        # a matrix whose columns are asked for is read once
+        stored = {b: _load_ds(fh[b], transpose) for b in {_stored(n, names) for n in chosen}}
+        return _Raw({n: _column(path, n, stored[_stored(n, names)], names) for n in chosen})
 
 
 _MATLAB_NUMERIC = {
