@@ -25,7 +25,12 @@ test: $(STAMP)
 	    (apt-get install -y -qq chromium chromium-driver >/dev/null 2>&1 \
 	     || (apt-get update -qq >/dev/null 2>&1 \
 	         && apt-get install -y -qq chromium chromium-driver >/dev/null 2>&1)) || true; fi
-	$(BIN)/python -m pytest -q
+	@# everything but the realtime tests on every core, then those alone (their pacing by
+	@# the wall clock must not compete for the cores); one fresh numba cache for both
+	cache=$$(mktemp -d) && trap 'rm -rf "$$cache"' EXIT \
+	    && export EHSS_TEST_NUMBA_CACHE="$$cache" \
+	    && $(BIN)/python -m pytest -q -n auto --dist loadfile -m "not realtime" \
+	    && $(BIN)/python -m pytest -q -m realtime
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks

@@ -36,6 +36,7 @@ def test_exposed_dashboard_needs_a_token():
 
 
 @pytest.mark.slow
+@pytest.mark.realtime
 @pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
                     reason="no headless browser: install Debian's chromium and "
                     "chromium-driver (make test does so when run as root)")

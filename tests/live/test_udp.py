@@ -18,6 +18,8 @@ import pytest
 from ehss.live import RecordLayout, UdpSource, read_recording, rig_record
 
 SRC = str(Path(__file__).resolve().parents[2] / "src")
+pytestmark = pytest.mark.realtime
+
 FIELDS8 = ",".join(["t"] + [f"{k}{i}" for i in range(1, 9) for k in ("ref", "fb")])
 
 
