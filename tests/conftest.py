@@ -37,9 +37,10 @@ _GIVEN = os.environ.get("EHSS_TEST_NUMBA_CACHE", "")  # made fresh by make test
 if not _WORKER:
     _NUMBA_CACHE = _GIVEN or tempfile.mkdtemp(prefix="ehss-numba-cache-")
     os.environ["NUMBA_CACHE_DIR"] = _NUMBA_CACHE
+    _WARM_LOG = tempfile.TemporaryFile()  # its error, if it fails
     _WARM = subprocess.Popen(
         [sys.executable, str(Path(__file__).with_name("warm_kernels.py"))],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL, stderr=_WARM_LOG, stdin=subprocess.DEVNULL,
     )
 
 import matplotlib  # noqa: E402
@@ -49,6 +50,15 @@ import pytest  # noqa: E402
 matplotlib.use("Agg")
 
 
+def pytest_terminal_summary(terminalreporter) -> None:
+    """Say so when the kernel warm-up failed (the tests then compiled the kernels)."""
+    if _WORKER or _WARM.poll() in (None, 0):
+        return
+    _WARM_LOG.seek(0)
+    lines = _WARM_LOG.read().decode(errors="replace").strip().splitlines() or ["?"]
+    terminalreporter.write_line(f"tests/warm_kernels.py failed: {lines[-1]}", yellow=True)
+
+
 def pytest_unconfigure(config: pytest.Config) -> None:
     """Stop the kernel warm-up if it still runs; remove the run's numba cache (unless
     make test made it: it removes it after both parts)."""
@@ -56,6 +66,7 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         return
     _WARM.kill()
     _WARM.wait()
+    _WARM_LOG.close()
     if not _GIVEN:
         shutil.rmtree(_NUMBA_CACHE, ignore_errors=True)
 
