@@ -58,7 +58,7 @@ def test_detector_waits_for_the_hold_time_and_clears():
 
 
 def test_nan_raises_nothing():
-    det = Detector(DetectionSettings())
+    det = Detector(DetectionSettings(hold_s=0.2))
     assert det.exceeded(np.array([np.nan, 0, np.nan])) == []
 
 

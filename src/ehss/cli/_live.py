@@ -159,9 +159,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--pole-shift", type=float, default=math.inf, metavar="FRACTION",
                    help="threshold of the relative shift of the dominant pole in the band "
                    "(default: off; recorded all the same)")
-    d.add_argument("--hold", type=float, default=0.2, metavar="S",
-                   help="a figure must stay beyond its threshold this long (default: "
-                   "%(default)s s)")
+    d.add_argument("--hold", type=float, metavar="S",
+                   help="a figure must stay beyond its threshold this long (default: 1.5 "
+                   "memories of the estimator, at least 0.2 s: an excursion of the "
+                   "estimate under noise lasts about one memory; 1 s for unattended "
+                   "running)")
     d.add_argument("--clear", type=float, default=2.0, metavar="S",
                    help="all figures below their thresholds this long clear an alarm "
                    "(default: %(default)s s)")
@@ -316,6 +318,8 @@ def run(args: argparse.Namespace) -> int:
         if report.active_wall_s > 0 else math.nan,
         "counters": report.counters, "lag_ms": report.lag_ms,
         "setup_ms": session.setup_ms,
+        "settings": {"estimator": session.est.to_dict(), "detection": session.det.to_dict(),
+                     "forgetting": session.est.lam(session.fs) if session.fs else None},
         "alarms": report.alarms,
         "final_theta": {k: (None if v is None else v.tolist())
                         for k, v in report.final_theta.items()},

@@ -81,6 +81,11 @@ class EstimatorSettings:
             return float(self.forgetting)
         return 1.0 - 1.0 / (self.memory_s * fs)
 
+    def memory(self, fs: float) -> float:
+        """The memory 1/((1 − λ) fs) at sample rate ``fs``, s (``inf`` for λ = 1)."""
+        lam = self.lam(fs)
+        return math.inf if lam >= 1.0 else 1.0 / ((1.0 - lam) * fs)
+
     @property
     def n_params(self) -> int:
         return self.na + self.nb + 1 + self.nc
@@ -120,6 +125,8 @@ class ChannelProcessor:
         Sample rate, Hz.
     est : EstimatorSettings
     det : DetectionSettings
+        Without a hold time, the default for the estimator's memory is taken
+        (:meth:`DetectionSettings.for_memory`).
     baseline : ArmaxModel, optional
         Baseline model: the estimator starts from its θ and detection compares with
         it. Without one, the baseline is the mean of the estimates over the second half
@@ -134,7 +141,7 @@ class ChannelProcessor:
         self.name = name
         self.fs = float(fs)
         self.est = est
-        self.det = det
+        self.det = det = det.for_memory(est.memory(self.fs))
         if baseline is not None:
             if (baseline.na, baseline.nb, baseline.nc, baseline.delay) != (
                     est.na, est.nb, est.nc, est.delay):

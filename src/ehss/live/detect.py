@@ -16,21 +16,30 @@ the analysis band [f_lo, f_hi]:
 An alarm is raised when any figure stays beyond its threshold for ``hold_s`` of stream
 time, and cleared when all of them stay below for ``clear_s``. A figure that cannot be
 computed (NaN: e.g. no pole in the band) raises nothing.
+
+The default hold follows the estimator: 1.5 times its memory 1/((1 − λ) fs). Its
+estimates are correlated over about one memory, so an excursion of the estimate under
+noise leaves a threshold for about that long, while a change of the loop stays.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from ehss.errors import ParameterError
 
-__all__ = ["FIGURES", "DetectionSettings", "Detector", "dominant_pole", "figures"]
+__all__ = ["FIGURES", "HOLD_MEMORIES", "MIN_HOLD_S", "DetectionSettings", "Detector",
+           "dominant_pole", "figures"]
 
 #: Names of the figures, in the order they are recorded.
 FIGURES = ("frf_db", "gain_db", "pole_shift")
+#: The default hold, in memories of the estimator (:meth:`DetectionSettings.for_memory`).
+HOLD_MEMORIES = 1.5
+#: The shortest default hold (s): two evaluations at the default 0.1 s interval.
+MIN_HOLD_S = 0.2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -50,8 +59,11 @@ class DetectionSettings:
         is computed and recorded but raises no alarm by default: a model of this order
         places its dominant in-band pole poorly when the loop's main dynamics lie near
         the band's edges (e.g. 0.1 turns it on).
-    hold_s : float
-        How long a figure must stay beyond its threshold before the alarm (s).
+    hold_s : float or None
+        How long a figure must stay beyond its threshold before the alarm (s). None
+        (the default): :data:`HOLD_MEMORIES` times the estimator's memory, at least
+        :data:`MIN_HOLD_S` and at most ``learn_s`` (:meth:`for_memory`; 0.45 s for the
+        default 0.3 s memory).
     clear_s : float
         How long all figures must stay below before the alarm clears (s).
     learn_s : float
@@ -69,7 +81,7 @@ class DetectionSettings:
     frf_db: float = 0.5
     gain_db: float = 1.0
     pole_shift: float = math.inf
-    hold_s: float = 0.2
+    hold_s: float | None = None
     clear_s: float = 2.0
     learn_s: float = 10.0
     recent_s: float = 5.0
@@ -84,6 +96,8 @@ class DetectionSettings:
                 raise ParameterError(f"{name}={v!r} must be > 0 (inf disables it)")
         for name in ("hold_s", "clear_s", "learn_s", "recent_s"):
             v = getattr(self, name)
+            if name == "hold_s" and v is None:
+                continue
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ParameterError(f"{name}={v!r} must be a finite time >= 0 (s)")
         if self.band_hz is not None:
@@ -93,6 +107,15 @@ class DetectionSettings:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    def for_memory(self, memory_s: float) -> DetectionSettings:
+        """These settings with the default hold set for an estimator of memory
+        ``memory_s`` (s; ``inf`` without forgetting): :data:`HOLD_MEMORIES` memories, at
+        least :data:`MIN_HOLD_S`, at most ``learn_s``. A hold already given is kept."""
+        if self.hold_s is not None:
+            return self
+        hold = min(max(MIN_HOLD_S, HOLD_MEMORIES * memory_s), max(MIN_HOLD_S, self.learn_s))
+        return replace(self, hold_s=hold)
 
 
 def dominant_pole(a: np.ndarray, dt: float,
@@ -140,6 +163,9 @@ class Detector:
     """
 
     def __init__(self, settings: DetectionSettings) -> None:
+        if settings.hold_s is None:
+            raise ParameterError("the hold time is not set: give hold_s, or take the "
+                                 "estimator's default with DetectionSettings.for_memory")
         self.settings = settings
         self._limits = np.array([settings.frf_db, settings.gain_db, settings.pole_shift])
         self.active = False
