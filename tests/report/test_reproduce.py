@@ -174,6 +174,28 @@ def test_bad_duration_and_unwritable_out(tmp_path, capsys):
     assert f.read_text() == "x"
 
 
+def test_more_jobs_than_strands_start_no_more_processes(tmp_path, capsys, monkeypatch):
+    # the programme has two strands: --jobs 64 on a big machine must not start 63
+    # workers (each imports numpy, scipy, numba and matplotlib)
+    import contextlib
+
+    import ehss.experiments.pool as pool
+    from ehss.errors import DataError
+
+    asked = []
+
+    @contextlib.contextmanager
+    def recording_pool(jobs):
+        asked.append(jobs)
+        raise DataError("stopped before the programme")
+        yield  # pragma: no cover
+
+    monkeypatch.setattr(pool, "process_pool", recording_pool)
+    assert main(["reproduce", "--out", str(tmp_path / "r"), "--jobs", "64", "--quiet"]) == 2
+    assert asked == [pool.PROGRAMME_STRANDS] == [2]
+    assert "stopped before the programme" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("jobs", ["0", "two"])
 def test_jobs_must_be_a_count_of_processes(tmp_path, capsys, jobs):
     with pytest.raises(SystemExit) as exc:

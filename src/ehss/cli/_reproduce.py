@@ -30,8 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
                    help="processes to use, this one included: the compensation "
                    "demonstrations and some figures run in a second one (default 2 where "
-                   "the machine has two cores or more; the report is the same; use 1 when "
-                   "other jobs keep the cores busy)")
+                   "the machine has two cores or more; more than 2 gain nothing, so at "
+                   "most 2 are used; the report is the same; use 1 when other jobs keep "
+                   "the cores busy)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
 
@@ -56,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from ehss.cli._params import warn_if_unstable
     from ehss.errors import DataError
     from ehss.experiments import ProgrammeSettings, run_programme
-    from ehss.experiments.pool import default_jobs, process_pool
+    from ehss.experiments.pool import PROGRAMME_STRANDS, default_jobs, process_pool
     from ehss.params import load_params, preset
     from ehss.report import write_report
 
@@ -73,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
     # handing work to BLAS threads costs far more than it saves (a norm of 12 000
     # samples: 3 ms with threads on a busy two-core machine, 3 µs without).
     # The workers of the pool keep BLAS to one thread too (ehss.experiments.pool).
-    jobs = default_jobs() if args.jobs is None else args.jobs
+    # one process per strand of the programme at most: each costs its imports and memory
+    jobs = default_jobs() if args.jobs is None else min(args.jobs, PROGRAMME_STRANDS)
     with (console.status("starting") as status, threadpool_limits(limits=1, user_api="blas"),
           process_pool(jobs) as executor):
 

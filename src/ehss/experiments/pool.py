@@ -27,7 +27,11 @@ from typing import Any, TypeVar
 
 from ehss.errors import ParameterError
 
-__all__ = ["default_jobs", "process_pool", "submit", "collect"]
+__all__ = ["PROGRAMME_STRANDS", "default_jobs", "process_pool", "submit", "collect"]
+
+#: A programme has two long, independent strands (the loop identifications and the
+#: compensation demonstrations): more processes than that gain nothing.
+PROGRAMME_STRANDS = 2
 
 T = TypeVar("T")
 
@@ -35,12 +39,9 @@ _Caught = list[tuple[Warning | str, type[Warning], str, int]]
 
 
 def default_jobs() -> int:
-    """Processes a programme uses by default: two where the machine has two cores.
-
-    A programme has two long, independent strands (the identifications and the
-    compensation demonstrations), so more processes than two gain nothing.
-    """
-    return max(1, min(2, os.cpu_count() or 1))
+    """Processes a programme uses by default: one per strand
+    (:data:`PROGRAMME_STRANDS`) the machine has a core for."""
+    return max(1, min(PROGRAMME_STRANDS, os.cpu_count() or 1))
 
 
 def _start_worker() -> None:
