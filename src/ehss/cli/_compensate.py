@@ -53,8 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate in Hz (needed when the file has no time column)")
     p.add_argument("--time-column", default="t", metavar="COL",
-                   help="time column in seconds of the reference (and of the --update run), "
-                   "used for the sample rate if present (default: %(default)s)")
+                   help="time column of the reference (and of the --update run), used for "
+                   "the sample rate if present; in seconds unless its name states a unit: "
+                   "'t [ms]', 'time_us' (default: %(default)s)")
     p.add_argument("--fade", type=float, metavar="S",
                    help="fade the reference in and out over S seconds (raised cosine) when it "
                    "does not start or end at rest")

@@ -50,8 +50,9 @@ def add_record_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate in Hz (needed when the file has no time column)")
     p.add_argument("--time-column", default="t", metavar="COL",
-                   help="time column in seconds (name, or number from 1), used for the "
-                   "sample rate if present (default: %(default)s)")
+                   help="time column (name, or number from 1), used for the sample rate if "
+                   "present; in seconds unless its name states a unit: 't [ms]', "
+                   "'time_us' (default: %(default)s)")
 
 
 @dataclass(frozen=True)

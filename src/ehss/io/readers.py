@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import zipfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -19,7 +20,43 @@ import numpy as np
 from ehss._checks import SAMPLE_RATE_RANGE_HZ
 from ehss.errors import DataError
 
-__all__ = ["Table", "read_columns", "sample_rate", "SUPPORTED_SUFFIXES"]
+__all__ = ["Table", "read_columns", "sample_rate", "time_unit", "SUPPORTED_SUFFIXES"]
+
+#: Units of time a time column's name may state, in seconds.
+TIME_UNITS_S = {
+    "s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0,
+    "ms": 1e-3, "msec": 1e-3, "millisecond": 1e-3, "milliseconds": 1e-3,
+    "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "usec": 1e-6, "microseconds": 1e-6,
+    "ns": 1e-9, "min": 60.0, "h": 3600.0,
+}
+# A unit at the end of a column name: "t [ms]", "time (s)", "time_ms", "t ms", "t/ms".
+_BRACKETED_UNIT = re.compile(r"[\[(]\s*([^\[\]()]+?)\s*[\])]\s*$")
+_SUFFIX_UNIT = re.compile(r"[_\s/]([A-Za-zµμ]+)\s*$")
+
+
+def time_unit(name: str) -> tuple[str, float]:
+    """The unit a time column's name states, and its length in seconds.
+
+    ``"t [ms]"``, ``"time (ms)"``, ``"time_ms"``, ``"t ms"`` and ``"t/ms"`` state
+    milliseconds; a name stating no unit (``"t"``, ``"time"``) is taken as seconds.
+
+    Raises
+    ------
+    DataError
+        If the name states a unit in brackets that is not one of time (``"t [samples]"``).
+    """
+    m = _BRACKETED_UNIT.search(name)
+    if m:
+        unit = m.group(1)
+        if unit.lower() not in TIME_UNITS_S and unit not in TIME_UNITS_S:
+            raise DataError(f"time column {name!r} is in {unit!r}, not a unit of time "
+                            "(s, ms, us, ns, min, h); pass the sample rate with --fs "
+                            "instead")
+    else:
+        m = _SUFFIX_UNIT.search(name)
+        unit = m.group(1) if m and (m.group(1) in TIME_UNITS_S
+                                    or m.group(1).lower() in TIME_UNITS_S) else "s"
+    return unit, TIME_UNITS_S.get(unit, TIME_UNITS_S.get(unit.lower(), 1.0))
 
 #: File name endings understood by :func:`read_columns`.
 SUPPORTED_SUFFIXES = (
@@ -43,7 +80,9 @@ class Table(Mapping[str, np.ndarray]):
     columns : dict of str to ndarray
         The columns, each float64, contiguous, finite and of length ``n_rows``.
     time_column : str or None
-        Name of the time column (seconds) if the file had one, else None.
+        Name of the time column if the file had one, else None. Its values are in
+        seconds unless the name states another unit (:func:`time_unit`: ``"t [ms]"``);
+        :attr:`time` gives them in seconds.
     labels : dict of str to str
         How each column is named in messages when that is not ``column 'key'``: a column
         of a headerless text file is ``column 2``; one chosen by number from a file with
@@ -82,8 +121,13 @@ class Table(Mapping[str, np.ndarray]):
 
     @property
     def time(self) -> np.ndarray | None:
-        """The time column in seconds, or None if the file had none."""
-        return None if self.time_column is None else self.columns[self.time_column]
+        """The time column in seconds (converted from the unit its name states, see
+        :func:`time_unit`), or None if the file had none."""
+        if self.time_column is None:
+            return None
+        t = self.columns[self.time_column]
+        _, seconds = time_unit(self.time_column)
+        return t if seconds == 1.0 else t * seconds
 
 
 def read_columns(
@@ -112,7 +156,8 @@ def read_columns(
         keyed by the strings given here. None reads every numeric vector in the file
         (a headerless text file's columns are then named ``"1"``, ``"2"``, ...).
     time_column : str or None, default "t"
-        Name (or, in text files, number) of the time column in seconds. It is read as well
+        Name (or, in text files, number) of the time column, in seconds unless its name
+        states another unit (``"t [ms]"``, ``"time_us"``: :func:`time_unit`). It is read as well
         when the file has it, and is then available as :attr:`Table.time`; a file without
         it is not an error here (pass the sample rate to :func:`sample_rate` instead).
 
@@ -246,7 +291,8 @@ def sample_rate(
     if t is None:
         if fs is None:
             raise DataError(f"{where}no time column to get the sample rate from; name it "
-                            f"with --time-column COL (seconds) or pass --fs HZ")
+                            f"with --time-column COL or pass --fs HZ"
+                            + _time_column_hint(data))
         return fs
     fs_t = _rate_from_time(t, where, name or "t", rtol)
     if fs is not None:
@@ -257,6 +303,14 @@ def sample_rate(
             )
         return fs
     return fs_t
+
+
+def _time_column_hint(data: object) -> str:
+    """`` (the file has 'time_s')`` when a column of ``data`` is named like a time."""
+    if not isinstance(data, Table):
+        return ""
+    like = [c for c in data.columns if re.match(r"(t|time)\b|(t|time)[_\s\[(/]", c, re.I)]
+    return f" (the file has {', '.join(repr(c) for c in like)})" if like else ""
 
 
 def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
