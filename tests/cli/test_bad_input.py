@@ -164,7 +164,7 @@ DATA_CASES: dict[str, DataCase] = {
                                ("time column 't' goes backwards", "data row 10")),
     "time-uneven": DataCase(lambda: _with_time(np.r_[np.arange(500), np.arange(501, N + 1)]
                                                / FS),
-                            ("time column 't' is unevenly sampled", "data row 500")),
+                            ("time column 't' jumps", "data row 500", "1 sample(s) missing")),
     "time-step-1e-310": DataCase(lambda: _with_time(np.arange(N) * 1e-310),
                                  ("time column 't'", "step of 1e-310 s", "1e+09 Hz")),
     "time-step-1e300": DataCase(lambda: _with_time(np.arange(N) * 1e300),

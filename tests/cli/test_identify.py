@@ -98,7 +98,7 @@ def _bad(tmp_path, capsys, args, match):
         ("t,u,y\n0,1,2\n0.001,1\n", "data row 2 has 2 fields"),
         ("t,u,v\n0,1,2\n0.001,1,2\n", "no column 'y'; available: 't', 'u', 'v'"),
         ("t,u,y\n0,1,2\n0.001,1,3\n0.002,1,3\n0.004,1,4\n0.005,1,4\n",
-         "unevenly sampled: the step from data row 3 to row 4"),
+         "jumps from 0.002 s at data row 3 to 0.004 s at row 4"),
         ("", "empty file"),
     ],
 )

@@ -307,7 +307,7 @@ def test_uneven_time_names_row(tmp_path):
     t[12:] += 0.001  # one sample dropped between data rows 12 and 13
     path = tmp_path / "run.csv"
     write_csv(path, {"t": t, "u": np.zeros(20)})
-    with pytest.raises(DataError, match=r"unevenly sampled: the step from data row 12 to row 13"):
+    with pytest.raises(DataError, match=r"at data row 12 to .* at row 13, 2 typical steps"):
         sample_rate(read_columns(path))
 
 

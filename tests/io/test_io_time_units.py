@@ -68,3 +68,30 @@ def test_without_a_time_column_the_message_names_the_likely_one(tmp_path):
     with pytest.raises(DataError, match=r"--time-column COL or pass --fs HZ "
                                         r"\(the file has 'time_s'\)"):
         sample_rate(table)
+
+
+def test_a_gap_in_the_time_stamps_is_named_as_missing_samples(tmp_path):
+    # jittered stamps (1 % of the step) and, further on, two samples dropped: the gap is
+    # what the message names, with the rows around it
+    fs, n = 1000.0, 3000
+    t = np.arange(n) / fs + np.random.default_rng(4).normal(0.0, 1e-5, n)
+    t = np.delete(t, [2000, 2001])
+    x = np.zeros(t.size)
+    path = tmp_path / "gap.csv"
+    np.savetxt(path, np.c_[t, x, x], delimiter=",", header="t,u,y", comments="")
+    with pytest.raises(DataError, match=r"data row 2000 .* row 2001, 3.0. typical steps .*"
+                                        r"2 sample\(s\) missing there"):
+        sample_rate(read_columns(path, ["u", "y"]))
+
+
+def test_jittered_stamps_point_to_ignoring_them(tmp_path):
+    fs, n = 1000.0, 3000
+    t = np.arange(n) / fs + np.random.default_rng(4).normal(0.0, 2e-5, n)
+    x = np.zeros(n)
+    path = tmp_path / "jitter.csv"
+    np.savetxt(path, np.c_[t, x, x], delimiter=",", header="t,u,y", comments="")
+    with pytest.raises(DataError, match=r"unevenly sampled.*pass --fs HZ with "
+                                        r"--time-column '' to ignore them"):
+        sample_rate(read_columns(path, ["u", "y"]))
+    # and that is what the command line then accepts
+    assert sample_rate(read_columns(path, ["u", "y"], time_column=None), fs) == fs

@@ -351,10 +351,24 @@ def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
         )
     bad = np.flatnonzero(np.abs(steps - dt) > rtol * dt)
     if bad.size:
+        ratios = steps[bad] / dt
+        whole = (np.round(ratios) >= 2) & (np.abs(ratios - np.round(ratios)) < 0.1)
+        if whole.any():  # whole steps missing: a gap, whatever else is uneven
+            k = int(bad[np.flatnonzero(whole)[0]])
+            ratio = float(steps[k] / dt)
+            raise DataError(
+                f"{col} jumps from {float(t[k])!r} s at data row {k + 1} to "
+                f"{float(t[k + 1])!r} s at row {k + 2}, {ratio:.3g} typical steps "
+                f"({dt:.6g} s): {round(ratio) - 1} sample(s) missing there; split the "
+                "record at the gap"
+            )
         k = int(bad[0])
+        spread = float(np.max(np.abs(steps - dt)) / dt)
         raise DataError(
-            f"{col} is unevenly sampled: the step from data row {k + 1} "
-            f"to row {k + 2} is {steps[k]:.6g} s, the typical step is {dt:.6g} s"
+            f"{col} is unevenly sampled: the step from data row {k + 1} to row {k + 2} "
+            f"is {steps[k]:.6g} s, the typical step {dt:.6g} s (steps differ from it by "
+            f"up to {100 * spread:.3g} %); if the samples were taken at a fixed rate and "
+            "only the time stamps jitter, pass --fs HZ with --time-column '' to ignore them"
         )
     return (t.size - 1) / float(t[-1] - t[0])
 
