@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import math
 import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -142,6 +143,11 @@ def run(args: argparse.Namespace) -> int:
         )
     command = identify_command(args, search)
     _print_table(search, rec, args)
+    if not any(v is not None and v.accepted for v in search.verdicts):
+        print(f"no candidate meets the acceptance (the pick fails: "
+              f"{'; '.join(search.verdicts[search.best_index].failed) or 'not validated'}); "
+              f"widen the grid, or record more data ({search.prepared.u.size} estimation "
+              "samples)", file=sys.stderr)
     print(f"refit and validate it with:\n  {command}")
     if args.out is not None:
         cols = {c: np.array([_value(search, i, c) for i in range(len(search.table))],
