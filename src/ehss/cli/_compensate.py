@@ -172,13 +172,14 @@ def _band(args: argparse.Namespace, model: Any) -> tuple[float, float]:
 
 def run(args: argparse.Namespace) -> int:
     from ehss._provenance import versions
-    from ehss.cli._dataargs import write_outputs
+    from ehss.cli._dataargs import report_warnings, write_outputs
     from ehss.compensation import (
         apply_inverse,
         check_at_rest,
         check_drive,
         design_inverse,
         fade_to_rest,
+        warn_if_outside_band,
     )
     from ehss.compensation.rates import rate_factor
     from ehss.identification.model import ArmaxModel
@@ -220,6 +221,8 @@ def run(args: argparse.Namespace) -> int:
         # the model maps deviations from the operating point (u0, y0) it was identified
         # about: y − y0 = G (u − u0), so the drive for r is u0 + G⁻¹ (r − y0)
         drive_dev = apply_inverse(inverse, r_dev, fs)
+        with report_warnings("compensate"):
+            warn_if_outside_band(r_dev, fs, inverse)
         extra["iteration"] = {"log": [], "gain": None}
     else:
         drive_dev, columns, extra = _update(args, model, r_dev, fs, band, u0, y0)

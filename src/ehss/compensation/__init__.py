@@ -14,7 +14,14 @@ Experiments on the simulated rig live in :mod:`ehss.experiments`.
 
 from __future__ import annotations
 
-from ehss.compensation.apply import OUTSIDE_BAND, apply_inverse, as_reference, compensate
+from ehss.compensation.apply import (
+    OUTSIDE_BAND,
+    OUTSIDE_SHARE_WARN,
+    apply_inverse,
+    as_reference,
+    compensate,
+    warn_if_outside_band,
+)
 from ehss.compensation.checks import (
     DEFAULT_MAX_GAIN,
     REST_TOLERANCE,
@@ -48,6 +55,8 @@ from ehss.compensation.iteration import (
 __all__ = [
     "compensate",
     "apply_inverse",
+    "warn_if_outside_band",
+    "OUTSIDE_SHARE_WARN",
     "OUTSIDE_BAND",
     "as_reference",
     "DEFAULT_MAX_GAIN",

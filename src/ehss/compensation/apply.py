@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -12,10 +13,11 @@ from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_at_res
 from ehss.compensation.inverse import InverseModel, design_inverse
 from ehss.compensation.inverse_model import _fft_band_limit
 from ehss.compensation.rates import RATE_RTOL, rate_factor, to_model_rate, to_record_rate
-from ehss.errors import ParameterError
+from ehss.errors import EhssWarning, ParameterError
 from ehss.identification.model import ArmaxModel
 
-__all__ = ["compensate", "apply_inverse", "OUTSIDE_BAND", "as_reference"]
+__all__ = ["compensate", "apply_inverse", "OUTSIDE_BAND", "OUTSIDE_SHARE_WARN", "as_reference",
+           "warn_if_outside_band"]
 
 #: What a drive holds outside the inverse's band limit (:func:`apply_inverse`).
 OUTSIDE_BAND = ("reference", "zero")
@@ -202,7 +204,35 @@ def compensate(
     if require_rest:
         check_at_rest(r)
     drive = apply_inverse(inverse, r, rate, preview=preview, outside_band=outside_band)
+    warn_if_outside_band(r, rate, inverse, outside_band)
     if not np.all(np.isfinite(drive)):
         raise ParameterError("the compensated drive is not finite (badly conditioned model)")
     check_drive(drive, r, rate, max_gain=max_gain, limits=limits, loop=loop, params=params)
     return drive
+
+
+#: Share of the reference's power outside the inverse's band above which
+#: :func:`compensate` warns that the drive compensates little of it.
+OUTSIDE_SHARE_WARN = 0.1
+
+
+def warn_if_outside_band(r: np.ndarray, fs: float, inverse: InverseModel,
+                         outside_band: str = "reference") -> None:
+    """Warn (:class:`~ehss.errors.EhssWarning`) when more than
+    :data:`OUTSIDE_SHARE_WARN` of the power of the reference ``r`` (at ``fs``) lies
+    outside the band the inverse acts on: there the drive is the reference itself
+    (``outside_band="reference"``) or nothing, not compensated."""
+    total = float(np.sum(np.square(r - np.mean(r))))
+    if not total > 0.0:
+        return
+    inside = _fft_band_limit(r - np.mean(r), 1.0 / fs, inverse.band_hz, inverse.cutoff_hz)
+    share = 1.0 - float(np.sum(np.square(inside))) / total
+    if share > OUTSIDE_SHARE_WARN:
+        lo, hi = inverse.band_hz
+        there = ("the drive is the reference itself there, uncompensated"
+                 if outside_band == "reference" else "the drive holds nothing of it")
+        warnings.warn(
+            f"{100 * share:.0f} % of the reference's power lies outside the band "
+            f"{lo:g}-{hi:g} Hz the inverse acts on (the model's validated band unless "
+            f"given); {there}. Identify the loop on a record whose validation covers the "
+            "reference's band, or give the band", EhssWarning, stacklevel=3)
