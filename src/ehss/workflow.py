@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -670,6 +671,7 @@ def select_orders(
     criterion: str = "fit",
     fit_tolerance: float = 0.1,
     acceptance: Acceptance | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> OrderSearch:
     """Search a grid of orders the way :func:`identify` fits and validates one.
 
@@ -699,6 +701,9 @@ def select_orders(
         As for :func:`ehss.identification.select_order`.
     acceptance : Acceptance, optional
         For the verdict of each row (default ``Acceptance()``).
+    progress : callable, optional
+        Called with a line such as ``"(2,1,1,1): fit 98.7 %"`` after each candidate is
+        validated (for a progress display).
 
     Returns
     -------
@@ -737,6 +742,9 @@ def select_orders(
     def score(model: ArmaxModel) -> float:
         report, verdict = assess(model, prep, acceptance=acceptance, initial=initial)
         assessed[(model.na, model.nb, model.nc, model.delay)] = (report, verdict)
+        if progress is not None:
+            progress(f"({model.na},{model.nb},{model.nc},{model.delay}): fit "
+                     f"{report.fit_pct:.1f} %")
         return report.fit_pct
 
     sel = select_order(prep.u, prep.y, na=na, nb=nb, nc=nc, delay=list(record_delay),

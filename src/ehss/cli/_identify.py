@@ -172,14 +172,20 @@ def run(args: argparse.Namespace) -> int:
     rec = load_record(args)
     val_rec = load_validation(args, rec)
     validation: Any = opts["holdout"] if val_rec is None else (val_rec.u, val_rec.y)
+    from rich.console import Console
+
     with report_warnings("identify"):
-        res = identify(
-            rec.u, rec.y, fs=rec.fs, orders=(args.na, args.nb, args.nc, args.delay),
-            method=args.method, init=args.init, validation=validation, band_hz=opts["band"],
-            detrend=opts["detrend"], decimate=opts["decimate"], nperseg=args.nperseg,
-            frf_method=args.frf_method, initial=args.initial,
-            acceptance=Acceptance(min_coherence=args.min_coherence),
-        )
+        # a spinner on a terminal while the model is fitted and validated, nothing otherwise
+        with Console(stderr=True).status(
+                f"fitting {args.method} ({args.na},{args.nb},{args.nc}) to "
+                f"{rec.u.size} samples and validating it"):
+            res = identify(
+                rec.u, rec.y, fs=rec.fs, orders=(args.na, args.nb, args.nc, args.delay),
+                method=args.method, init=args.init, validation=validation,
+                band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
+                nperseg=args.nperseg, frf_method=args.frf_method, initial=args.initial,
+                acceptance=Acceptance(min_coherence=args.min_coherence),
+            )
         model = res.model
         _print_model(res, rec, args)
         # inside the block: an unstable model is an error, not also a warning

@@ -134,12 +134,23 @@ def run(args: argparse.Namespace) -> int:
     rec = load_record(args)
     val = load_validation(args, rec)
     validation = opts["holdout"] if val is None else (val.u, val.y)
-    with report_warnings("order"):
+    from rich.console import Console
+
+    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay)
+    done = 0
+    with (report_warnings("order"),
+          Console(stderr=True).status(f"fitting {n_grid} candidates") as status):
+
+        def progress(line: str) -> None:  # a spinner on a terminal, nothing otherwise
+            nonlocal done
+            done += 1
+            status.update(f"fitted {done} of {n_grid} candidates; last {line}")
+
         search = select_orders(
             rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
             method=args.method, init=args.init, validation=validation,
             band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
-            initial=args.initial, criterion=args.criterion,
+            initial=args.initial, criterion=args.criterion, progress=progress,
         )
     command = identify_command(args, search)
     _print_table(search, rec, args)
