@@ -47,6 +47,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="read the reference from a file")
     p.add_argument("--column", default="reference",
                    help="reference column in --reference FILE (default: %(default)s)")
+    p.add_argument("--time-column", default="t", metavar="COL",
+                   help="time column of --reference FILE, used for the sample rate if "
+                   "present; in seconds unless its name states a unit: 't [ms]', "
+                   "'time_us' (default: %(default)s)")
     p.add_argument("--amplitude", type=float,
                    help="size in SI units of the loop (m, m/s², N); default per loop: "
                    + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_AMPLITUDE.items()))
@@ -111,11 +115,12 @@ def run(args: argparse.Namespace) -> int:
 
     params = _load_params(args)
     if args.reference:
-        table = read_columns(args.reference, [args.column])
+        table = read_columns(args.reference, [args.column], time_column=args.time_column)
         fs = sample_rate(table, args.fs)
         values = np.asarray(table[args.column], dtype=np.float64)
         kind = "file"
-        settings: dict[str, Any] = {"path": str(args.reference), "column": args.column}
+        settings: dict[str, Any] = {"path": str(args.reference), "column": args.column,
+                                    "time_column": table.time_column}
     else:
         fs = params.timing.control_rate_hz if args.fs is None else args.fs
         sig = _generate(args, fs)
