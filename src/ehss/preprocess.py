@@ -27,6 +27,8 @@ from ehss._checks import as_record, as_signal
 from ehss.errors import DataError, ParameterError
 
 __all__ = [
+    "CLIP_SHARE_WARN",
+    "clipped_share",
     "DETRENDS",
     "Trend",
     "detrend",
@@ -234,3 +236,25 @@ def _fs(fs) -> float:
     if not (math.isfinite(fs) and fs > 0):
         raise ParameterError(f"{fs=} must be a positive finite sample rate in Hz")
     return fs
+
+
+#: Share of a measured output at one of its extreme values above which
+#: :func:`ehss.workflow.prepare` warns that the record looks clipped.
+CLIP_SHARE_WARN = 0.01
+
+
+def clipped_share(x: np.ndarray) -> tuple[float, float]:
+    """The share of samples of ``x`` at its maximum or at its minimum (the larger of the
+    two), and that value.
+
+    A measured response of a dynamic system with noise reaches its extremes at a few
+    samples; a sensor's range, an ADC's full scale or a limiter holds it there for runs.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    if x.size == 0:
+        return 0.0, math.nan
+    top, bottom = float(np.max(x)), float(np.min(x))
+    if top == bottom:
+        return 1.0, top
+    n_top, n_bottom = int(np.count_nonzero(x == top)), int(np.count_nonzero(x == bottom))
+    return (n_top / x.size, top) if n_top >= n_bottom else (n_bottom / x.size, bottom)

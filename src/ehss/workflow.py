@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,7 +38,7 @@ import numpy as np
 
 from ehss import preprocess
 from ehss._checks import as_record, check_int
-from ehss.errors import DataError, ParameterError
+from ehss.errors import DataError, EhssWarning, ParameterError
 from ehss.frequency import FRF_METHODS, check_band, check_fs
 from ehss.identification import INITS, METHODS, ArmaxModel, estimate
 from ehss.identification.order import OrderRow, OrderSelection, select_order
@@ -276,6 +277,7 @@ def prepare(
     """
     u, y = as_record(u, y)
     fs = check_fs(fs)
+    _warn_if_clipped(y)
     if detrend not in DETRENDS:
         raise ParameterError(f"detrend={detrend!r} must be 'mean', 'linear' or None")
     if band_hz is not None:
@@ -761,6 +763,19 @@ def select_orders(
 
 
 # ---------------------------------------------------------------------------- helpers
+def _warn_if_clipped(y: np.ndarray) -> None:
+    """Warn when the output sits at one extreme value for more than
+    :data:`ehss.preprocess.CLIP_SHARE_WARN` of the record (and at least 5 samples)."""
+    share, value = preprocess.clipped_share(y)
+    if share > preprocess.CLIP_SHARE_WARN and share * y.size >= 5:
+        warnings.warn(
+            f"the output sits at {value:.6g} for {100 * share:.3g} % of the record: "
+            "clipped by a sensor's range or a limit? A linear model of a clipped response "
+            "is biased, and its fit flatters it; identify on a record within the range",
+            EhssWarning, stacklevel=3)
+
+
+
 
 
 def _decimation(value, u: np.ndarray, y: np.ndarray, fs: float,
