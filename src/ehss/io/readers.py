@@ -14,6 +14,7 @@ import zipfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -87,12 +88,18 @@ class Table(Mapping[str, np.ndarray]):
         How each column is named in messages when that is not ``column 'key'``: a column
         of a headerless text file is ``column 2``; one chosen by number from a file with
         a header is ``column 'u'`` (its name).
+    stored_rate : (float, str) or None
+        A sample rate the file stores beside its columns (Hz, and where it was found:
+        ``"variable 'Ts' = 0.001 s"``): a scalar named as in :data:`RATE_NAMES_HZ` or
+        :data:`PERIOD_NAMES_S` in a MATLAB, HDF5 (also a root attribute) or ``.npz``
+        file. :func:`sample_rate` uses it when there is no time column.
     """
 
     path: Path
     columns: dict[str, np.ndarray] = field(repr=False)
     time_column: str | None = None
     labels: dict[str, str] = field(default_factory=dict, repr=False)
+    stored_rate: tuple[float, str] | None = None
 
     def label(self, key: str) -> str:
         """How column ``key`` is named in messages: ``column 'u'`` or ``column 2``."""
@@ -233,8 +240,9 @@ def read_columns(
         )
     table = _finish(path, raw)
     has_time = bool(time_column) and time_column in table.columns
+    stored = None if has_time else _stored_rate(path, suffix)
     return Table(path=path, columns=table.columns, time_column=time_column if has_time else None,
-                 labels=raw.labels)
+                 labels=raw.labels, stored_rate=stored)
 
 
 def sample_rate(
@@ -288,6 +296,17 @@ def sample_rate(
             raise DataError(f"sample rate {fs=} must be a number in Hz") from None
         if not (math.isfinite(fs) and lo_fs <= fs <= hi_fs):
             raise DataError(f"sample rate {fs=} Hz must be in [{lo_fs:g}, {hi_fs:g}] Hz")
+    stored = data.stored_rate if isinstance(data, Table) else None
+    if t is None and stored is not None:
+        rate, what = stored
+        if fs is not None and abs(rate - fs) > rtol * fs:
+            raise DataError(f"{where}the file stores {what}, a sample rate of {rate:.6g} Hz, "
+                            f"but --fs is {fs:.6g} Hz; drop --fs or make them agree")
+        if fs is None:
+            if not lo_fs <= rate <= hi_fs:
+                raise DataError(f"{where}the file stores {what}: a sample rate of {rate:.6g} "
+                                f"Hz, outside [{lo_fs:g}, {hi_fs:g}] Hz; pass --fs HZ")
+            return rate
     if t is None:
         if fs is None:
             raise DataError(f"{where}no time column to get the sample rate from; name it "
@@ -374,6 +393,54 @@ def _rate_from_time(t: np.ndarray, where: str, name: str, rtol: float) -> float:
 
 
 # --------------------------------------------------------------------------- helpers
+#: Names of a scalar sample rate (Hz) a MATLAB, HDF5 or .npz file may store.
+RATE_NAMES_HZ = ("fs", "Fs", "FS", "sample_rate", "sampling_rate", "srate")
+#: Names of a scalar sample time (s): MATLAB's iddata calls it Ts.
+PERIOD_NAMES_S = ("Ts", "ts", "dt", "sample_time")
+
+
+def _stored_rate(path: Path, suffix: str) -> tuple[float, str] | None:
+    """A sample rate stored in the file beside its columns, if any (see Table)."""
+    found: dict[str, Any] = {}
+    names = RATE_NAMES_HZ + PERIOD_NAMES_S
+    try:
+        if suffix in (".h5", ".hdf5") or (suffix == ".mat" and _is_hdf5(path)):
+            import h5py
+
+            with h5py.File(path, "r") as fh:
+                for n in names:
+                    if n in fh and isinstance(fh[n], h5py.Dataset) and fh[n].size == 1:
+                        found[n] = fh[n][()]
+                    elif n in fh.attrs and np.size(fh.attrs[n]) == 1:
+                        found[n] = fh.attrs[n]
+        elif suffix == ".mat":
+            import scipy.io
+
+            present = [v[0] for v in scipy.io.whosmat(path) if v[0] in names
+                       and int(np.prod(v[1])) == 1]
+            if present:
+                found = scipy.io.loadmat(path, variable_names=present)
+        elif suffix == ".npz":
+            with np.load(path, allow_pickle=False) as archive:
+                found = {n: archive[n] for n in names
+                         if n in archive.files and archive[n].size == 1}
+    except Exception:  # the columns were read: a stored rate is only a convenience
+        return None
+    for n in names:
+        if n not in found:
+            continue
+        try:
+            value = float(np.asarray(found[n], dtype=np.float64).ravel()[0])
+        except (TypeError, ValueError):
+            continue
+        if not (math.isfinite(value) and value > 0):
+            continue
+        if n in RATE_NAMES_HZ:
+            return value, f"{n!r} = {value:g} Hz"
+        return 1.0 / value, f"{n!r} = {value:g} s"
+    return None
+
+
 
 
 @dataclass(frozen=True)
