@@ -57,3 +57,10 @@ def test_rig_run_writes_a_report(tmp_path, capsys):
     assert r["samples"] == 3000 and r["counters"]["lost_samples"] == 0
     assert set(r["final_theta"]) == {"1", "2"}
     assert len(r["final_theta"]["1"]) == 4 + 4 + 4  # a1..a4, b0..b3, c1..c4
+
+
+def test_a_rig_run_too_short_for_its_fades_is_one_clear_line(capsys):
+    assert main(["live", "--rig", "position", "--duration", "0.3", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["ehss live: error: duration_s=0.3 is too short: the rig's reference fades "
+                   "in and out over 0.2 s at each end, so at least 0.4 s"]

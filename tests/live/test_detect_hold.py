@@ -47,3 +47,4 @@ def test_the_report_records_the_hold_used(tmp_path, capsys):
     assert settings["estimator"]["memory_s"] == 0.5
     assert settings["detection"]["hold_s"] == pytest.approx(0.75, rel=1e-12)
     assert settings["forgetting"] == pytest.approx(1 - 1 / 500, rel=1e-12)
+

@@ -35,6 +35,8 @@ RIG_SIGNAL = {
     "acceleration": (0.5, (1.0, 50.0)),
     "force": (1000.0, (1.0, 50.0)),
 }
+#: Fade in and out of the rig's reference at each end (s): it starts and ends at rest.
+RIG_FADE_S = 0.2
 
 # plant states that the simulation result reports, to carry over an event
 _CARRIED = ("spool", "piston_displacement_m", "p1_pa", "p2_pa", "displacement_m",
@@ -169,6 +171,10 @@ def rig_record(
     if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s)
             and duration_s > 0):
         raise ParameterError(f"duration_s={duration_s!r} must be > 0")
+    if duration_s < 2 * RIG_FADE_S:
+        raise ParameterError(f"duration_s={duration_s!r} is too short: the rig's reference "
+                             f"fades in and out over {RIG_FADE_S:g} s at each end, so at "
+                             f"least {2 * RIG_FADE_S:g} s")
     d_rms, d_band = RIG_SIGNAL[loop]
     rms = d_rms if rms is None else rms
     band_hz = d_band if band_hz is None else band_hz
@@ -181,7 +187,8 @@ def rig_record(
     out[:, 0] = np.arange(n) / fs
     for k, ch in enumerate(layout.channels, start=1):
         ref = ehss.signals.band_limited_random(band_hz=band_hz, rms=rms, duration_s=n / fs,
-                                               fs=fs, seed=seed + k).values[:n]
+                                               fs=fs, seed=seed + k,
+                                               fade_s=RIG_FADE_S).values[:n]
         mine = sorted((e for e in events if e.channel in (None, ch)), key=lambda e: e.time_s)
         cuts = sorted({min(n, int(round(e.time_s * fs))) for e in mine} - {0, n})
         p = params
