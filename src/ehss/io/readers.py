@@ -90,7 +90,7 @@ class Table(Mapping[str, np.ndarray]):
         a header is ``column 'u'`` (its name).
     stored_rate : (float, str) or None
         A sample rate the file stores beside its columns (Hz, and where it was found:
-        ``"variable 'Ts' = 0.001 s"``): a scalar named as in :data:`RATE_NAMES_HZ` or
+        ``"'Ts' = 0.001 s"``): a scalar named as in :data:`RATE_NAMES_HZ` or
         :data:`PERIOD_NAMES_S` in a MATLAB, HDF5 (also a root attribute) or ``.npz``
         file. :func:`sample_rate` uses it when there is no time column.
     """
