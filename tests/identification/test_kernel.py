@@ -211,15 +211,29 @@ def test_settings_round_trip_through_the_block():
     assert K.settings_of(block) == s._replace(enabled=True)
 
 
-def test_state_views_cover_the_block_once():
-    # after the header (settings, counters, noise variance) every float of the block
-    # belongs to exactly one named view, in order
+def test_state_views_tile_the_block_on_lines():
+    # after the header (settings, counters, noise variance) the named views follow one
+    # another without overlap, each on a 64-byte line of the line-aligned block, with
+    # less than a line of padding before each; the streaming sample (io) ends the block
     s = _settings(3, 2, 2, 2, 1.0, 1e6, 1e6, 8e6, 0.99, "rels")
     block = K.new_block(s)
-    block[K.HEADER :] = np.arange(block.size - K.HEADER)
+    assert block.ctypes.data % (8 * K.LINE) == 0
+    owner = np.full(block.size, -1)
+    owner[: K.HEADER] = -2
     views = K.state_views(block)
-    flat = np.concatenate([v.ravel() for v in views])
-    assert_allclose(flat, block[K.HEADER :], rtol=0, atol=0)
+    starts = [(view.ctypes.data - block.ctypes.data) // 8 for view in views]
+    for k in np.argsort(starts):  # in the order they lie in the block
+        view, start = views[k], starts[k]
+        assert start % K.LINE == 0 and start >= K.HEADER
+        assert np.all(owner[start : start + view.size] == -1), "views overlap"
+        padding = start - (np.flatnonzero(owner != -1).max() + 1)
+        assert 0 <= padding < K.LINE
+        owner[start : start + view.size] = k
+    assert owner[-1] == K.RelsState._fields.index("io")  # io ends the block
+    # every float of a view is the block's own (views, not copies)
+    block[K.HEADER :] = np.arange(block.size - K.HEADER)
+    for k, view in enumerate(views):
+        assert_allclose(view.ravel(), block[owner == k], rtol=0, atol=0)
 
 
 def test_poly_roots_match_numpy(rng):

@@ -39,10 +39,11 @@ The block
 An estimator lives in one float64 array, its *block*: the settings (a
 :class:`RelsSettings`, fields in order), the counters (indices :data:`COUNT`,
 :data:`RESETS`, :data:`C_PROJECTIONS`, :data:`TRACE_SCALINGS`, :data:`SKIPPED`), the
-running noise variance, the pending flag (below), then the state arrays. Inside the
-kernels nothing else is read by index: :func:`settings_of` gives the settings as a
-:class:`RelsSettings` and :func:`views` the state as named arrays (the one definition
-of the layout). One array is what makes the streaming call cheap: every argument
+running noise variance, the pending flag (below), then the state arrays, each on a
+64-byte line of the line-aligned block (:data:`LINE`). Inside the kernels nothing else
+is read by index: :func:`settings_of` gives the settings as a :class:`RelsSettings`
+and :func:`views` the state as named arrays (:func:`_starts` is the one definition of
+the layout). One array is what makes the streaming call cheap: every argument
 crossing the Python → numba boundary costs time to unbox, and the block is the only
 array it passes.
 
@@ -148,14 +149,20 @@ class RelsState(NamedTuple):
 
 def block_size(na: int, nb: int, nc: int, delay: int) -> int:
     """Length of the float64 block of an estimator with these orders."""
-    n = na + nb + 1 + nc
-    return HEADER + n + n * n + 3 * n + (delay + nb + 1) + 4 * (nc + 1) + (nc + 1) * n + 4
+    return _starts.py_func(na + nb + 1 + nc, delay + nb + 1, nc)[-1]
 
 
 def new_block(settings: RelsSettings) -> np.ndarray:
-    """A zeroed block holding ``settings`` (θ̂ = 0, P = 0: the caller sets P(0))."""
+    """A zeroed block holding ``settings`` (θ̂ = 0, P = 0: the caller sets P(0)).
+
+    The block starts on a 64-byte line, so that its state arrays do (see LINE); a copy
+    of it may not, which only makes it slower.
+    """
     s = settings
-    block = np.zeros(block_size(s.na, s.nb, s.nc, s.delay))
+    size = block_size(s.na, s.nb, s.nc, s.delay)
+    raw = np.zeros(size + LINE - 1)
+    skip = (-raw.ctypes.data % (8 * LINE)) // 8
+    block = raw[skip : skip + size]
     block[:N_SETTINGS] = [float(v) for v in settings]
     return block
 
@@ -183,31 +190,46 @@ def settings_of(block):
                         block[9] != 0.0, block[10] != 0.0, block[11], block[12])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+#: every state array starts on a 64-byte line (8 float64) of a line-aligned block
+#: (:func:`new_block`): a vector store to g that straddles two lines is not forwarded
+#: to the next row's load of g in the P pass, which then waits for the store to
+#: complete (the pass at n = 17 took 1.6× as long with g off the line; BENCHMARKS.md)
+LINE = 8
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _starts(n, nu, nc):
+    """Where each state array starts in the block, in :class:`RelsState` order, then
+    where the block ends: the one definition of the layout (``nu`` = delay + nb + 1).
+    P comes after the vectors that the P pass reads and writes."""
+    theta = HEADER + (-HEADER % LINE)
+    psi = theta + n + (-(theta + n) % LINE)
+    g = psi + n + (-(psi + n) % LINE)
+    w = g + n + (-(g + n) % LINE)
+    u_line = w + n + (-(w + n) % LINE)
+    c_work = u_line + nu + (-(u_line + nu) % LINE)
+    psi_f = c_work + 4 * (nc + 1) + (-(c_work + 4 * (nc + 1)) % LINE)
+    P = psi_f + (nc + 1) * n + (-(psi_f + (nc + 1) * n) % LINE)
+    io = P + n * n + (-(P + n * n) % LINE)
+    return theta, P, psi, g, w, u_line, c_work, psi_f, io, io + 4
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
 def views(block):
-    """The state arrays of ``block``, in :class:`RelsState` order (the layout)."""
+    """The state arrays of ``block``, in :class:`RelsState` order (see :func:`_starts`)."""
     na, nb, nc, delay = int(block[0]), int(block[1]), int(block[2]), int(block[3])
     n = na + nb + 1 + nc
     nu = delay + nb + 1
-    o = HEADER
-    theta = block[o : o + n]
-    o += n
-    P = block[o : o + n * n].reshape((n, n))
-    o += n * n
-    psi = block[o : o + n]
-    o += n
-    g = block[o : o + n]
-    o += n
-    w = block[o : o + n]
-    o += n
-    u_line = block[o : o + nu]
-    o += nu
-    c_work = block[o : o + 4 * (nc + 1)]
-    o += 4 * (nc + 1)
-    psi_f = block[o : o + (nc + 1) * n].reshape((nc + 1, n))
-    o += (nc + 1) * n
-    io = block[o : o + 4]
-    return theta, P, psi, g, w, u_line, c_work, psi_f, io
+    o_theta, o_P, o_psi, o_g, o_w, o_u, o_c, o_f, o_io, _ = _starts(n, nu, nc)
+    return (block[o_theta : o_theta + n],
+            block[o_P : o_P + n * n].reshape((n, n)),
+            block[o_psi : o_psi + n],
+            block[o_g : o_g + n],
+            block[o_w : o_w + n],
+            block[o_u : o_u + nu],
+            block[o_c : o_c + 4 * (nc + 1)],
+            block[o_f : o_f + (nc + 1) * n].reshape((nc + 1, n)),
+            block[o_io : o_io + 4])
 
 
 # ---------------------------------------------------------------- small helpers
@@ -542,8 +564,8 @@ def _update_theta(s, counters, theta, g, w, psi, c_work, y, e, den):
     # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
     # (RML: K = P ψ_f / (λ + ψ_fᵀ P ψ_f), e still with ψ̂)
     step = e * inv_den
-    # (22), applied at the next sample: P(k) = P(k−1)/λ − w wᵀ, w = g √(1/(den λ))
-    root = np.sqrt(inv_den / s.lam)
+    # (22), applied at the next sample: P(k) = P(k−1)/λ − w wᵀ, w = g / √(den λ)
+    root = 1.0 / np.sqrt(den * s.lam)
     for i in range(theta.shape[0]):
         theta[i] += g[i] * step
         w[i] = g[i] * root
@@ -658,7 +680,7 @@ def rels_update(block, u, y):
     y_scaled = y * (1.0 / block[12])  # y / y_scale
     if not (np.isfinite(u_scaled) and np.isfinite(y_scaled)):
         return np.nan
-    io = block[block.size - 4 :]  # the last view of the block (see views)
+    io = block[block.size - 4 :]  # the last view of the block (see _starts)
     io[0] = u_scaled
     io[1] = y_scaled
     # no history (hist_every: the run's length) and no settle; both passed as values
