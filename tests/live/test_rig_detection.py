@@ -48,19 +48,22 @@ def test_payload_step_flagged_within_one_second_on_its_channel(tmp_path):
 def test_ten_minutes_stationary_with_sensor_noise_raise_no_alarm_with_the_default_hold(
         tmp_path):
     # the default rig has LVDT noise (2 µm) and 16-bit quantisation; 600 s at 1 kHz,
-    # processed faster than real time. The 0.3 s-memory estimator's figures leave their
-    # thresholds in brief bursts, a few per 10 minutes, most 0.1 s long (README); the
-    # default hold, 1.5 memories (0.45 s), lets none of this seed's through, while a
-    # 0.2 s hold flags one of them (replayed below from the recorded figures)
+    # processed faster than real time. The 0.3 s-memory estimator's figures may leave
+    # their thresholds in brief bursts, a few per 10 minutes, most 0.1 s long (README;
+    # how many depends on the last bits of the arithmetic, so on the machine); the
+    # default hold, 1.5 memories (0.45 s), lets none through (test_detect.py holds the
+    # detector to its hold)
     layout, x, fs = rig_record("position", n_channels=1, duration_s=600.0, seed=5)
     report = _run(layout, x, fs, tmp_path)
     assert report.samples == x.shape[0]
     assert report.alarms == []
     rec = read_recording(tmp_path / "run.h5")
     assert rec["settings"]["detection"]["hold_s"] == pytest.approx(0.45, rel=1e-12)
-    short = Detector(DetectionSettings(hold_s=0.2))
-    flagged = [short.step(t, f[0]) for t, f in zip(rec["t"], rec["figures"], strict=True)]
-    assert flagged.count("alarm") >= 1
+    # the recorded figures are those the session judged: replayed through a detector
+    # with the recorded settings they raise nothing either
+    replay = Detector(DetectionSettings(**rec["settings"]["detection"]))
+    flagged = [replay.step(t, f[0]) for t, f in zip(rec["t"], rec["figures"], strict=True)]
+    assert len(flagged) > 1000 and flagged.count("alarm") == 0
 
 
 def test_compare_recent_flags_the_step_then_clears():
