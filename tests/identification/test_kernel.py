@@ -39,9 +39,9 @@ def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=
     tb = (na + nb + 1) * alpha + nc * ac if trace_bound is None else trace_bound
     settings = _settings(na, nb, nc, delay, lam, alpha, ac, tb, c_radius, method)
     block, views = _new_state(settings, np.zeros(n))
-    err, xi = np.empty(u.size), np.empty(u.size)
-    K.rels_run(block, u, y, err, xi, np.empty((0, n)), 1, True)
-    return views.theta.copy(), views.P.copy(), err, xi, _counters(block), views
+    rec = K.record(u, y)
+    assert K.rels_run(block, rec, np.empty((0, n)), 1, True) == u.size
+    return views.theta.copy(), views.P.copy(), rec[2], rec[3], _counters(block), views
 
 
 def _assert_close_to_exact(got, ref64, exact, name):
@@ -161,13 +161,14 @@ def test_rml_reset_clears_filtered_history(rng):
     n = na + nb + 1 + nc
     settings = _settings(na, nb, nc, d, 1.0, 1e3, 1e3, n * 1e3, 0.99, "rml")
     block, views = _new_state(settings, np.zeros(n))
-    err, xi = np.empty(300), np.empty(300)
-    K.rels_run(block, u[:300], y[:300], err, xi, np.empty((0, n)), 1, True)
+    rec = K.record(u[:300], y[:300])
+    K.rels_run(block, rec, np.empty((0, n)), 1, True)
+    xi = rec[3]
     assert np.any(views.psi_f[1:] != 0.0)  # the filter carries history
     views.P[:] = -np.eye(n)  # indefinite: ψ_fᵀPψ_f < 0 on the next sample
-    K.rels_update(block, u[300], y[300])
-    empty = np.empty(0)  # a run of no samples applies the pending P update
-    K.rels_run(block, empty, empty, empty, empty, np.empty((0, n)), 1, True)
+    K.rels_run(block, K.record(u[300:301], y[300:301]), np.empty((0, n)), 1, False)
+    # a run of no samples applies the pending P update
+    K.rels_run(block, np.empty((4, 0)), np.empty((0, n)), 1, True)
     assert _counters(block)["resets"] == 1
     # after the reset ψ_f(300) = ψ̂(300) (zero history), now shifted into row 1
     psi_300 = np.r_[-y[299], -y[298], u[299], u[298], xi[299], xi[298]]

@@ -1,8 +1,9 @@
 """Numba kernels of recursive extended least squares (RELS), eqs (19)–(22), and RML.
 
 One loop, :func:`rels_run`, runs the estimator over a record; the streaming estimator
-calls it through :func:`rels_update`, a run of one sample. So the per-sample code
-exists once. The kernels do no validation: :mod:`ehss.identification.rels` does.
+calls the same compiled loop with a record of one sample. So the per-sample code
+exists once, and is compiled once. The kernels do no validation:
+:mod:`ehss.identification.rels` does.
 
 Two estimators share the loop, selected by ``RelsSettings.rml``:
 
@@ -44,15 +45,15 @@ running noise variance, the pending flag (below), then the state arrays, each on
 is read by index: :func:`settings_of` gives the settings as a :class:`RelsSettings`
 and :func:`views` the state as named arrays (:func:`_starts` is the one definition of
 the layout). One array is what makes the streaming call cheap: every argument
-crossing the Python → numba boundary costs time to unbox, and the block is the only
-array it passes.
+crossing the Python → numba boundary costs time to unbox; a streaming sample passes
+the block, its own ``io`` as the record, and an empty history.
 
 (22) one sample late
 --------------------
 P is read twice per sample: by the gain g(k) = P(k−1) r(k) and by the update (22)
 that makes P(k). The loop applies the update of sample k−1 at the start of sample k,
 in the same pass over P that forms g(k), so that P is read and written once per
-sample; between samples it keeps w = g √(1/(λ den)) of the pending update. A batch
+sample; between samples it keeps w = g / √(λ den) of the pending update. A batch
 run ends by applying the last pending update (``settle``), so that the block then
 holds P(k); a streaming sample leaves it pending for the next one (one pass over P
 per sample), and readers of P settle it first with a run of no samples.
@@ -76,11 +77,15 @@ caller for the duration of a call, and a sample no longer pays the atomic increm
 and decrements that every array crossing a call costs (about fifty a sample before,
 a third of its time). The per-sample path (:func:`_sample` and the three steps it
 calls) is inlined by numba into the loop (``inline="always"``); the small leaf
-helpers are compiled once and called (inlining them too was ≈ 10 % faster but cost
-3–5 s of cold compile); the rare paths (:func:`_restart`, :func:`_project_c`) stay
-separate calls. No complex arithmetic (slow to compile), no fastmath (measured: no
-gain). Literal constants are never passed to a kernel: numba would compile the
-callee once more for each literal. BENCHMARKS.md has the measurements.
+helpers are compiled once and inlined by LLVM where they are called
+(``forceinline=True``: a call passes every array as a struct of seven words, which
+cost more than the helpers' work; inlining them through numba instead cost 3–5 s of
+cold compile); the P pass and the rare paths (:func:`_restart`, :func:`_project_c`)
+stay calls. There is one entry point, so the per-sample path is compiled once (a
+second entry calling it would link and optimise it again). No complex arithmetic
+(slow to compile), no fastmath (measured: no gain). Literal constants are never
+passed to a kernel: numba would compile the callee once more for each literal.
+BENCHMARKS.md has the measurements.
 """
 
 from __future__ import annotations
@@ -110,8 +115,8 @@ class RelsSettings(NamedTuple):
     c_radius: float  # roots of Ĉ kept inside this radius
     rml: bool  # True: RML (needs nc > 0), False: RELS
     enabled: bool  # False: θ̂ and P frozen, regressors still run
-    u_scale: float = 1.0  # streaming (rels_update): u/u_scale is what the step sees
-    y_scale: float = 1.0  # streaming: y/y_scale likewise, e returned times y_scale
+    u_scale: float = 1.0  # rels_run: u/u_scale is what the step sees
+    y_scale: float = 1.0  # y/y_scale likewise; e and ξ̂ come out times y_scale
 
 
 #: block[SETTINGS] holds the RelsSettings fields in order (booleans as 0.0 / 1.0)
@@ -233,7 +238,7 @@ def views(block):
 
 
 # ---------------------------------------------------------------- small helpers
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _dot(p, q):
     """pᵀq, in four partial sums.
 
@@ -256,7 +261,7 @@ def _dot(p, q):
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _push_input(u_line, psi, u, na, nb, delay):
     """u_line[j] = u(k−j); ψ̂'s u-part becomes u(k−d)..u(k−d−nb)."""
     for j in range(u_line.shape[0] - 1, 0, -1):
@@ -266,7 +271,7 @@ def _push_input(u_line, psi, u, na, nb, delay):
         psi[na + j] = u_line[delay + j]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _filter_regressor(psi_f, psi, theta, o):
     """RML: ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc), into row 0.
 
@@ -282,7 +287,7 @@ def _filter_regressor(psi_f, psi, theta, o):
             psi_f[0, i] -= cj * psi_f[j, i]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _shift_regressors(psi, psi_f, na, nc, rml, y, xi):
     """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: _push_input);
     RML: ψ_f(k) becomes ψ_f((k+1)−1) (rows move down by one)."""
@@ -302,7 +307,7 @@ def _shift_regressors(psi, psi_f, na, nc, rml, y, xi):
 
 
 # ---------------------------------------------------------------- the C check
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _c_within(theta, o, nc, radius, cw):
     """True if all roots of z^nc + c1 z^(nc−1) + … + c_nc lie strictly inside ``radius``.
 
@@ -396,8 +401,10 @@ def _project_c(c, radius, work):
     sigma = 1.0
     for j in range(nc):
         sigma = max(sigma, abs(c[j]) ** (1.0 / (j + 1)))
+    scale = 1.0
     for j in range(nc):
-        c[j] = c[j] / sigma ** (j + 1)
+        scale *= sigma  # σ^(j+1)
+        c[j] = c[j] / scale
     _poly_roots(c, re, im)
     for i in range(nc):
         zr, zi = re[i] * sigma, im[i] * sigma
@@ -619,17 +626,19 @@ def _sample(s, block, counters, st, pending, u, y):
     return (e if np.isfinite(e) else 0.0), xi, moved
 
 
-# ---------------------------------------------------------------- entry points
+# ---------------------------------------------------------------- the entry point
 @njit(cache=True, error_model="numpy", _nrt=False)
-def rels_run(block, u, y, err, xi_out, hist, hist_every, settle):
-    """Run the estimator in ``block`` over a record (batch RELS or RML).
+def rels_run(block, rec, hist, hist_every, settle):
+    """Run the estimator in ``block`` over a record, or one streaming sample.
 
     Parameters
     ----------
     block : float64 block of an estimator (:func:`new_block`), updated in place
-    u, y : float64 (N,), scaled, finite
-    err : float64 (N,) out, a-priori prediction errors e(k)
-    xi_out : float64 (N,) out, a-posteriori residuals ξ̂(k) of eq (19)
+    rec : float64 (4, N), C-contiguous
+        Rows u(k) and y(k) in; the step sees u/u_scale and y/y_scale (the settings'
+        scales). Rows e(k), the a-priori prediction error, and ξ̂(k), the residual of
+        eq (19), out, times y_scale. The streaming estimator passes its block's own
+        ``io`` as a (4, 1) record.
     hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
         (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
     hist_every : int ≥ 1
@@ -637,17 +646,32 @@ def rels_run(block, u, y, err, xi_out, hist, hist_every, settle):
         Apply the last sample's pending (22) at the end, so that the block holds
         P(k) (True for every caller but the streaming step; a run of no samples with
         ``settle`` only does that).
+
+    Returns
+    -------
+    int
+        The number of samples run: N, or k if u(k)/u_scale or y(k)/y_scale is not
+        finite (the run stops before sample k; the callers check the records, so
+        this only happens for a streaming sample or a scale that overflows).
     """
     s = settings_of(block)
     counters = block[N_SETTINGS:NOISE_VAR]
     st = views(block)
     theta, P, psi, g, w, u_line, c_work, psi_f, io = st
+    inv_us, inv_ys = 1.0 / s.u_scale, 1.0 / s.y_scale
     # (22) of the previous sample not yet applied (w holds it)
     pending = block[PENDING] != 0.0
     countdown = hist_every
     row = 0
-    for k in range(u.shape[0]):
-        err[k], xi_out[k], pending = _sample(s, block, counters, st, pending, u[k], y[k])
+    n_run = 0
+    for k in range(rec.shape[1]):
+        u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
+        if not (np.isfinite(u) and np.isfinite(y)):
+            break
+        e, xi, pending = _sample(s, block, counters, st, pending, u, y)
+        rec[2, k] = e * s.y_scale
+        rec[3, k] = xi * s.y_scale
+        n_run += 1
         countdown -= 1
         if countdown == 0:
             countdown = hist_every
@@ -660,33 +684,17 @@ def rels_run(block, u, y, err, xi_out, hist, hist_every, settle):
         _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
         pending = False
     block[PENDING] = 1.0 if pending else 0.0
+    return n_run
 
 
-#: the one signature of :func:`rels_update`: (block, u, y)
-RELS_UPDATE_SIGNATURE = (types.float64[::1], types.float64, types.float64)
+#: the one signature :func:`rels_run` is compiled for
+RELS_RUN_SIGNATURE = (types.float64[::1], types.float64[:, ::1], types.float64[:, ::1],
+                      types.int64, types.boolean)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
-def rels_update(block, u, y):
-    """Streaming entry point: one sample in physical units, a run of one; returns e(k)
-    in physical units.
-
-    The step sees u/u_scale and y/y_scale (the settings' streaming scales, applied
-    here so that the Python wrapper has nothing to do per sample). Returns NaN only
-    if the scaled ``u`` or ``y`` is not finite, in which case the state is left
-    untouched; the Python wrapper turns that into a DataError.
-    """
-    u_scaled = u * (1.0 / block[11])  # u / u_scale
-    y_scaled = y * (1.0 / block[12])  # y / y_scale
-    if not (np.isfinite(u_scaled) and np.isfinite(y_scaled)):
-        return np.nan
-    io = block[block.size - 4 :]  # the last view of the block (see _starts)
-    io[0] = u_scaled
-    io[1] = y_scaled
-    # no history (hist_every: the run's length) and no settle; both passed as values
-    # computed at run time, since a literal would make numba compile rels_run again
-    one = io[0:1]
-    no_settle = one.size == 0
-    rels_run(block, one, io[1:2], io[2:3], io[3:4], io.reshape((4, 1))[:0], one.size,
-             no_settle)
-    return io[2] * block[12]
+def record(u: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The (4, N) record of :func:`rels_run`: rows u, y, then room for e and ξ̂."""
+    rec = np.empty((4, u.shape[0]))
+    rec[0] = u
+    rec[1] = y
+    return rec

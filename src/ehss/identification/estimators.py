@@ -166,14 +166,15 @@ def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: 
     r_c = float(np.max(np.abs(np.roots(start.c)))) if nc else 0.0
     settle = int(np.ceil(np.log(1e-3) / np.log(r_c))) if 0.0 < r_c < 1.0 else 0
     warm = min(max(na, nb + d, nc) + settle, u.size // 4)
-    err, xi = np.empty(u.size), np.empty(u.size)
     no_hist = np.empty((0, n))
     # adaptation held while the regressors fill (as RelsEstimator.freeze), then on
     _k.set_enabled(block, False)
-    _k.rels_run(block, us[:warm], ys[:warm], err[:warm], xi[:warm], no_hist, 1, True)
+    _k.rels_run(block, _k.record(us[:warm], ys[:warm]), no_hist, 1, True)
     _k.set_enabled(block, True)
-    _k.rels_run(block, us[warm:], ys[warm:], err[warm:], xi[warm:], no_hist, 1, True)
-    nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
+    rec = _k.record(us[warm:], ys[warm:])
+    _k.rels_run(block, rec, no_hist, 1, True)
+    xi = rec[3]  # the residuals of the adapting part (warm < u.size // 4)
+    nv_s = float(np.mean(np.square(xi[u.size // 2 - warm :])))
     counts = _counters(block)
     counts.pop("n_samples", None)
     meta = {"method": method, "n_samples": int(u.size), "forgetting": forgetting,

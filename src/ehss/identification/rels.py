@@ -350,13 +350,13 @@ def rels(
         )
     theta_s = theta0 / dvec
     settings = _settings(na, nb, nc, delay, lam, alpha, alpha_c, tb, c_radius, method)
-    err = np.empty(u.size)
-    xi = np.empty(u.size)
     hist = np.empty((0, n))
     totals = dict.fromkeys(_k.COUNTER_NAMES, 0)
+    rec = _k.record(us, ys)
+    xi = rec[3]  # ξ̂ of the last pass
     for _ in range(passes):
         block, views = _new_state(settings, theta_s)
-        _k.rels_run(block, us, ys, err, xi, hist, 1, True)
+        _k.rels_run(block, rec, hist, 1, True)
         totals = {key: totals[key] + v for key, v in _counters(block).items()}
         theta_s = views.theta.copy()
     totals_d = dict(totals)
@@ -410,9 +410,10 @@ class RelsEstimator:
     -----
     :meth:`update` and :meth:`update_many` run the same compiled loop as :func:`rels`
     (a run of one sample per call, or of the whole block); :attr:`P` is in scaled
-    units. :meth:`update` calls the kernel compiled for its one signature directly
+    units. :meth:`update` calls the loop compiled for its one signature directly
     (numba's ``Dispatcher.compile`` returns that entry point), so a call does not pay
-    the dispatcher's typing of its arguments.
+    the dispatcher's typing of its arguments, and passes its sample through the
+    block's own record (``io``, written and read through a memoryview).
 
     Examples
     --------
@@ -461,13 +462,13 @@ class RelsEstimator:
             if _real(name, v) <= 0:
                 raise ParameterError(f"{name}={v!r} must be > 0")
         self._us, self._ys = float(u_scale), float(y_scale)
-        self._inv_us, self._inv_ys = 1.0 / self._us, 1.0 / self._ys
         self._dvec = _theta_scale(na, nb, nc, self._us, self._ys)
         self._theta0 = _check_theta0(theta0, n)
         if history_every is not None:
             history_every = _order("history_every", history_every, 1)
         self._every = history_every
-        self._kernel = _k.rels_update.compile(_k.RELS_UPDATE_SIGNATURE)
+        self._run = _k.rels_run.compile(_k.RELS_RUN_SIGNATURE)
+        self._no_hist = np.empty((0, n))
         self.reset()
 
     # ---------------------------------------------------------------- state
@@ -479,6 +480,8 @@ class RelsEstimator:
             self._c_radius, self._method, u_scale=self._us, y_scale=self._ys,
         )
         self._block, self._views = _new_state(self._settings, self._theta0 / self._dvec)
+        self._io_rec = self._views.io.reshape((4, 1))  # the streaming sample's record
+        self._io = memoryview(self._views.io)
         self._hist: list[np.ndarray] = []
         self._since = 0
         if self._every is not None:
@@ -518,10 +521,13 @@ class RelsEstimator:
         """
         if type(u_k) is not float or type(y_k) is not float:
             u_k, y_k = _sample("u_k", u_k), _sample("y_k", y_k)
-        e = self._kernel(self._block, u_k, y_k)  # scales u_k, y_k and e itself
-        if e != e:
-            raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite")
-        return e
+        io = self._io
+        io[0] = u_k
+        io[1] = y_k
+        if not self._run(self._block, self._io_rec, self._no_hist, 1, False):
+            raise DataError(f"u_k={u_k!r}, y_k={y_k!r}: samples must be finite (also "
+                            f"once divided by u_scale={self._us!r}, y_scale={self._ys!r})")
+        return io[2]  # e(k), in y's units: the kernel applies the scales
 
     def _update_with_history(self, u_k: float, y_k: float) -> float:
         e = RelsEstimator.update(self, u_k, y_k)
@@ -534,35 +540,39 @@ class RelsEstimator:
     def update_many(self, u: Any, y: Any) -> np.ndarray:
         """Process a block of samples; return their a-priori prediction errors."""
         u, y = check_record(u, y)
-        err = np.empty(u.size)
-        xi = np.empty(u.size)
         if self._every is None:
-            _k.rels_run(self._block, u * self._inv_us, y * self._inv_ys, err, xi,
-                        np.empty((0, self._n)), 1, True)
-        else:
-            # the kernel records every `every` samples from its own start: run the
-            # first (every − since) samples separately to keep the phase
-            first = min(u.size, self._every - self._since)
-            for k in range(first):
-                err[k] = self.update(u[k], y[k]) / self._ys
-            rest = u.size - first
-            hist = np.empty((rest // self._every, self._n))
-            if rest:
-                _k.rels_run(self._block, u[first:] * self._inv_us,
-                            y[first:] * self._inv_ys, err[first:], xi[first:], hist,
-                            self._every, True)
-            self._hist.extend(list(hist * self._dvec))
-            if rest:  # else the samples above counted themselves (_update_with_history)
-                self._since = rest % self._every
-        with np.errstate(over="ignore"):  # |e| near float max times y_scale > 1
-            return err * self._ys
+            rec = _k.record(u, y)
+            self._run_record(rec, self._no_hist, 1)
+            return rec[2].copy()
+        # the kernel records every `every` samples from its own start: run the first
+        # (every − since) samples one by one to keep the phase
+        err = np.empty(u.size)
+        first = min(u.size, self._every - self._since)
+        for k in range(first):
+            err[k] = self.update(u[k], y[k])
+        rest = u.size - first
+        hist = np.empty((rest // self._every, self._n))
+        if rest:  # else the samples above counted themselves (_update_with_history)
+            rec = _k.record(u[first:], y[first:])
+            self._run_record(rec, hist, self._every)
+            err[first:] = rec[2]
+            self._since = rest % self._every
+        self._hist.extend(list(hist * self._dvec))
+        return err
+
+    def _run_record(self, rec: np.ndarray, hist: np.ndarray, every: int) -> None:
+        """Run a (4, N) record (see ``_kernels.rels_run``) and settle P."""
+        done = self._run(self._block, rec, hist, every, True)
+        if done < rec.shape[1]:
+            raise DataError(
+                f"sample {done} is not finite once divided by u_scale={self._us!r}, "
+                f"y_scale={self._ys!r} (the {done} samples before it were run)"
+            )
 
     # ---------------------------------------------------------------- results
     def _settle(self) -> None:
         """Apply the last sample's pending P update (a run of no samples)."""
-        empty = np.empty(0)
-        _k.rels_run(self._block, empty, empty, empty, empty, np.empty((0, self._n)), 1,
-                    True)
+        self._run(self._block, np.empty((4, 0)), self._no_hist, 1, True)
 
     @property
     def theta(self) -> np.ndarray:
