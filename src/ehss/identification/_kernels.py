@@ -206,16 +206,17 @@ LINE = 8
 def _starts(n, nu, nc):
     """Where each state array starts in the block, in :class:`RelsState` order, then
     where the block ends: the one definition of the layout (``nu`` = delay + nb + 1).
-    P comes after the vectors that the P pass reads and writes."""
+    Each array starts on the first line at or after the end of the one before
+    (o + (−o mod LINE)); P comes after the vectors that the P pass reads and writes."""
     theta = HEADER + (-HEADER % LINE)
-    psi = theta + n + (-(theta + n) % LINE)
-    g = psi + n + (-(psi + n) % LINE)
-    w = g + n + (-(g + n) % LINE)
-    u_line = w + n + (-(w + n) % LINE)
-    c_work = u_line + nu + (-(u_line + nu) % LINE)
-    psi_f = c_work + 4 * (nc + 1) + (-(c_work + 4 * (nc + 1)) % LINE)
-    P = psi_f + (nc + 1) * n + (-(psi_f + (nc + 1) * n) % LINE)
-    io = P + n * n + (-(P + n * n) % LINE)
+    psi = (theta + n) + (-(theta + n) % LINE)
+    g = (psi + n) + (-(psi + n) % LINE)
+    w = (g + n) + (-(g + n) % LINE)
+    u_line = (w + n) + (-(w + n) % LINE)
+    c_work = (u_line + nu) + (-(u_line + nu) % LINE)
+    psi_f = (c_work + 4 * (nc + 1)) + (-(c_work + 4 * (nc + 1)) % LINE)
+    P = (psi_f + (nc + 1) * n) + (-(psi_f + (nc + 1) * n) % LINE)
+    io = (P + n * n) + (-(P + n * n) % LINE)
     return theta, P, psi, g, w, u_line, c_work, psi_f, io, io + 4
 
 
