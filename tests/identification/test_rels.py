@@ -189,6 +189,20 @@ def test_streaming_rejects_non_finite_and_keeps_state():
     assert est.counters["n_samples"] == 1
 
 
+def test_a_sample_that_overflows_once_scaled_is_refused_in_both_forms():
+    # 1e300 is finite, 1e300 / 1e-10 is not: the estimator would run on inf. Streaming,
+    # the sample is refused and the state kept; in a block, the samples before it are
+    # run and the error names it
+    est = RelsEstimator(na=1, nb=0, nc=0, u_scale=1e-10)
+    est.update(1.0, 2.0)
+    with pytest.raises(DataError, match="once divided by u_scale"):
+        est.update(1e300, 1.0)
+    assert est.counters["n_samples"] == 1
+    with pytest.raises(DataError, match=r"sample 2 is not finite once divided by u_scale"):
+        est.update_many([1.0, 2.0, 1e300, 3.0], [0.5, 0.25, 0.125, 0.0])
+    assert est.counters["n_samples"] == 3
+
+
 # ------------------------------------------------------------------ bad inputs
 GOOD = dict(na=2, nb=1, nc=1, delay=1)
 
