@@ -184,8 +184,10 @@ def default_nperseg(
     *,
     band_hz: tuple[float, float] | None = None,
     min_averages: int = MIN_AVERAGES,
+    min_nperseg: int | None = None,
 ) -> int:
-    """Default Welch segment length, from the record's length and the band of interest.
+    """Default Welch segment length, from the record's length, the band of interest and
+    the memory of the system measured.
 
     The rule (powers of two throughout):
 
@@ -194,7 +196,12 @@ def default_nperseg(
     2. with a band ``(lo, hi)``, no longer than needed for a resolution of
        ``min(lo / 2, (hi − lo) / 32)`` (``(hi − lo) / 32`` when ``lo`` is 0): the shortest
        segment reaching it, which leaves the rest of the record for more averages;
-    3. at least 16 samples when the record has them (8 otherwise).
+    3. with ``min_nperseg``, at least that long, as far as rule 1 allows: a segment
+       short against the system's impulse response biases the estimate (a dead time τ
+       lowers the coherence by about (1 − τ/T)², and a resonance is smeared unless the
+       resolution is finer than a quarter of its half-power bandwidth; Bendat & Piersol,
+       *Random Data*, ch. 9, bias errors), whatever resolution the band asks for;
+    4. at least 16 samples when the record has them (8 otherwise).
 
     The sample rate enters only through the band: a record at 1 Hz and one at 4 kHz of
     the same length get the same segments unless a band says otherwise.
@@ -207,6 +214,8 @@ def default_nperseg(
     4096
     >>> default_nperseg(20_000, 1000.0, band_hz=(2.0, 100.0))  # 1 Hz is enough
     1024
+    >>> default_nperseg(20_000, 1000.0, band_hz=(2.0, 100.0), min_nperseg=1500)
+    2048
     """
     n = operator.index(n_samples)
     fs = check_fs(fs)
@@ -217,6 +226,7 @@ def default_nperseg(
     nperseg = 2 ** max(3, int(math.floor(math.log2(max(n, 8)))))
     while nperseg > floor and n_segments(n, nperseg, nperseg // 2) < min_averages:
         nperseg //= 2
+    longest = nperseg
     if band_hz is not None:
         lo, hi = check_band(band_hz)
         need_hz = (hi - lo) / 32.0
@@ -226,6 +236,8 @@ def default_nperseg(
             # shortest power of two with fs / nperseg <= need_hz
             n_need = 2 ** max(3, math.ceil(math.log2(fs / need_hz)))
             nperseg = max(min(nperseg, n_need), min(floor, nperseg))
+    if min_nperseg is not None and min_nperseg > nperseg:
+        nperseg = min(2 ** math.ceil(math.log2(min_nperseg)), longest)
     return nperseg
 
 
@@ -239,6 +251,7 @@ def h1_estimate(
     window: str | tuple = "hann",
     detrend: str | bool = "constant",
     band_hz: tuple[float, float] | None = None,
+    min_nperseg: int | None = None,
 ) -> FrequencyResponse:
     """H1 frequency-response estimate and coherence from input ``u`` to output ``y``.
 
@@ -260,6 +273,9 @@ def h1_estimate(
         no information and is left out.
     band_hz : (float, float), optional
         Band of interest, used only for the default ``nperseg``.
+    min_nperseg : int, optional
+        The system's memory in samples, used only for the default ``nperseg`` (see
+        :func:`default_nperseg`).
 
     Returns
     -------
@@ -302,7 +318,7 @@ def h1_estimate(
     if n < MIN_SAMPLES:
         raise DataError(f"too few samples for a frequency response: {n} < {MIN_SAMPLES}")
     if nperseg is None:
-        nperseg = default_nperseg(n, fs, band_hz=band_hz)
+        nperseg = default_nperseg(n, fs, band_hz=band_hz, min_nperseg=min_nperseg)
     else:
         nperseg = _as_int(nperseg, "nperseg")
         if nperseg < 4:
@@ -454,6 +470,7 @@ def frf_estimate(
     nperseg: int | None = None,
     band_hz: tuple[float, float] | None = None,
     min_coherence: float = 0.9,
+    min_nperseg: int | None = None,
 ) -> FrequencyResponse:
     """Non-parametric frequency response by Welch averaging, whole-record DFTs, or
     whichever of the two the record supports better.
@@ -476,6 +493,9 @@ def frf_estimate(
         Band of interest (defaults and the ``"auto"`` choice).
     min_coherence : float, default 0.9
         Coherence counted as good by ``"auto"``.
+    min_nperseg : int, optional
+        The system's memory in samples, for the default Welch segment
+        (:func:`default_nperseg`); the DFT estimate needs none (whole periods).
 
     Returns
     -------
@@ -488,7 +508,8 @@ def frf_estimate(
         raise ParameterError(f"{min_coherence=} must be in [0, 1]")
     welch = dft = None
     if method in ("auto", "welch"):
-        welch = h1_estimate(u, y, fs, nperseg=nperseg, band_hz=band_hz)
+        welch = h1_estimate(u, y, fs, nperseg=nperseg, band_hz=band_hz,
+                            min_nperseg=min_nperseg)
         if method == "welch":
             return welch
     n_average = None

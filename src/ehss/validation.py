@@ -52,6 +52,7 @@ __all__ = [
     "INITIAL_STATES",
     "prediction_fit",
     "residual_tests",
+    "segment_floor",
     "ljung_box",
     "validate",
 ]
@@ -789,7 +790,8 @@ def validate(
         bfit = band_fit(y[start:], simulated[start:], fs=fs, band_hz=band_hz)
     pred = {int(h): prediction_fit(model, u, y, int(h), start=start) for h in horizons}
     frf = frf_estimate(u[start:], y[start:], fs, method=frf_method, nperseg=nperseg,
-                       band_hz=band_hz, min_coherence=min_coherence)
+                       band_hz=band_hz, min_coherence=min_coherence,
+                       min_nperseg=segment_floor(model, n_val))
     err = None
     if band_hz is not None:
         err = frf_error(model, frf, band_hz=band_hz, min_coherence=min_coherence)
@@ -809,6 +811,34 @@ def validate(
         residuals=res,
         simulated=simulated,
     )
+
+
+def segment_floor(model: _Model, n_samples: int) -> int:
+    """The shortest Welch segment that does not bias the estimate of ``model``'s loop.
+
+    From the model's impulse response h over ``n_samples`` samples: its dead time d (the
+    first sample where |h| reaches 1 % of its peak) and its memory m (the sample after
+    the last where it does). The segment is at least 32 d (a dead time τ lowers the
+    coherence by about (1 − τ/T)², here to 0.94 at worst) and 4 m (a resonance decays
+    to 1 % in 4.6 time constants; a quarter of its half-power bandwidth, the resolution
+    that resolves it, is 1/(4π τ), so 4 m ≥ 18 τ is enough; Bendat & Piersol, *Random
+    Data*, ch. 9). An unstable model, or one whose response has not died out within the
+    record, asks for ``n_samples``: the longest segment the record affords.
+
+    Examples
+    --------
+    >>> from ehss.identification import ArmaxModel
+    >>> segment_floor(ArmaxModel(a=[1.0, -0.5], b=[1.0], c=[1.0], delay=3), 10_000)
+    96
+    """
+    h = np.asarray(model.simulate(np.r_[1.0, np.zeros(n_samples - 1)]), dtype=np.float64)
+    peak = float(np.max(np.abs(h))) if np.all(np.isfinite(h)) else math.inf
+    if not math.isfinite(peak) or not model.is_stable():
+        return n_samples
+    if peak == 0.0:
+        return 1
+    above = np.flatnonzero(np.abs(h) >= 0.01 * peak)
+    return max(32 * int(above[0]), 4 * (int(above[-1]) + 1))
 
 
 # -------------------------------------------------------------------------------- helpers
