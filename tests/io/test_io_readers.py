@@ -379,10 +379,28 @@ def test_column_number_in_a_binary_file_says_so(tmp_path, record):
         read_columns(path, ["2"])
 
 
-def test_semicolons_win_over_decimal_commas(tmp_path):
+def test_semicolon_files_with_decimal_commas_are_read(tmp_path):
+    # as spreadsheets write CSV in much of Europe; a point in a column name is no point
+    # in the numbers
     path = tmp_path / "eu.csv"
-    path.write_text("u;y\n1,5;2,5\n")
-    with pytest.raises(DataError, match=r"column 'u', data row 1: '1,5' is not a number"):
+    path.write_text("u.cmd;y\n1,5;2,5\n-3,25e-3;4\n")
+    table = read_columns(path, ["u.cmd", "y"])
+    assert table["u.cmd"].tolist() == [1.5, -3.25e-3]
+    assert table["y"].tolist() == [2.5, 4.0]
+    headerless = tmp_path / "eu_headerless.txt"
+    headerless.write_text("1,5;2,5\n3;4,75\n")
+    assert read_columns(headerless, ["2"])["2"].tolist() == [2.5, 4.75]
+
+
+def test_decimal_commas_next_to_points_are_not_guessed(tmp_path):
+    # 1.234,5 (a thousands point) or a mix of both: not read as decimal commas
+    path = tmp_path / "mixed.csv"
+    path.write_text("u;y\n1.234,5;2\n")
+    with pytest.raises(DataError, match=r"column 'u', data row 1: '1.234,5' is not a number"):
+        read_columns(path, ["u", "y"])
+    path.write_text("u;y\n1,5;2\n1,25;2,5,0\n")
+    with pytest.raises(DataError, match=r"column 'y', data row 2: '2,5,0' is not a number "
+                                        r"\(read with decimal commas\)"):
         read_columns(path, ["u", "y"])
 
 

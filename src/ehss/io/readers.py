@@ -153,9 +153,10 @@ def read_columns(
         lines starting with ``#`` before it are comments; the first row names the columns,
         or holds numbers, and then the file has no header and its columns are known by
         number only, as public identification records such as DaISy's ``.dat`` files
-        come), ``.mat`` (MATLAB v5 through :func:`scipy.io.loadmat`, v7.3 through h5py),
-        ``.h5``/``.hdf5`` (datasets by name; nested paths such as ``"run1/u"`` allowed)
-        and ``.npz``.
+        come; semicolon-separated numbers with decimal commas and no points are read
+        with decimal commas), ``.mat`` (MATLAB v5 through :func:`scipy.io.loadmat`,
+        v7.3 through h5py), ``.h5``/``.hdf5`` (datasets by name; nested paths such as
+        ``"run1/u"`` allowed) and ``.npz``.
     columns : sequence of str, optional
         The columns to read, by name or, in text files, by number counted from 1 as
         MATLAB, awk and spreadsheets count (``"1"`` is the first column): a name found in
@@ -604,7 +605,9 @@ def _read_csv(path: Path, wanted: list[str] | None, optional: str | None) -> _Ra
         raise DataError(f"{str(path)!r}: empty file (no header row)")
     delim, split = _split_fn(lines[i])
     first = [h.strip().strip('"').strip("'").strip() for h in split(lines[i])]
-    headerless = _looks_numeric(first)
+    decimal_comma = _decimal_comma(delim, lines[i + 1 :])
+    headerless = _looks_numeric([h.replace(",", ".") for h in first] if decimal_comma
+                                else first)
     if headerless:
         # No header: the columns are known by number, counted from 1.
         header = [str(k) for k in range(1, len(first) + 1)]
@@ -628,11 +631,13 @@ def _read_csv(path: Path, wanted: list[str] | None, optional: str | None) -> _Ra
         data_lines.pop()
     if not data_lines:
         raise DataError(f"{str(path)!r}: no data rows after the header")
+    parsed_lines = [line.replace(",", ".") for line in data_lines] if decimal_comma \
+        else data_lines
     # Fast path: numpy parses the whole block; on any failure, a slow pass finds the cell.
     try:
         with np.errstate(all="ignore"):
             block = np.loadtxt(
-                data_lines,
+                parsed_lines,
                 delimiter=delim,
                 usecols=idx,
                 dtype=np.float64,
@@ -648,7 +653,7 @@ def _read_csv(path: Path, wanted: list[str] | None, optional: str | None) -> _Ra
         n_fields_ok = False
     if block is None or not n_fields_ok:
         _diagnose_csv(path, data_lines, split, header, [labels[k] for k in keys], idx,
-                      headerless)
+                      headerless, decimal_comma)
         raise DataError(f"{str(path)!r}: cannot parse the data rows")  # pragma: no cover
     return _Raw({k: block[:, j].copy() for j, k in enumerate(keys)}, labels)
 
@@ -711,6 +716,15 @@ def _no_text_column(path: Path, header: list[str], headerless: bool, spec: str) 
         f", or a column number 1 to {n}")
 
 
+def _decimal_comma(delim: str | None, lines: list[str]) -> bool:
+    """True for a semicolon-separated file whose numbers have decimal commas (as
+    spreadsheets write them in much of Europe): commas in it, and no point."""
+    if delim != ";":
+        return False
+    text = "\n".join(lines)
+    return "," in text and "." not in text
+
+
 def _looks_numeric(header: list[str]) -> bool:
     try:
         [float(h) for h in header]
@@ -730,7 +744,8 @@ def _field_counts(data_lines: list[str], delim: str | None, split) -> np.ndarray
     return np.fromiter(map(len, map(str.split, data_lines)), np.int64, n)
 
 
-def _diagnose_csv(path, data_lines, split, header, labels, idx, headerless) -> None:
+def _diagnose_csv(path, data_lines, split, header, labels, idx, headerless,
+                  decimal_comma) -> None:
     n = len(header)
     reference = "the first row" if headerless else "the header"
     for r, line in enumerate(data_lines, start=1):
@@ -745,11 +760,12 @@ def _diagnose_csv(path, data_lines, split, header, labels, idx, headerless) -> N
         for label, j in zip(labels, idx, strict=True):
             cell = fields[j].strip()
             try:
-                float(cell)
+                float(cell.replace(",", ".") if decimal_comma else cell)
             except ValueError:
                 shown = cell if cell else "(empty)"
+                how = " (read with decimal commas)" if decimal_comma else ""
                 raise DataError(
-                    f"{str(path)!r}: {label}, data row {r}: {shown!r} is not a number"
+                    f"{str(path)!r}: {label}, data row {r}: {shown!r} is not a number{how}"
                 ) from None
 
 
