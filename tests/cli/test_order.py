@@ -231,3 +231,25 @@ def test_the_printed_identify_command_reports_the_fit_of_the_pick(tmp_path, caps
     assert reported == order_fit
     model = ArmaxModel.from_dict(json.loads(model_path.read_text()))
     assert model.is_stable()
+
+
+def test_order_with_no_grid_searches_low_orders_around_the_estimated_delay(tmp_path, rng,
+                                                                          capsys):
+    # a second-order loop behind 3 samples of dead time, nothing but the columns given:
+    # the delay is estimated (3, so 2 and 3 are tried), na 1-4, nb 0-3, nc 1-2
+    m = ArmaxModel(a=[1.0, -1.5, 0.7], b=[0.1, 0.1], c=[1.0], delay=3, dt=1 / FS)
+    u = rng.standard_normal(4000)
+    path = tmp_path / "run.csv"
+    write_csv(path, {"t": np.arange(u.size) / FS, "u": u,
+                     "y": m.simulate(u) + 0.005 * rng.standard_normal(u.size)})
+    out = tmp_path / "orders.csv"
+    code = main(["order", str(path), "--input", "u", "--output", "y", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "delay estimated from the record's impulse response: 3 sample(s); trying 2 " \
+           "and 3" in captured.err
+    table = read_columns(out)
+    assert table.n_rows == 4 * 4 * 2 * 2
+    assert sorted(set(table["delay"])) == [2.0, 3.0]
+    best = re.search(r"best by fit: --na (\d) --nb (\d) --nc (\d) --delay (\d)", captured.out)
+    assert best is not None and int(best.group(4)) == 3

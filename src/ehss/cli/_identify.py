@@ -47,8 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "beyond twice the estimate's own standard error where coherence >= 0.9), and saves "
         "it as JSON or MATLAB .mat. An unstable model "
         "is not written.",
-        epilog="orders unknown? `ehss order DATA --input U --output Y --na 2-6 --nb 1-5 "
-        "--nc 0-2` fits a grid of them and prints the identify command of the best",
+        epilog="orders unknown? `ehss order DATA --input U --output Y` fits a grid of them "
+        "around the record's estimated delay and prints the identify command of the best",
     )
     add_record_arguments(p)
     p.add_argument("--na", type=int, required=True, metavar="N", help="order of A (>= 1)")

@@ -36,6 +36,9 @@ __all__ = ["register", "run", "identify_command"]
 _COLUMNS = ("na", "nb", "nc", "delay", "n_params", "loss", "aic", "fpe", "mdl", "fit_pct",
             "simulation_fit_pct", "stable", "max_pole_radius", "accepted")
 _DEFAULT_HOLDOUT = 0.3
+#: the grid searched when --na, --nb or --nc is not given: low orders, as most loops of a
+#: rig are at the model's rate (the decimation brings the rate to ten times the band)
+DEFAULT_NA, DEFAULT_NB, DEFAULT_NC = range(1, 5), range(0, 4), range(1, 3)
 _METHOD_HELP = ("arx: least squares; armax: prediction-error minimisation from extended "
                 "least squares; oe: output error by prediction-error minimisation (nc is "
                 "ignored); rels: the paper's recursive extended least squares; rml: recursive "
@@ -58,14 +61,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "2-6.",
     )
     add_record_arguments(p)
-    p.add_argument("--na", type=int_list, required=True, metavar="LIST",
-                   help="candidate orders of A")
-    p.add_argument("--nb", type=int_list, required=True, metavar="LIST",
-                   help="candidate orders of B")
-    p.add_argument("--nc", type=int_list, required=True, metavar="LIST",
-                   help="candidate orders of C")
-    p.add_argument("--delay", type=int_list, default=[1], metavar="LIST",
-                   help="candidate input delays in samples of the record (default: 1)")
+    p.add_argument("--na", type=int_list, default=list(DEFAULT_NA), metavar="LIST",
+                   help="candidate orders of A (default: 1-4)")
+    p.add_argument("--nb", type=int_list, default=list(DEFAULT_NB), metavar="LIST",
+                   help="candidate orders of B (default: 0-3)")
+    p.add_argument("--nc", type=int_list, default=list(DEFAULT_NC), metavar="LIST",
+                   help="candidate orders of C (default: 1-2)")
+    p.add_argument("--delay", type=int_list, metavar="LIST",
+                   help="candidate input delays in samples of the record (default: the "
+                   "delay estimated from the prepared record's impulse response, and the "
+                   "one a sample of the model's rate shorter)")
     p.add_argument("--criterion", choices=("fit", "aic", "fpe", "mdl"), default="fit",
                    help="how the best is chosen: the free-run fit on the validation data "
                    "(the one identify reports), or an information criterion on the "
@@ -116,10 +121,10 @@ def _check_args(args: argparse.Namespace) -> dict:
         band = (lo, hi)
     for name in ("na", "nb", "nc", "delay"):
         low = 1 if name == "na" else 0
-        bad = [v for v in getattr(args, name) if v < low]
+        bad = [v for v in getattr(args, name) or [] if v < low]
         if bad:
             raise ParameterError(f"--{name} {bad[0]} must be >= {low}")
-    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay)
+    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay or [0, 1])
     if n_grid > 500:
         raise ParameterError(f"the grid has {n_grid} candidates; keep it to 500 or fewer")
     return {"holdout": None if args.validate is not None else holdout, "band": band,
@@ -134,9 +139,11 @@ def run(args: argparse.Namespace) -> int:
     rec = load_record(args)
     val = load_validation(args, rec)
     validation = opts["holdout"] if val is None else (val.u, val.y)
+    delays = args.delay if args.delay is not None else _estimated_delays(rec, validation,
+                                                                          opts)
     from rich.console import Console
 
-    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay)
+    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(delays)
     done = 0
     with (report_warnings("order"),
           Console(stderr=True).status(f"fitting {n_grid} candidates") as status):
@@ -147,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
             status.update(f"fitted {done} of {n_grid} candidates; last {line}")
 
         search = select_orders(
-            rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
+            rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=delays,
             method=args.method, init=args.init, validation=validation,
             band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
             initial=args.initial, criterion=args.criterion, progress=progress,
@@ -191,6 +198,30 @@ def run(args: argparse.Namespace) -> int:
         }
         write_outputs(table_writers(Path(args.out), cols, sidecar))
     return 0
+
+
+def _estimated_delays(rec, validation, opts: dict) -> list[int]:
+    """Candidate delays (samples of the record) from the prepared estimation data: the
+    estimated delay and the one a sample of the model's rate shorter, as it may be
+    placed late (:func:`ehss.identification.estimate_delay`). Says what it found."""
+    from ehss.identification.delay import default_max_delay, estimate_delay
+    from ehss.workflow import prepare
+
+    p = prepare(rec.u, rec.y, fs=rec.fs, validation=validation, band_hz=opts["band"],
+                detrend=opts["detrend"], decimate=opts["decimate"])
+    longest = default_max_delay(p.u.size)
+    found = estimate_delay(p.u, p.y, max_delay=longest)
+    rate = f" at the model's {p.fs_model:g} Hz" if p.decimation > 1 else ""
+    if found is None:
+        print(f"no delay estimated: the output shows no significant response to the "
+              f"input within {longest} samples{rate} (check --input and --output, or "
+              "give --delay); trying delays 0 and 1", file=sys.stderr)
+        found = 1
+    else:
+        tried = f"{found - 1} and {found}" if found else "0"
+        print(f"delay estimated from the record's impulse response: {found} sample(s)"
+              f"{rate}; trying {tried} (--delay sets the candidates)", file=sys.stderr)
+    return sorted({max(found - 1, 0) * p.decimation, found * p.decimation})
 
 
 def identify_command(args: argparse.Namespace, search) -> str:

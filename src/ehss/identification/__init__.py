@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ehss.identification.batch import armax_els, arx_ls
+from ehss.identification.delay import estimate_delay
 from ehss.identification.estimators import INITS, METHODS, estimate
 from ehss.identification.model import ArmaxModel, RoundingSensitivity
 from ehss.identification.order import OrderRow, OrderSelection, select_order
@@ -24,4 +25,5 @@ __all__ = [
     "OrderRow",
     "OrderSelection",
     "select_order",
+    "estimate_delay",
 ]
