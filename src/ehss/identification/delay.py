@@ -36,7 +36,10 @@ def estimate_delay(u: Any, y: Any, *, max_delay: int | None = None) -> int | Non
     ARX model, that estimate is not biased by output noise. The delay is the first lag
     whose tap exceeds 4 standard errors of its estimate (the residual variance times
     the diagonal of (ΦᵀΦ)⁻¹). A response whose first tap is small (a low-pass whose
-    b0 ≈ 0) may be placed a sample late; an order search around it settles that.
+    b0 ≈ 0) may be placed a sample late; an order search around it settles that. The
+    delay can be resolved no finer than the excitation allows (about half a period of
+    its highest frequency): a record far oversampled for its test signal (0.5–20 Hz at
+    1 kHz) places it early, and is best decimated first, as ``ehss order`` does.
 
     Parameters
     ----------
