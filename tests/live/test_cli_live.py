@@ -23,6 +23,13 @@ from ehss.cli import main
     (["live", "--rig", "position", "--memory", "-1"], "memory_s"),
     (["live", "--replay", "no-such-file.csv"], "no such file"),
     (["stream", "--to", "127.0.0.1", "--rig", "position"], "IPv4:PORT"),
+    # --duration is the simulated rig's: a received or replayed stream would ignore it
+    (["live", "--udp", "127.0.0.1:0", "--fields", "t,ref1,fb1", "--duration", "10"],
+     "--stop-after S stops the run"),
+    (["live", "--udp", "127.0.0.1:0", "--fields", "t,ref1,fb1", "--event", "3:mass_kg=3"],
+     "--event applies to --rig only"),
+    (["stream", "--to", "127.0.0.1:9", "--replay", "no-such-file.csv", "--duration", "5"],
+     "--duration applies to --rig only"),
 ])
 def test_bad_input_exits_2_with_one_line(argv, word, capsys):
     assert main(argv) == 2

@@ -40,8 +40,8 @@ def add_rig_arguments(p: argparse.ArgumentParser) -> None:
     """Options of the simulated rig and of replayed files (shared with ehss stream)."""
     p.add_argument("--channels", type=int, default=1, metavar="N",
                    help="--rig: number of actuator channels (default: %(default)s)")
-    p.add_argument("--duration", type=float, default=60.0, metavar="S",
-                   help="--rig: length of the run, s (default: %(default)s)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help=f"--rig: length of the run, s (default: {RIG_DURATION_S:g})")
     p.add_argument("--event", action="append", default=[], metavar="T:NAME=VALUE[@CH]",
                    help="--rig: a parameter change at T s, on channel CH or all, e.g. "
                    "30:mass_kg=350@1 (repeatable; NAME may be group.field)")
@@ -61,6 +61,22 @@ def _check_positive(name: str, value: float, *, allow_inf: bool = False) -> floa
     return check_real(value, name, lo=0.0, lo_open=True)
 
 
+#: length of a simulated rig run without --duration, s
+RIG_DURATION_S = 60.0
+
+
+def _rig_only(args: argparse.Namespace, command: str) -> None:
+    """Refuse the options that shape the simulated rig when the data come from
+    elsewhere: they would be ignored."""
+    if args.event:
+        raise ParameterError("--event applies to --rig only")
+    if args.duration is not None:
+        hint = ("; --stop-after S stops the run after S s of stream" if command == "live"
+                else "; a replayed file plays to its end")
+        raise ParameterError(f"--duration applies to --rig only (the length of the "
+                             f"simulated run){hint}")
+
+
 def rig_or_replay(args: argparse.Namespace, command: str):
     """``(layout, samples, fs)`` of ``--rig LOOP`` or ``--replay FILE``; ``command``
     names the command in a warning (a simulated loop its gains leave unstable)."""
@@ -73,13 +89,13 @@ def rig_or_replay(args: argparse.Namespace, command: str):
     if args.rig is not None:
         events = tuple(parse_event(e) for e in args.event)
         params = ehss.load_params(args.params) if args.params else ehss.preset(args.preset)
-        _check_positive("--duration", args.duration)
+        duration = RIG_DURATION_S if args.duration is None else args.duration
+        _check_positive("--duration", duration)
         source = f"--params {args.params}" if args.params else f"--preset {args.preset}"
         warn_if_unstable(command, params, args.rig, source)
-        return rig_record(args.rig, n_channels=args.channels, duration_s=args.duration,
+        return rig_record(args.rig, n_channels=args.channels, duration_s=duration,
                           fs=args.fs, params=params, events=events, seed=args.seed)
-    if args.event:
-        raise ParameterError("--event applies to --rig only")
+    _rig_only(args, command)
     if not args.fields or "=" not in args.fields:
         fields = parse_fields(args.fields) if args.fields else None
         return replay_record(args.replay, fields=fields, fs=args.fs)
@@ -220,6 +236,7 @@ def _source(args: argparse.Namespace):
     from ehss.live.udp import UdpSource, parse_address
 
     if args.udp is not None:
+        _rig_only(args, "live")
         if not args.fields:
             raise ParameterError("--udp needs --fields, the names of one sample's fields in "
                                  "wire order (e.g. t,ref1,fb1)")
