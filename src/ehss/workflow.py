@@ -682,7 +682,8 @@ def select_orders(
     :func:`ehss.identification.estimate` on the estimation data and validated with
     :func:`assess` on the validation data; the candidates are ranked by the fit the
     verdict judges (:attr:`ehss.validation.ValidationReport.fit_pct`) through
-    :func:`ehss.identification.select_order`, which never picks an unstable one. Refitting
+    :func:`ehss.identification.select_order`, which never picks an unstable one, and
+    picks among the candidates that meet the acceptance whenever any does. Refitting
     the pick with :func:`identify` and the same settings gives the same model and fit.
 
     Parameters
@@ -749,9 +750,13 @@ def select_orders(
                      f"{report.fit_pct:.1f} %")
         return report.fit_pct
 
+    def accepted(model: ArmaxModel) -> bool:
+        return assessed[(model.na, model.nb, model.nc, model.delay)][1].accepted
+
     sel = select_order(prep.u, prep.y, na=na, nb=nb, nc=nc, delay=list(record_delay),
                        dt=1.0 / prep.fs_model, criterion=criterion, score=score,
-                       method=method, init=init, fit_tolerance=fit_tolerance)
+                       method=method, init=init, fit_tolerance=fit_tolerance,
+                       admissible=accepted)
     reports, verdicts = [], []
     for r in sel.table:
         got = assessed.get((r.na, r.nb, r.nc, r.delay)) if math.isfinite(r.loss) else None

@@ -79,6 +79,27 @@ def test_select_order_defaults_to_validation_fit_with_the_armax_estimator(rng):
     assert (sel.best.na, sel.best.nb) == (2, 1)
 
 
+def test_select_order_picks_among_admissible_candidates_when_any_is(rng):
+    # the true orders (2, 1) fit best; declared inadmissible (as a model failing the
+    # acceptance would be), the pick is the best of the admissible rest; when none is
+    # admissible, the pick is the ordinary one
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=30.0)
+    uv, yv, _ = armax_data(rng, a, b, c, 2000, snr_db=30.0)
+    kw = dict(na=[1, 2, 3], nb=[1], nc=[1], delay=1, dt=DT_S, score=_fit_on(uv, yv))
+    plain = select_order(u, y, **kw)
+    assert (plain.best.na, plain.best.nb) == (2, 1)
+    picky = select_order(u, y, **kw, admissible=lambda m: m.na != 2)
+    rest = [r for r in picky.table if r.na != 2]
+    assert picky.best.na != 2
+    assert picky.best.fit >= max(r.fit for r in rest) - 0.1
+    assert picky.model.na == picky.best.na
+    none = select_order(u, y, **kw, admissible=lambda m: False)
+    assert (none.best.na, none.best.nb) == (2, 1)
+    with pytest.raises(TypeError, match="admissible must be callable"):
+        select_order(u, y, **kw, admissible=True)
+
+
 def test_select_order_never_recommends_an_unstable_model(rng):
     # a diverging plant: every least-squares candidate is unstable, so none is picked
     u = rng.standard_normal(400)

@@ -311,6 +311,8 @@ def _print_table(search, rec, args) -> None:
     fit = f"simulation fit {fit_text(rep.simulation_fit_pct)}"
     if rep.band_fit_pct is not None:
         fit += f", in the band {fit_text(rep.band_fit_pct)}"
+    verdict = search.verdicts[search.best_index]
+    among = ("the best that meets the acceptance" if verdict is not None
+             and verdict.accepted else "none meets the acceptance")
     console.print(f"best by {search.selection.criterion}: --na {na} --nb {nb} --nc {nc} "
-                  f"--delay {d} (method {search.method}; {fit}; unstable candidates are "
-                  "never recommended)")
+                  f"--delay {d} (method {search.method}; {fit}; {among}; never unstable)")

@@ -108,6 +108,7 @@ def select_order(
     p0_c: float | None = None,
     forgetting: float = 1.0,
     fit_tolerance: float = 0.1,
+    admissible: Callable[[ArmaxModel], bool] | None = None,
 ) -> OrderSelection:
     """Fit every (na, nb, nc, delay) of the grid and pick the best stable one.
 
@@ -138,6 +139,11 @@ def select_order(
         taken as equally good and the one with the fewest parameters is picked (fit
         differences of a tenth of a point are within what one validation record can
         resolve; the smaller model generalises better).
+    admissible : callable, optional
+        ``admissible(model) -> bool``, called after ``score``: when any stable candidate
+        is admissible, the pick is made among those only (:func:`ehss.workflow.
+        select_orders` passes its acceptance, so that a model that fails it is not
+        recommended over one that meets it); when none is, among all stable ones.
 
     Returns
     -------
@@ -161,6 +167,8 @@ def select_order(
         raise ParameterError("criterion='fit' needs a score (the fit on validation data)")
     if score is not None and not callable(score):
         raise TypeError(f"score must be callable, not {type(score).__name__}")
+    if admissible is not None and not callable(admissible):
+        raise TypeError(f"admissible must be callable, not {type(admissible).__name__}")
     tol = fit_tolerance
     if (isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating))
             or not (math.isfinite(tol) and tol >= 0)):
@@ -200,6 +208,9 @@ def select_order(
             f"none of the {len(rows)} candidate orders gives a stable model with method "
             f"{method!r}; try lower orders, another method or a longer record"
         )
+    if admissible is not None:
+        passing = [j for j in ok if admissible(models[j])]
+        ok = passing or ok
     i = min(ok, key=lambda j: key(rows[j]))
     if criterion == "fit":
         near = [j for j in ok if rows[j].fit >= rows[i].fit - tol]
