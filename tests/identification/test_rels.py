@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -177,6 +180,32 @@ def test_freeze_holds_theta_and_reset(rng):
     assert_allclose(est.theta, 0.0, atol=0)
     assert est.counters["n_samples"] == 0
     assert_allclose(est.P, 1e6 * np.eye(5), rtol=0)
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy", "copy"])
+def test_a_copied_estimator_runs_on_independently(rng, how):
+    # a copy carries the state (θ̂, P, regressors, history, counters) and then goes its
+    # own way: the same samples give the original and the copy the same errors bit for
+    # bit, and running one leaves the other as it was
+    u = rng.standard_normal(600)
+    y = np.convolve(u, [0.0, 0.5, 0.3])[: u.size] + 0.01 * rng.standard_normal(u.size)
+    est = RelsEstimator(na=2, nb=1, nc=1, history_every=7, u_scale=2.0)
+    est.update_many(u[:300], y[:300])
+    copy_ = {"pickle": lambda e: pickle.loads(pickle.dumps(e)),
+             "deepcopy": copy.deepcopy, "copy": copy.copy}[how](est)
+    before = copy_.theta
+    est.update_many(u[300:], y[300:])
+    assert_allclose(copy_.theta, before, rtol=0, atol=0)
+    assert copy_.counters["n_samples"] == 300 and len(copy_.history) == 300 // 7
+    e_copy = np.array([copy_.update(float(a), float(b)) for a, b in zip(u[300:], y[300:],
+                                                                        strict=True)])
+    fresh = RelsEstimator(na=2, nb=1, nc=1, history_every=7, u_scale=2.0)
+    fresh.update_many(u[:300], y[:300])
+    e_fresh = np.array([fresh.update(float(a), float(b)) for a, b in zip(u[300:], y[300:],
+                                                                         strict=True)])
+    assert_allclose(e_copy, e_fresh, rtol=0, atol=0)
+    assert_allclose(copy_.theta, est.theta, rtol=0, atol=0)
+    assert len(copy_.history) == len(est.history) == 600 // 7
 
 
 def test_streaming_rejects_non_finite_and_keeps_state():

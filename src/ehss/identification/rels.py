@@ -479,12 +479,36 @@ class RelsEstimator:
             na, nb, nc, delay, self._lam, self._alpha, self._alpha_c, self._trace_bound,
             self._c_radius, self._method, u_scale=self._us, y_scale=self._ys,
         )
-        self._block, self._views = _new_state(self._settings, self._theta0 / self._dvec)
-        self._io_rec = self._views.io.reshape((4, 1))  # the streaming sample's record
-        self._io = memoryview(self._views.io)
+        block, _ = _new_state(self._settings, self._theta0 / self._dvec)
+        self._attach(block)
         self._hist: list[np.ndarray] = []
         self._since = 0
         if self._every is not None:
+            self.update = self._update_with_history  # type: ignore[method-assign]
+
+    def _attach(self, block: np.ndarray) -> None:
+        """Work on ``block``: its named views, and the streaming sample's record."""
+        self._block = block
+        self._views = _k.state_views(block)
+        self._io_rec = self._views.io.reshape((4, 1))
+        self._io = memoryview(self._views.io)  # u, y written and e read per sample
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the views and the memoryview are rebuilt on the copy's own block, and the
+        # compiled loop is looked up again (a copy, a deep copy or a pickle)
+        state = {k: v for k, v in self.__dict__.items()
+                 if k not in ("_views", "_io_rec", "_io", "_run", "update")}
+        state["_history_update"] = "update" in self.__dict__
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        history_update = state.pop("_history_update")
+        block = state.pop("_block")
+        self.__dict__.update(state)
+        self._run = _k.rels_run.compile(_k.RELS_RUN_SIGNATURE)
+        self._attach(_k.aligned_copy(block))
+        self._hist = list(self._hist)  # a shallow copy too keeps its own history
+        if history_update:
             self.update = self._update_with_history  # type: ignore[method-assign]
 
     def freeze(self) -> None:
