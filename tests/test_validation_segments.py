@@ -29,12 +29,18 @@ def test_segment_floor_of_an_unstable_model_is_the_whole_record():
 
 
 def test_min_nperseg_lengthens_the_segment_only_as_far_as_the_record_affords():
-    # 20 000 samples afford 4096 with 8 averages; the band alone asks for 1024
+    # 20 000 samples afford 4096 with 8 averages (8192 would leave 3); the band alone
+    # asks for 1024
     band = (2.0, 100.0)
     assert default_nperseg(20_000, 1000.0, band_hz=band) == 1024
     assert default_nperseg(20_000, 1000.0, band_hz=band, min_nperseg=600) == 1024
     assert default_nperseg(20_000, 1000.0, band_hz=band, min_nperseg=1025) == 2048
     assert default_nperseg(20_000, 1000.0, band_hz=band, min_nperseg=10**6) == 4096
+    # 30 000 samples: 8 averages allow 4096, a long memory may take 8192 (6 averages),
+    # not 16384 (2)
+    assert default_nperseg(30_000, 1000.0) == 4096
+    assert default_nperseg(30_000, 1000.0, min_nperseg=5000) == 8192
+    assert default_nperseg(30_000, 1000.0, min_nperseg=10**6) == 8192
 
 
 @pytest.mark.slow

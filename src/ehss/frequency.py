@@ -48,6 +48,10 @@ MIN_SAMPLES = 16
 
 #: Fewest averages the default segment length aims for (Welch segments or DFT bins).
 MIN_AVERAGES = 8
+#: fewest averages a segment as long as the system's memory may leave (rule 3 of
+#: default_nperseg): a validation's tolerance widens with the random error of fewer
+#: averages, but nothing allows for the bias of a segment too short
+MIN_AVERAGES_FOR_MEMORY = 4
 
 #: Fraction of the record tapered (half at each end) by :func:`dft_estimate`.
 TAPER_FRACTION = 0.1
@@ -196,11 +200,14 @@ def default_nperseg(
     2. with a band ``(lo, hi)``, no longer than needed for a resolution of
        ``min(lo / 2, (hi − lo) / 32)`` (``(hi − lo) / 32`` when ``lo`` is 0): the shortest
        segment reaching it, which leaves the rest of the record for more averages;
-    3. with ``min_nperseg``, at least that long, as far as rule 1 allows: a segment
+    3. with ``min_nperseg``, at least that long, as far as the record affords
+       :data:`MIN_AVERAGES_FOR_MEMORY` averages (fewer than rule 1 asks): a segment
        short against the system's impulse response biases the estimate (a dead time τ
        lowers the coherence by about (1 − τ/T)², and a resonance is smeared unless the
        resolution is finer than a quarter of its half-power bandwidth; Bendat & Piersol,
-       *Random Data*, ch. 9, bias errors), whatever resolution the band asks for;
+       *Random Data*, ch. 9, bias errors), whatever resolution the band asks for, and a
+       comparison with the estimate allows for its random error (which fewer averages
+       increase) but not for its bias;
     4. at least 16 samples when the record has them (8 otherwise).
 
     The sample rate enters only through the band: a record at 1 Hz and one at 4 kHz of
@@ -216,6 +223,8 @@ def default_nperseg(
     1024
     >>> default_nperseg(20_000, 1000.0, band_hz=(2.0, 100.0), min_nperseg=1500)
     2048
+    >>> default_nperseg(30_000, 1000.0, min_nperseg=6000)  # 6 averages, not 8
+    8192
     """
     n = operator.index(n_samples)
     fs = check_fs(fs)
@@ -223,10 +232,7 @@ def default_nperseg(
     if min_averages < 1:
         raise ParameterError(f"{min_averages=} must be >= 1")
     floor = 16 if n >= 16 * (min_averages + 1) // 2 else 8
-    nperseg = 2 ** max(3, int(math.floor(math.log2(max(n, 8)))))
-    while nperseg > floor and n_segments(n, nperseg, nperseg // 2) < min_averages:
-        nperseg //= 2
-    longest = nperseg
+    nperseg = _longest_segment(n, min_averages, floor)
     if band_hz is not None:
         lo, hi = check_band(band_hz)
         need_hz = (hi - lo) / 32.0
@@ -237,7 +243,17 @@ def default_nperseg(
             n_need = 2 ** max(3, math.ceil(math.log2(fs / need_hz)))
             nperseg = max(min(nperseg, n_need), min(floor, nperseg))
     if min_nperseg is not None and min_nperseg > nperseg:
-        nperseg = min(2 ** math.ceil(math.log2(min_nperseg)), longest)
+        longest = _longest_segment(n, min(min_averages, MIN_AVERAGES_FOR_MEMORY), floor)
+        nperseg = max(nperseg, min(2 ** math.ceil(math.log2(min_nperseg)), longest))
+    return nperseg
+
+
+def _longest_segment(n: int, min_averages: int, floor: int) -> int:
+    """The longest power-of-two segment (at least ``floor``) that gives ``min_averages``
+    half-overlapping averages of ``n`` samples."""
+    nperseg = 2 ** max(3, int(math.floor(math.log2(max(n, 8)))))
+    while nperseg > floor and n_segments(n, nperseg, nperseg // 2) < min_averages:
+        nperseg //= 2
     return nperseg
 
 

@@ -162,10 +162,16 @@ def run(args: argparse.Namespace) -> int:
     command = identify_command(args, search)
     _print_table(search, rec, args)
     if not any(v is not None and v.accepted for v in search.verdicts):
+        p = search.prepared
+        rate = ("" if p.decimation == 1 or args.band is not None else
+                f", or fit at a higher rate than {p.fs_model:g} Hz (--decimate N below "
+                f"{p.decimation}: near its Nyquist frequency a sampled model of a loop "
+                "with a dead time misses) or judge only the band of interest (--band LO "
+                "HI)")
         print(f"no candidate meets the acceptance (the pick fails: "
               f"{'; '.join(search.verdicts[search.best_index].failed) or 'not validated'}); "
-              f"widen the grid, or record more data ({search.prepared.u.size} estimation "
-              "samples)", file=sys.stderr)
+              f"widen the grid, or record more data ({p.u.size} estimation samples)"
+              f"{rate}", file=sys.stderr)
     print(f"refit and validate it with:\n  {command}")
     if args.out is not None:
         cols = {c: np.array([_value(search, i, c) for i in range(len(search.table))],
