@@ -41,22 +41,40 @@ EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 128 + int(signal.SIGINT)
 EXIT_TERMINATED = 128 + int(signal.SIGTERM)
 
-# Subcommand modules, in the order they are listed by `ehss --help`.
+# The subcommands in the order `ehss --help` lists them: (name, module ehss.cli._<module>
+# that registers it, one-line help). The help lines are here, not in the modules, so
+# that listing the commands imports none of them (numpy, scipy, numba take a second).
 _COMMANDS = (
-    "params",
-    "simulate",
-    "identify",
-    "frf",
-    "order",
-    "compensate",
-    "reproduce",
-    "live",
-    "stream",
+    ("params", "params", "print a parameter set with units and its loops' stability (or "
+     "retune the loops, or save it as TOML)"),
+    ("simulate", "simulate", "simulate a closed-loop test (position, acceleration or force "
+     "loop)"),
+    ("identify", "identify", "identify an ARMAX-family model from an input/output record "
+     "and validate it"),
+    ("frf", "frf", "H1 frequency response and coherence of an input/output record"),
+    ("order", "order", "order-selection table (validation fit, AIC, FPE, MDL, verdict) over "
+     "a grid"),
+    ("compensate", "compensate", "compute a checked, compensated drive from an identified "
+     "closed-loop model"),
+    ("compensate-demo", "compensate", "demonstrate inverse-model compensation on the "
+     "simulated rig"),
+    ("reproduce", "reproduce", "run the paper's experiments end to end and write a report"),
+    ("live", "live", "identify a running rig online (UDP, simulated rig or replay), detect "
+     "changes, record, dashboard"),
+    ("stream", "stream", "send the simulated rig or a file as UDP datagrams (for ehss live "
+     "--udp)"),
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``ehss`` parser with every available subcommand registered."""
+def command_help(name: str) -> str:
+    """The one-line help of subcommand ``name``, as ``ehss --help`` lists it."""
+    return next(text for command, _, text in _COMMANDS if command == name)
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``ehss`` parser: with every subcommand registered in full, or, for the
+    command line ``argv``, only the one it names (the others listed by name and help,
+    so that their modules and what they import are not loaded)."""
     import argparse
     import importlib
 
@@ -75,15 +93,30 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"ehss {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in _COMMANDS:
+    named = None if argv is None else _named_command(argv)
+    registered: set[str] = set()
+    for name, module_name, text in _COMMANDS:
+        if name in registered:
+            continue
+        if argv is not None and module_name != named:
+            sub.add_parser(name, help=text, add_help=False)  # listed, not loaded
+            continue
         try:
-            module = importlib.import_module(f"ehss.cli._{name}")
+            module = importlib.import_module(f"ehss.cli._{module_name}")
         except ModuleNotFoundError as exc:
-            if exc.name == f"ehss.cli._{name}":
+            if exc.name == f"ehss.cli._{module_name}":
                 continue  # subcommand not available in this build
             raise
         module.register(sub)
+        registered.update(sub.choices)
     return parser
+
+
+def _named_command(argv: Sequence[str]) -> str | None:
+    """The module of the subcommand ``argv`` names (its first word that is not an
+    option), or None."""
+    word = next((a for a in argv if not a.startswith("-")), None)
+    return next((module for name, module, _ in _COMMANDS if name == word), None)
 
 
 class _Terminated(BaseException):
@@ -119,7 +152,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = "ehss"
     try:
         with _sigterm_as_exception():
-            parser = build_parser()  # imports the commands, and with them numpy, scipy...
+            argv = sys.argv[1:] if argv is None else list(argv)
+            parser = build_parser(argv)  # imports the command argv names, and numpy...
             args = parser.parse_args(argv)
             if getattr(args, "func", None) is None:
                 parser.print_help(sys.stderr)

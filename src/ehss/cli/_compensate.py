@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
 from ehss.errors import DataError, ParameterError
 
@@ -23,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "compensate",
-        help="compute a checked, compensated drive from an identified closed-loop model",
+        help=command_help("compensate"),
         description="Invert an identified closed-loop model inside the band it was validated "
         "over (exact stable inversion by default) and apply it to a reference file, or "
         "correct the drive of a previous run. Outside that band the drive is the reference "
@@ -117,7 +118,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     d = sub.add_parser(
         "compensate-demo",
-        help="demonstrate inverse-model compensation on the simulated rig",
+        help=command_help("compensate-demo"),
         description="Identify a closed loop on a random test, invert it in its working band "
         "(stable inversion by default), iterate the drive file, and compare tracking "
         "without and with compensation (random and earthquake-like references). Writes "

@@ -6,6 +6,7 @@ import argparse
 import math
 from pathlib import Path
 
+from ehss.cli import command_help
 from ehss.cli._dataargs import add_record_arguments, load_record, write_outputs
 from ehss.cli._outputs import OutputFile, OutputTable
 from ehss.errors import ParameterError
@@ -16,7 +17,7 @@ __all__ = ["register", "run"]
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "frf",
-        help="H1 frequency response and coherence of an input/output record",
+        help=command_help("frf"),
         description="Estimate the frequency response from --input to --output and its "
         "coherence, and write columns freq_hz, magnitude_db, phase_deg, coherence. Welch "
         "averages of Hann-windowed segments (H1 = S_uy / S_uu) for random and multisine "

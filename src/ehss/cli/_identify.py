@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss.cli import command_help
 from ehss.cli._dataargs import (
     add_record_arguments,
     load_record,
@@ -37,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "identify",
-        help="identify an ARMAX-family model from an input/output record and validate it",
+        help=command_help("identify"),
         description="Identify A y = q^-d B u + C e from a record: remove the operating point "
         "(or a drift), decimate an oversampled record, fit the model, and validate it on the "
         "held-out end or on a separate record (free-run fit from the least-squares initial "

@@ -13,6 +13,7 @@ from pathlib import Path
 import ehss
 from ehss._checks import check_real
 from ehss._provenance import versions
+from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import DataError, ParameterError
 
@@ -112,8 +113,7 @@ def rig_or_replay(args: argparse.Namespace, command: str):
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "live",
-        help="identify a running rig online (UDP, simulated rig or replay), detect "
-        "changes, record, dashboard",
+        help=command_help("live"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Identify every channel of a running rig online with recursive "
         "estimation and forgetting,\ncompare each model with a baseline (or the recent "

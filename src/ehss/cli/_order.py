@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ehss.cli import command_help
 from ehss.cli._dataargs import (
     add_record_arguments,
     int_list,
@@ -51,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "order",
-        help="order-selection table (validation fit, AIC, FPE, MDL, verdict) over a grid",
+        help=command_help("order"),
         description="Prepare the record as ehss identify does (held-out end or --validate "
         "FILE, detrend, decimation), fit every combination of the candidate orders with "
         "the estimator identify will use, validate each as identify does (free-run fit on "

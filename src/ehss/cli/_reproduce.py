@@ -6,6 +6,7 @@ import argparse
 import sys
 import time
 
+from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFolder
 
 __all__ = ["register"]
@@ -14,7 +15,7 @@ __all__ = ["register"]
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
-        help="run the paper's experiments end to end and write a report",
+        help=command_help("reproduce"),
         description="Step tests of the three loops, then identification of the position, "
         "acceleration and force closed loops with RELS, each validated against the "
         "Hann-window H1 estimate and on held-out data. Writes report.html, report.md, "

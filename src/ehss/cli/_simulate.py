@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFile, OutputTable
 from ehss.cli._params import warn_if_unstable
 from ehss.errors import ParameterError
@@ -34,7 +35,7 @@ _EXPECTED_REAL_TIME_FACTOR = 400.0
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate",
-        help="simulate a closed-loop test (position, acceleration or force loop)",
+        help=command_help("simulate"),
         description="Simulate one closed-loop test of the rig: the nonlinear actuator "
         "channel with its digital controller, driven by a generated test signal or by a "
         "reference column read from a file. Writes CSV + JSON (units, parameters, seed) "

@@ -7,6 +7,7 @@ import argparse
 import math
 import sys
 
+from ehss.cli import command_help
 from ehss.cli._live import WIRE_FORMAT, add_rig_arguments, rig_or_replay
 from ehss.cli._outputs import InputFile
 from ehss.errors import ParameterError
@@ -17,7 +18,7 @@ __all__ = ["register", "run"]
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "stream",
-        help="send the simulated rig or a file as UDP datagrams (for ehss live --udp)",
+        help=command_help("stream"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Play the simulated rig (computed up front, then paced to the wall "
         "clock) or a recorded file\nto a UDP address, as a real-time target would.\n\n"
