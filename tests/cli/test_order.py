@@ -280,3 +280,14 @@ def test_the_pick_meets_the_acceptance_when_a_candidate_does(tmp_path, capsys):
     assert table["accepted"][row[0]] == 1.0
     accepted = table["accepted"] == 1.0
     assert table["fit_pct"][row[0]] >= np.max(table["fit_pct"][accepted]) - 0.1
+
+
+def test_a_record_too_short_to_estimate_its_delay_asks_for_it(tmp_path, rng, capsys):
+    u = rng.standard_normal(200)
+    path = tmp_path / "short.csv"
+    write_csv(path, {"t": np.arange(u.size) / FS, "u": u, "y": np.roll(u, 1)})
+    assert main(["order", str(path), "--input", "u", "--output", "y", "--holdout",
+                 "0.5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "too few to estimate a delay" in err and "give the candidate delays with --delay" in err

@@ -30,7 +30,7 @@ from ehss.cli._dataargs import (
 )
 from ehss.cli._identify import _decimate_arg
 from ehss.cli._outputs import InputFile, OutputTable
-from ehss.errors import ParameterError
+from ehss.errors import DataError, ParameterError
 
 __all__ = ["register", "run", "identify_command"]
 
@@ -217,7 +217,10 @@ def _estimated_delays(rec, validation, opts: dict) -> list[int]:
     p = prepare(rec.u, rec.y, fs=rec.fs, validation=validation, band_hz=opts["band"],
                 detrend=opts["detrend"], decimate=opts["decimate"])
     longest = default_max_delay(p.u.size)
-    found = estimate_delay(p.u, p.y, max_delay=longest)
+    try:
+        found = estimate_delay(p.u, p.y, max_delay=longest)
+    except DataError as exc:
+        raise DataError(f"{exc}; give the candidate delays with --delay") from None
     rate = f" at the model's {p.fs_model:g} Hz" if p.decimation > 1 else ""
     if found is None:
         print(f"no delay estimated: the output shows no significant response to the "
