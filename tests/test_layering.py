@@ -37,6 +37,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("workflow",),
     ("plots",),
     ("compensation",),
+    ("target",),  # the compensator filter a real-time target runs, and its datagram
     ("experiments",),
     ("report",),
     ("ehss",),  # the package's __init__: re-exports the library
