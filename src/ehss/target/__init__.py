@@ -3,6 +3,14 @@ that carries a compensator to it, and the same filter and decoder in portable C9
 (``c/ehss_compensator.h``, ``c/ehss_compensator.c``; ``ehss target-code`` writes them out).
 """
 
+from ehss.target.datagram import (
+    FAULTS,
+    RESULTS,
+    CompensatorUpdate,
+    Inbox,
+    decode,
+    encode,
+)
 from ehss.target.filter import (
     MAX_PREVIEW,
     MAX_SECTIONS,
@@ -19,4 +27,10 @@ __all__ = [
     "Compensator",
     "CompensatorFilter",
     "coefficient_fault",
+    "CompensatorUpdate",
+    "FAULTS",
+    "encode",
+    "decode",
+    "RESULTS",
+    "Inbox",
 ]

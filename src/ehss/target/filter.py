@@ -23,8 +23,10 @@ at most :data:`MAX_SECTIONS` sections and :data:`MAX_TAPS` taps, and a preview o
 **Swapping.** :meth:`CompensatorFilter.load` hands over a new compensator, the sample
 index ``k0`` from which it applies and a cross-fade length ``N``. The new filter is taken
 up at the next sample boundary where no cross-fade is under way (a load that arrives
-during a cross-fade waits, and a newer load replaces one that waits: only the newest
-counts). From then on it runs *in shadow*, beside the running one, on the same input;
+during a cross-fade waits for its end; while one waits, a further load is refused as
+``busy``, as the C target's one-slot mailbox refuses it, and the host sends it again).
+It replaces a filter still in shadow (counted ``superseded``). From then on it runs
+*in shadow*, beside the running one, on the same input;
 from sample ``k0`` the drive is
 
 .. math:: u[k] = (1 - w_k)\\, u_{old}[k] + w_k\\, u_{new}[k], \\qquad
@@ -240,7 +242,7 @@ class _Load:
     crossfade: int
 
 
-COUNTERS = ("loads", "swaps", "refused_preview", "superseded", "late")
+COUNTERS = ("loads", "swaps", "refused_preview", "busy", "superseded", "late")
 
 
 class CompensatorFilter:
@@ -258,8 +260,9 @@ class CompensatorFilter:
     ----------
     counters : dict of str to int
         ``loads`` (taken up), ``swaps`` (cross-fades completed), ``refused_preview``,
-        ``superseded`` (replaced by a newer load before their cross-fade began),
-        ``late`` (taken up after their apply index: the cross-fade started late).
+        ``busy`` (refused while another load waited), ``superseded`` (replaced by a
+        newer load while still in shadow), ``late`` (taken up after their apply index:
+        the cross-fade started late).
     """
 
     def __init__(self, initial: Compensator, *, start_index: int = 0) -> None:
@@ -293,12 +296,23 @@ class CompensatorFilter:
         """The compensator running in shadow or fading in, if any."""
         return None if self._next is None else self._next.compensator
 
+    @property
+    def waiting(self) -> bool:
+        """True while a load waits to be taken up (during a cross-fade)."""
+        return self._pending is not None
+
     def load(self, compensator: Compensator, apply_index: int, crossfade: int) -> bool:
         """Hand over ``compensator``, to apply from sample ``apply_index`` with a
-        cross-fade of ``crossfade`` samples; False (and counted) if its preview differs.
+        cross-fade of ``crossfade`` samples.
 
         It is taken up at the next sample boundary where no cross-fade is under way,
-        replacing a load that has not yet been taken up or a filter still in shadow.
+        replacing a filter still in shadow.
+
+        Returns
+        -------
+        bool
+            False, and counted, if it is refused: its preview differs from the filter's
+            (``refused_preview``) or another load still waits (``busy``).
         """
         if not isinstance(compensator, Compensator):
             raise TypeError(f"compensator must be a Compensator, not "
@@ -309,7 +323,8 @@ class CompensatorFilter:
             self.counters["refused_preview"] += 1
             return False
         if self._pending is not None:
-            self.counters["superseded"] += 1
+            self.counters["busy"] += 1
+            return False
         self._pending = _Load(compensator, k0, n)
         return True
 
