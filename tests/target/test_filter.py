@@ -9,7 +9,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from ehss.errors import ParameterError
 from ehss.target import MAX_PREVIEW, MAX_SECTIONS, MAX_TAPS, Compensator, CompensatorFilter
 from ehss.target import filter as target_filter
-from ehss.target._kernels import filter_block
+from ehss.target._kernels import crossfade_block, filter_block
 
 from .naive import random_compensator, reference_filter, reference_swaps
 
@@ -205,6 +205,7 @@ def test_pure_python_path_equals_the_compiled_one_over_swaps(rng, monkeypatch):
 
     compiled = run()
     monkeypatch.setattr(target_filter, "filter_block", filter_block.py_func)
+    monkeypatch.setattr(target_filter, "crossfade_block", crossfade_block.py_func)
     # the same code, compiled without fastmath or interpreted: equal to the last bit
     assert_array_equal(run(), compiled)
 

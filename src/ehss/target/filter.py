@@ -69,7 +69,7 @@ import numpy as np
 
 from ehss._checks import SAMPLE_RATE_RANGE_HZ, check_int, check_real
 from ehss.errors import ParameterError
-from ehss.target._kernels import filter_block
+from ehss.target._kernels import crossfade_block, filter_block
 
 __all__ = [
     "MAX_SECTIONS",
@@ -359,13 +359,9 @@ class CompensatorFilter:
         y = self._run.run(x)
         if self._next is not None:
             y_new = self._next.run(x)
-            if fading:
-                n = max(self._crossfade, 1)
-                # w_k = (k - k0 + 1) / N ;  u = (1 - w) u_old + w u_new
-                j = np.arange(self._index - self._start + 1,
-                              self._index - self._start + 1 + x.size)
-                w = j / float(n)
-                y = (1.0 - w) * y + w * y_new
+            if fading:   # w_k = (k - k0 + 1) / N ;  u = (1 - w) u_old + w u_new
+                crossfade_block(y, y_new, self._index - self._start + 1,
+                                max(self._crossfade, 1))
         self._index += x.size
         if fading and self._index >= self._start + max(self._crossfade, 1):
             self._run, self._next = self._next, None   # w reached 1: drop the old one
