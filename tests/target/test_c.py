@@ -24,6 +24,7 @@ from ehss.target import (
     CompensatorFilter,
     CompensatorUpdate,
     Inbox,
+    decode,
     encode,
 )
 from ehss.target.datagram import MAX_DATAGRAM_BYTES
@@ -146,6 +147,66 @@ def test_the_c_parser_reads_what_python_writes(c, rng):
         assert np.array_equal(taps, comp.taps)
         assert lib.ehss_comp_datagram_channel(data, len(data)) == 9
     assert lib.ehss_comp_datagram_channel(b"EHSC", 4) == -1
+
+
+HARNESS = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "ehss_compensator.h"
+
+/* Each record of the file: a uint32 length, then that many bytes. Each datagram is
+ * copied into a heap block of exactly its length, so that a read beyond it is caught
+ * by AddressSanitizer; prints the parse result of each. */
+int main(int argc, char **argv)
+{
+    static ehss_comp_state s;
+    static ehss_comp_update u;
+    unsigned char head[4];
+    FILE *f = argc > 1 ? fopen(argv[1], "rb") : NULL;
+    if (f == NULL) return 3;
+    ehss_comp_init(&s, 1, 0, 0);
+    while (fread(head, 1, 4, f) == 4) {
+        size_t n = (size_t)head[0] | (size_t)head[1] << 8 | (size_t)head[2] << 16
+                   | (size_t)head[3] << 24;
+        unsigned char *buf = malloc(n);
+        if (n > 0 && (buf == NULL || fread(buf, 1, n, f) != n)) return 3;
+        printf("%d\n", ehss_comp_parse(buf, n, &u));
+        ehss_comp_datagram_channel(buf, n);
+        ehss_comp_decode(&s, buf, n);
+        ehss_comp_step(&s, 1.0);
+        free(buf);
+    }
+    fclose(f);
+    return 0;
+}
+"""
+
+
+def test_the_c_parser_never_reads_beyond_the_datagram(tmp_path, rng):
+    exe = tmp_path / "harness"
+    (tmp_path / "harness.c").write_text(HARNESS)
+    build = subprocess.run(
+        [CC, "-std=c99", "-g", "-O1", "-fsanitize=address,undefined",
+         "-fno-sanitize-recover=all", "-I", str(C_DIR), str(tmp_path / "harness.c"),
+         str(C_DIR / "ehss_compensator.c"), "-o", str(exe)], capture_output=True, text=True)
+    if build.returncode != 0:
+        pytest.skip(f"the C compiler cannot build with AddressSanitizer: {build.stderr}")
+    big = encode(CompensatorUpdate(
+        channel=1, sequence=1, apply_index=0, crossfade=0,
+        compensator=random_compensator(rng, MAX_SECTIONS, MAX_TAPS)))
+    cases = [big[:n] for n in range(len(big) + 1)]           # every truncation
+    cases += [data for _, data, _ in corrupted()]
+    cases += [rng.bytes(int(n)) for n in rng.integers(0, 3000, 200)]
+    cases += [b"EHSC\x01\x00" + rng.bytes(int(n)) for n in rng.integers(0, 3000, 200)]
+    with open(tmp_path / "cases.bin", "wb") as f:
+        for data in cases:
+            f.write(len(data).to_bytes(4, "little") + data)
+    done = subprocess.run([str(exe), str(tmp_path / "cases.bin")], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    got = [RESULTS[int(line)] for line in done.stdout.split()]
+    expected = [decode(data) for data in cases]
+    assert got == [e if isinstance(e, str) else "ok" for e in expected]
 
 
 def _run_both(c, x, preview, events):

@@ -190,8 +190,16 @@ def decode(data: bytes) -> CompensatorUpdate | str:
 
     Parameters
     ----------
-    data : bytes-like
+    data : bytes, bytearray or memoryview
+
+    Raises
+    ------
+    TypeError
+        If ``data`` is not bytes-like (an int would otherwise be read as that many
+        zero bytes).
     """
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise TypeError(f"data must be bytes, not {type(data).__name__}")
     data = bytes(data)
     fault = _frame_fault(data)
     if fault is not None:
