@@ -81,7 +81,7 @@ def _c_rate(n_sections, n_taps, seconds):
     states = []
     for ch in range(CHANNELS):
         s = ffi.new("ehss_comp_state *")
-        lib.ehss_comp_init(s, ch, 3, 0)
+        lib.ehss_comp_init(s, ch, 3, FS, 0)
         data = encode(CompensatorUpdate(channel=ch, sequence=1, apply_index=0, crossfade=0,
                                         compensator=_compensator(rng, n_sections, n_taps)))
         lib.ehss_comp_decode(s, data, len(data))

@@ -48,7 +48,7 @@ typedef struct {
 } ehss_comp_update;
 typedef struct {
     uint32_t loads; uint32_t swaps; uint32_t superseded; uint32_t late;
-    uint32_t decoded[17];
+    uint32_t decoded[18];
 } ehss_comp_counters;
 typedef struct { uint64_t index; int has_next; ehss_comp_counters counters; ...; }
     ehss_comp_state;
@@ -57,7 +57,7 @@ typedef struct { uint64_t index; int has_next; ehss_comp_counters counters; ...;
 #define EHSS_COMP_MAX_PREVIEW ...
 #define EHSS_COMP_MAX_DATAGRAM_BYTES ...
 #define EHSS_COMP_N_RESULTS ...
-int ehss_comp_init(ehss_comp_state *s, uint16_t channel, uint32_t preview,
+int ehss_comp_init(ehss_comp_state *s, uint16_t channel, uint32_t preview, double fs_hz,
                    uint64_t start_index);
 int ehss_comp_parse(const unsigned char *buf, size_t len, ehss_comp_update *out);
 long ehss_comp_datagram_channel(const unsigned char *buf, size_t len);
@@ -164,7 +164,7 @@ int main(int argc, char **argv)
     unsigned char head[4];
     FILE *f = argc > 1 ? fopen(argv[1], "rb") : NULL;
     if (f == NULL) return 3;
-    ehss_comp_init(&s, 1, 0, 0);
+    ehss_comp_init(&s, 1, 0, 5000.0, 0);
     while (fread(head, 1, 4, f) == 4) {
         size_t n = (size_t)head[0] | (size_t)head[1] << 8 | (size_t)head[2] << 16
                    | (size_t)head[3] << 24;
@@ -215,7 +215,7 @@ def _run_both(c, x, preview, events):
     results of each datagram on each side, and both filters' counters."""
     ffi, lib = c
     state = ffi.new("ehss_comp_state *")
-    assert lib.ehss_comp_init(state, 1, preview, 0) == lib.EHSS_COMP_OK
+    assert lib.ehss_comp_init(state, 1, preview, 5000.0, 0) == lib.EHSS_COMP_OK
     f = CompensatorFilter(Compensator.delay(preview, fs_hz=5000.0))
     inbox = Inbox({1: f})
     y_py, y_c = np.empty_like(x), np.empty_like(x)
@@ -239,8 +239,8 @@ def _run_both(c, x, preview, events):
 def _scenario(rng, preview):
     """Updates that exercise every path: shadow, cross-fade, a load waiting for a fade
     to end, busy, superseded, late, an outright switch, stale, refused ones."""
-    def upd(seq, k0, n, *, s=3, t=20, p=preview, channel=1):
-        comp = random_compensator(rng, s, t, preview=p)
+    def upd(seq, k0, n, *, s=3, t=20, p=preview, channel=1, fs_hz=5000.0):
+        comp = random_compensator(rng, s, t, preview=p, fs_hz=fs_hz)
         return encode(CompensatorUpdate(channel=channel, sequence=seq, apply_index=k0,
                                         crossfade=n, compensator=comp))
     wait_for_fade = upd(11, 0, 3000)
@@ -254,6 +254,8 @@ def _scenario(rng, preview):
         (130_000, frame(sequence=5, crc=1)),                  # checksum
         (140_000, upd(5, 0, 10, p=preview + 1)),              # other preview
         (150_500, upd(6, 0, 10, channel=2)),                  # other channel
+        (150_600, upd(6, 0, 10, fs_hz=5006.0)),               # 0.12 % off: refused
+        (150_700, upd(7, 0, 10, fs_hz=5004.0)),               # 0.08 % off: taken
         (300_000, upd(10, 250_000, 2_000)),                   # late: fades from now
         (301_000, wait_for_fade),                             # waits, then late
         (301_500, frame(sos=[[1.0, 0, 0, 1, 0, 1.0]], sequence=12)),  # unstable
@@ -277,15 +279,19 @@ def test_c_filter_equals_python_over_a_million_samples_with_swaps(c):
     assert [py for py, _ in results] == [cc for _, cc in results]
     assert [py for py, _ in results] == [
         "ok", "ok", "busy", "ok", "ok", "stale", "checksum", "other_preview",
-        "other_channel", "ok", "ok", "unstable", "ok", "ok", "ok"]
+        "other_channel", "other_sample_rate", "ok", "ok", "ok", "unstable", "ok", "ok",
+        "ok"]
     assert counters[0] == counters[1]
-    assert counters[0] == {"loads": 9, "swaps": 8, "superseded": 1, "late": 2}
+    assert counters[0] == {"loads": 10, "swaps": 9, "superseded": 1, "late": 3}
     assert list(decoded[0].values()) == decoded[1]
 
 
 def test_the_c_state_starts_as_the_reference_delayed_by_the_preview(c):
     ffi, lib = c
     state = ffi.new("ehss_comp_state *")
-    assert lib.ehss_comp_init(state, 0, MAX_PREVIEW + 1, 0) == lib.EHSS_COMP_FAULT_PREVIEW
-    assert lib.ehss_comp_init(state, 0, 2, 0) == lib.EHSS_COMP_OK
+    assert lib.ehss_comp_init(state, 0, MAX_PREVIEW + 1, 5000.0, 0) == \
+        lib.EHSS_COMP_FAULT_PREVIEW
+    for fs in (0.0, float("nan"), float("inf"), 2e9):
+        assert lib.ehss_comp_init(state, 0, 2, fs, 0) == lib.EHSS_COMP_FAULT_SAMPLE_RATE
+    assert lib.ehss_comp_init(state, 0, 2, 5000.0, 0) == lib.EHSS_COMP_OK
     assert [lib.ehss_comp_step(state, v) for v in (1.0, 2.0, 3.0, 4.0)] == [0, 0, 1, 2]

@@ -110,11 +110,12 @@ def test_inbox_loads_updates_and_counts_every_refusal():
     assert inbox.accept(frame(sequence=4)) == "stale"          # late
     assert inbox.accept(frame(sequence=6, channel=7)) == "other_channel"
     assert inbox.accept(frame(sequence=6, preview=3)) == "other_preview"
+    assert inbox.accept(frame(sequence=6, fs_hz=1000.0)) == "other_sample_rate"
     assert inbox.accept(frame(sequence=6)) == "busy"   # the first has not been taken up
     assert inbox.accept(b"\x00" * 10) == "truncated"
     assert inbox.last_sequence(1) == 5
     assert inbox.counters["ok"] == 1 and inbox.counters["stale"] == 2
-    assert sum(inbox.counters.values()) == 7
+    assert sum(inbox.counters.values()) == 8
 
 
 def test_an_update_refused_as_busy_is_taken_when_sent_again():

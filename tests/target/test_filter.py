@@ -99,8 +99,8 @@ def test_a_swap_loaded_ahead_runs_in_shadow_then_cross_fades(rng):
     expected = reference_swaps(x, old, [(1000, new, 2500, 1200)])
     assert_allclose(np.r_[y1, y2], expected, rtol=0, atol=_atol(expected))
     assert f.active is new and f.incoming is None
-    assert f.counters == {"loads": 1, "swaps": 1, "refused_preview": 0, "busy": 0,
-                          "superseded": 0, "late": 0}
+    assert f.counters == {"loads": 1, "swaps": 1, "refused_preview": 0,
+                          "refused_sample_rate": 0, "busy": 0, "superseded": 0, "late": 0}
 
 
 def test_the_weights_rise_linearly_from_one_filter_to_the_other():
@@ -166,8 +166,8 @@ def test_a_load_during_a_cross_fade_waits_and_a_third_is_busy(rng):
     y.append(f.process(x[300:]))
     expected = reference_swaps(x, c0, [(100, c1, 200, 400), (600, c2, 600, 100)])
     assert_allclose(np.concatenate(y), expected, rtol=0, atol=_atol(expected))
-    assert f.counters == {"loads": 2, "swaps": 2, "refused_preview": 0, "busy": 1,
-                          "superseded": 0, "late": 1}
+    assert f.counters == {"loads": 2, "swaps": 2, "refused_preview": 0,
+                          "refused_sample_rate": 0, "busy": 1, "superseded": 0, "late": 1}
 
 
 def test_a_newer_load_replaces_a_filter_still_in_shadow(rng):
@@ -188,6 +188,15 @@ def test_a_compensator_with_another_preview_is_refused(rng):
     f = CompensatorFilter(Compensator.delay(2, fs_hz=FS))
     assert not f.load(random_compensator(rng, 1, 3, preview=3), 0, 10)
     assert f.counters["refused_preview"] == 1 and not f.waiting
+
+
+def test_a_compensator_for_another_sample_rate_is_refused(rng):
+    f = CompensatorFilter(Compensator.delay(0, fs_hz=FS))
+    # 0.1 % is the tolerance: 5005.5 Hz (0.11 %) and 2500 Hz are refused
+    assert not f.load(random_compensator(rng, 1, 3, fs_hz=FS * 1.0011), 0, 10)
+    assert not f.load(random_compensator(rng, 1, 3, fs_hz=FS / 2), 0, 10)
+    assert f.counters["refused_sample_rate"] == 2 and not f.waiting
+    assert f.load(random_compensator(rng, 1, 3, fs_hz=FS * 0.9991), 0, 10)
 
 
 def test_pure_python_path_equals_the_compiled_one_over_swaps(rng, monkeypatch):

@@ -90,8 +90,9 @@ FAULTS = ("truncated", "magic", "version", "sections", "taps", "length", "checks
 
 
 #: Results of receiving a datagram, in the order of the C code's ``ehss_comp_result``
-#: (``EHSS_COMP_OK`` = 0 … ``EHSS_COMP_BUSY`` = 16).
-RESULTS = ("ok", *FAULTS, "stale", "other_channel", "other_preview", "busy")
+#: (``EHSS_COMP_OK`` = 0 … ``EHSS_COMP_OTHER_SAMPLE_RATE`` = 17).
+RESULTS = ("ok", *FAULTS, "stale", "other_channel", "other_preview", "busy",
+           "other_sample_rate")
 
 
 def datagram_bytes(n_sections: int, n_taps: int) -> int:
@@ -243,7 +244,8 @@ class Inbox:
     -----
     A datagram is checked in this order, and counted by its first result: the faults
     of :data:`FAULTS`; ``other_channel`` (no filter for its channel); ``other_preview``
-    (its preview differs from the channel's filter's); ``stale`` (its sequence number
+    (its preview differs from the channel's filter's); ``other_sample_rate`` (its
+    sample rate is more than 0.1 % from the filter's); ``stale`` (its sequence number
     is not above the last one loaded for its channel); ``busy`` (an update still waits
     for a cross-fade to end; the host sends it again later); ``ok`` (loaded: the filter
     takes it up at its next sample boundary outside a cross-fade).
@@ -269,8 +271,9 @@ class Inbox:
         f = self._filters.get(got.channel)
         if f is None:
             return "other_channel"
-        if got.compensator.preview != f.preview:
-            return "other_preview"
+        refused = f.accepts(got.compensator)
+        if refused is not None:
+            return refused
         last = self._last.get(got.channel)
         if last is not None and got.sequence <= last:
             return "stale"

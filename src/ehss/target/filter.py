@@ -48,7 +48,10 @@ up, the cross-fade starts at once (counted as ``late``) and the start-up transie
 weighted down by the rising ``w``.
 
 A compensator with a different preview than the running one is refused and counted:
-the drive would jump by the difference of the previews.
+the drive would jump by the difference of the previews. So is one designed for a sample
+rate more than :data:`SAMPLE_RATE_TOLERANCE` (0.1 %) away from the filter's: its time
+constants and delays would be misplaced by as much (a model identified on a decimated
+record, say, has a rate several times lower).
 
 Examples
 --------
@@ -75,6 +78,7 @@ __all__ = [
     "MAX_SECTIONS",
     "MAX_TAPS",
     "MAX_PREVIEW",
+    "SAMPLE_RATE_TOLERANCE",
     "Compensator",
     "CompensatorFilter",
     "coefficient_fault",
@@ -86,6 +90,9 @@ MAX_SECTIONS = 16
 MAX_TAPS = 256
 #: Longest preview, samples: a pure delay of it fits the FIR part.
 MAX_PREVIEW = MAX_TAPS - 1
+#: Largest relative difference between a loaded compensator's sample rate and the
+#: filter's (the C code's ``EHSS_COMP_SAMPLE_RATE_TOLERANCE``).
+SAMPLE_RATE_TOLERANCE = 1e-3
 
 
 def coefficient_fault(sos: np.ndarray, taps: np.ndarray) -> str | None:
@@ -242,7 +249,8 @@ class _Load:
     crossfade: int
 
 
-COUNTERS = ("loads", "swaps", "refused_preview", "busy", "superseded", "late")
+COUNTERS = ("loads", "swaps", "refused_preview", "refused_sample_rate", "busy", "superseded",
+            "late")
 
 
 class CompensatorFilter:
@@ -251,8 +259,8 @@ class CompensatorFilter:
     Parameters
     ----------
     initial : Compensator
-        The compensator that runs from the start; its preview is the filter's for good
-        (:meth:`Compensator.delay` runs the reference unchanged).
+        The compensator that runs from the start; its preview and sample rate are the
+        filter's for good (:meth:`Compensator.delay` runs the reference unchanged).
     start_index : int, default 0
         Sample index of the first sample :meth:`step` or :meth:`process` computes.
 
@@ -260,15 +268,17 @@ class CompensatorFilter:
     ----------
     counters : dict of str to int
         ``loads`` (taken up), ``swaps`` (cross-fades completed), ``refused_preview``,
-        ``busy`` (refused while another load waited), ``superseded`` (replaced by a
-        newer load while still in shadow), ``late`` (taken up after their apply index:
-        the cross-fade started late).
+        ``refused_sample_rate``, ``busy`` (refused while another load waited),
+        ``superseded`` (replaced by a newer load while still in shadow), ``late`` (taken
+        up after their apply index: the cross-fade started late).
     """
 
     def __init__(self, initial: Compensator, *, start_index: int = 0) -> None:
         if not isinstance(initial, Compensator):
             raise TypeError(f"initial must be a Compensator, not {type(initial).__name__}")
         self._run = _Slot(initial)
+        self._preview = initial.preview
+        self._fs_hz = initial.fs_hz
         self._next: _Slot | None = None
         self._start = 0          # k0 of the next filter
         self._crossfade = 0      # N of the next filter
@@ -279,7 +289,22 @@ class CompensatorFilter:
     @property
     def preview(self) -> int:
         """Samples of reference the input runs ahead of the drive."""
-        return self._run.compensator.preview
+        return self._preview
+
+    @property
+    def fs_hz(self) -> float:
+        """Sample rate the filter runs at, Hz (the initial compensator's)."""
+        return self._fs_hz
+
+    def accepts(self, compensator: Compensator) -> str | None:
+        """Why :meth:`load` would refuse ``compensator`` (``"other_preview"``,
+        ``"other_sample_rate"``), or None."""
+        if compensator.preview != self._preview:
+            return "other_preview"
+        # |fs - fs_0| > tol fs_0, as the C code computes it
+        if abs(compensator.fs_hz - self._fs_hz) > SAMPLE_RATE_TOLERANCE * self._fs_hz:
+            return "other_sample_rate"
+        return None
 
     @property
     def index(self) -> int:
@@ -312,15 +337,18 @@ class CompensatorFilter:
         -------
         bool
             False, and counted, if it is refused: its preview differs from the filter's
-            (``refused_preview``) or another load still waits (``busy``).
+            (``refused_preview``), its sample rate is more than
+            :data:`SAMPLE_RATE_TOLERANCE` away from the filter's (``refused_sample_rate``)
+            or another load still waits (``busy``).
         """
         if not isinstance(compensator, Compensator):
             raise TypeError(f"compensator must be a Compensator, not "
                             f"{type(compensator).__name__}")
         k0 = check_int(apply_index, "apply_index", lo=0)
         n = check_int(crossfade, "crossfade", lo=0)
-        if compensator.preview != self.preview:
-            self.counters["refused_preview"] += 1
+        refused = self.accepts(compensator)
+        if refused is not None:
+            self.counters[refused.replace("other", "refused")] += 1
             return False
         if self._pending is not None:
             self.counters["busy"] += 1

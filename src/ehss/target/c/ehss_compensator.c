@@ -217,6 +217,9 @@ static int offer(ehss_comp_state *s, const unsigned char *buf, size_t len)
     if (s->scratch.preview != s->preview) {
         return EHSS_COMP_OTHER_PREVIEW;
     }
+    if (absolute(s->scratch.fs_hz - s->fs_hz) > EHSS_COMP_SAMPLE_RATE_TOLERANCE * s->fs_hz) {
+        return EHSS_COMP_OTHER_SAMPLE_RATE;
+    }
     if (s->has_sequence && s->scratch.sequence <= s->last_sequence) {
         return EHSS_COMP_STALE;
     }
@@ -275,21 +278,23 @@ static double slot_step(ehss_comp_slot *f, double x)
     return acc;
 }
 
-int ehss_comp_init(ehss_comp_state *s, uint16_t channel, uint32_t preview,
+int ehss_comp_init(ehss_comp_state *s, uint16_t channel, uint32_t preview, double fs_hz,
                    uint64_t start_index)
 {
-    static const double no_sections[1][6] = {{0.0, 0.0, 0.0, 0.0, 0.0, 0.0}};
-    double delay[EHSS_COMP_MAX_TAPS];
     if (preview > EHSS_COMP_MAX_PREVIEW) {
         return EHSS_COMP_FAULT_PREVIEW;
     }
+    if (!(is_finite(fs_hz) && fs_hz >= FS_MIN_HZ && fs_hz <= FS_MAX_HZ)) {
+        return EHSS_COMP_FAULT_SAMPLE_RATE;
+    }
     memset(s, 0, sizeof *s);
-    memset(delay, 0, sizeof delay);
-    delay[preview] = 1.0;   /* u[k] = x[k - p] = r[k] */
     s->channel = channel;
     s->preview = preview;
+    s->fs_hz = fs_hz;
     s->index = start_index;
-    slot_load(&s->slot[0], 0, no_sections, preview + 1u, delay);
+    /* no sections; taps 0 ... 0 1: u[k] = x[k - p] = r[k] */
+    s->slot[0].n_taps = preview + 1u;
+    s->slot[0].taps[preview] = 1.0;
     return EHSS_COMP_OK;
 }
 

@@ -9,7 +9,7 @@
  *
  * One ehss_comp_state per channel:
  *
- *     ehss_comp_init(&s, channel, preview, first_sample_index);   once
+ *     ehss_comp_init(&s, channel, preview, fs_hz, first_sample_index);   once
  *     ehss_comp_decode(&s, bytes, n_bytes);   whenever a datagram arrives
  *                                             (a non-real-time thread may call it)
  *     drive = ehss_comp_step(&s, r_ahead);    once per control period, where r_ahead
@@ -44,6 +44,8 @@ extern "C" {
 #define EHSS_COMP_VERSION 1
 /* 52 + 48 * 16 + 8 * 256 */
 #define EHSS_COMP_MAX_DATAGRAM_BYTES 2868
+/* largest relative difference of a compensator's sample rate from the channel's */
+#define EHSS_COMP_SAMPLE_RATE_TOLERANCE 1e-3
 
 /* What ehss_comp_decode made of a datagram (ehss.target.RESULTS, same order). */
 enum ehss_comp_result {
@@ -64,7 +66,8 @@ enum ehss_comp_result {
     EHSS_COMP_OTHER_CHANNEL = 14,       /* for another channel's state */
     EHSS_COMP_OTHER_PREVIEW = 15,       /* preview differs from the running one */
     EHSS_COMP_BUSY = 16,                /* an update still waits: send it again later */
-    EHSS_COMP_N_RESULTS = 17
+    EHSS_COMP_OTHER_SAMPLE_RATE = 17,   /* designed for another sample rate */
+    EHSS_COMP_N_RESULTS = 18
 };
 
 /* One compensator and when it applies: what a datagram carries. */
@@ -105,6 +108,7 @@ typedef struct {
 typedef struct {
     uint16_t channel;
     uint32_t preview;
+    double fs_hz;                /* the channel's sample rate, Hz */
     uint64_t index;              /* sample index of the next drive sample */
     ehss_comp_slot slot[2];
     int run;                     /* slot[run] runs; slot[1 - run] is the next one */
@@ -119,10 +123,11 @@ typedef struct {
     ehss_comp_counters counters;
 } ehss_comp_state;
 
-/* Start a channel: no compensation (the drive is the reference, i.e. the input
- * delayed by `preview` samples) from sample `start_index`. Returns EHSS_COMP_OK, or
- * EHSS_COMP_FAULT_PREVIEW if preview > EHSS_COMP_MAX_PREVIEW. */
-int ehss_comp_init(ehss_comp_state *s, uint16_t channel, uint32_t preview,
+/* Start a channel running at `fs_hz`: no compensation (the drive is the reference,
+ * i.e. the input delayed by `preview` samples) from sample `start_index`. Returns
+ * EHSS_COMP_OK, EHSS_COMP_FAULT_PREVIEW if preview > EHSS_COMP_MAX_PREVIEW or
+ * EHSS_COMP_FAULT_SAMPLE_RATE if fs_hz is not finite or outside 1e-9 .. 1e9 Hz. */
+int ehss_comp_init(ehss_comp_state *s, uint16_t channel, uint32_t preview, double fs_hz,
                    uint64_t start_index);
 
 /* Parse and check a datagram into `out` without reading beyond buf[0 .. len - 1].
@@ -133,8 +138,8 @@ int ehss_comp_parse(const unsigned char *buf, size_t len, ehss_comp_update *out)
  * route it to its channel's state. */
 long ehss_comp_datagram_channel(const unsigned char *buf, size_t len);
 
-/* Parse a datagram and, if it is whole, for this channel and preview, newer than the
- * last one and the mailbox is free, put it in the mailbox. Counted by result in
+/* Parse a datagram and, if it is whole, for this channel, preview and sample rate,
+ * newer than the last one and the mailbox is free, put it in the mailbox. Counted by result in
  * s->counters.decoded; returns the result (enum ehss_comp_result). */
 int ehss_comp_decode(ehss_comp_state *s, const unsigned char *buf, size_t len);
 
