@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from ehss.errors import ParameterError
+from ehss.errors import DataError, ParameterError
 from ehss.target import MAX_PREVIEW, MAX_SECTIONS, MAX_TAPS, Compensator, CompensatorFilter
 from ehss.target import filter as target_filter
 from ehss.target._kernels import crossfade_block, filter_block
@@ -250,3 +250,15 @@ def test_a_section_just_inside_the_unit_circle_is_accepted():
 def test_empty_taps_mean_no_fir_part():
     c = Compensator(sos=np.zeros((0, 6)), taps=[], preview=0, fs_hz=FS)
     assert c.taps.tolist() == [1.0] and c.n_sections == 0
+
+
+def test_a_non_finite_input_is_refused_and_leaves_the_filter_as_it_was(rng):
+    c = random_compensator(rng, 2, 5)
+    x = rng.standard_normal(100)
+    f = CompensatorFilter(c)
+    f.process(x[:50])
+    with pytest.raises(DataError, match="not finite"):
+        f.process(np.r_[x[50:60], np.nan])
+    assert f.index == 50
+    assert_array_equal(np.r_[CompensatorFilter(c).process(x[:50]), f.process(x[50:])],
+                       CompensatorFilter(c).process(x))

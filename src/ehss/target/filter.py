@@ -70,7 +70,7 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import SAMPLE_RATE_RANGE_HZ, check_int, check_real
+from ehss._checks import SAMPLE_RATE_RANGE_HZ, as_signal, check_int, check_real
 from ehss.errors import ParameterError
 from ehss.target._kernels import crossfade_block, filter_block
 
@@ -251,6 +251,8 @@ class _Load:
 
 COUNTERS = ("loads", "swaps", "refused_preview", "refused_sample_rate", "busy", "superseded",
             "late")
+# why a load is refused -> its counter
+_REFUSED = {"other_preview": "refused_preview", "other_sample_rate": "refused_sample_rate"}
 
 
 class CompensatorFilter:
@@ -348,7 +350,7 @@ class CompensatorFilter:
         n = check_int(crossfade, "crossfade", lo=0)
         refused = self.accepts(compensator)
         if refused is not None:
-            self.counters[refused.replace("other", "refused")] += 1
+            self.counters[_REFUSED[refused]] += 1
             return False
         if self._pending is not None:
             self.counters["busy"] += 1
@@ -403,14 +405,19 @@ class CompensatorFilter:
         Parameters
         ----------
         block : array_like, shape (n,)
+            Finite samples.
 
         Returns
         -------
         ndarray, shape (n,)
+
+        Raises
+        ------
+        DataError
+            If ``block`` is not 1-D or holds a NaN or infinite sample (it would stay in
+            the filter's state for good); the filter is left as it was.
         """
-        x = np.ascontiguousarray(block, dtype=np.float64)
-        if x.ndim != 1:
-            raise ParameterError(f"block has shape {x.shape}, must be 1-D")
+        x = as_signal(block, "block", allow_empty=True)
         out = np.empty_like(x)
         i = 0
         while i < x.size:
