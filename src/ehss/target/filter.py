@@ -255,6 +255,19 @@ COUNTERS = ("loads", "swaps", "refused_preview", "refused_sample_rate", "busy", 
 _REFUSED = {"other_preview": "refused_preview", "other_sample_rate": "refused_sample_rate"}
 
 
+def _as_block(block: Any) -> np.ndarray:
+    """``block`` as a finite float64 1-D array: the common case checked in a few
+    microseconds, the rest by :func:`~ehss._checks.as_signal` (which names the bad
+    sample)."""
+    try:
+        x = np.ascontiguousarray(block, dtype=np.float64)
+    except (TypeError, ValueError):
+        x = None
+    if x is None or x.ndim != 1 or not np.isfinite(x).all():
+        x = as_signal(block, "block", allow_empty=True)
+    return x
+
+
 class CompensatorFilter:
     """The target-side filter of one channel, with bumpless compensator swaps.
 
@@ -417,7 +430,7 @@ class CompensatorFilter:
             If ``block`` is not 1-D or holds a NaN or infinite sample (it would stay in
             the filter's state for good); the filter is left as it was.
         """
-        x = as_signal(block, "block", allow_empty=True)
+        x = _as_block(block)
         out = np.empty_like(x)
         i = 0
         while i < x.size:
