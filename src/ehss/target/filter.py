@@ -398,17 +398,20 @@ class CompensatorFilter:
 
     def _advance(self, x: np.ndarray) -> np.ndarray:
         """Run the samples ``x`` of one segment (no event inside it)."""
-        fading = self._fading()
         y = self._run.run(x)
-        if self._next is not None:
-            y_new = self._next.run(x)
-            if fading:   # w_k = (k - k0 + 1) / N ;  u = (1 - w) u_old + w u_new
-                crossfade_block(y, y_new, self._index - self._start + 1,
-                                max(self._crossfade, 1))
+        new = self._next
+        if new is None:
+            self._index += x.size
+            return y
+        y_new = new.run(x)
+        if self._index >= self._start:   # fading in
+            n = max(self._crossfade, 1)
+            # w_k = (k - k0 + 1) / N ;  u = (1 - w) u_old + w u_new
+            crossfade_block(y, y_new, self._index - self._start + 1, n)
+            if self._index + x.size >= self._start + n:   # w reached 1: drop the old one
+                self._run, self._next = new, None
+                self.counters["swaps"] += 1
         self._index += x.size
-        if fading and self._index >= self._start + max(self._crossfade, 1):
-            self._run, self._next = self._next, None   # w reached 1: drop the old one
-            self.counters["swaps"] += 1
         return y
 
     def process(self, block: Any) -> np.ndarray:
