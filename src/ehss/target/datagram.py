@@ -8,7 +8,7 @@ offset        type      meaning
 0             4 bytes   magic ``b"EHSC"``
 4             uint16    format version, 1
 6             uint16    channel, 0..65535 (the target's own numbering of its loops)
-8             uint64    sequence number: a datagram not newer than the last accepted one
+8             uint64    sequence number: a datagram not newer than the last one loaded
                         for its channel is ignored
 16            float64   sample rate of the model the compensator was designed from, Hz
 24            uint64    apply index: the sample from which the compensator applies
