@@ -12,6 +12,8 @@ from pathlib import Path
 import cffi
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 import ehss.target
@@ -295,3 +297,27 @@ def test_the_c_state_starts_as_the_reference_delayed_by_the_preview(c):
         assert lib.ehss_comp_init(state, 0, 2, fs, 0) == lib.EHSS_COMP_FAULT_SAMPLE_RATE
     assert lib.ehss_comp_init(state, 0, 2, 5000.0, 0) == lib.EHSS_COMP_OK
     assert [lib.ehss_comp_step(state, v) for v in (1.0, 2.0, 3.0, 4.0)] == [0, 0, 1, 2]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1),
+       loads=st.lists(st.tuples(st.integers(1, 400), st.integers(-200, 400),
+                                st.integers(0, 300)), min_size=1, max_size=12))
+def test_c_and_python_agree_on_any_schedule_of_loads(c, seed, loads):
+    # loads (gap since the previous one, apply index relative to now, cross-fade): any
+    # mix of shadow runs, late loads, loads during fades (waiting, busy), supersedings
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal(sum(g for g, _, _ in loads) + 500)
+    events, at = [], 0
+    for seq, (gap, ahead, n) in enumerate(loads, start=1):
+        at += gap
+        comp = random_compensator(rng, int(rng.integers(0, 4)), int(rng.integers(1, 30)))
+        events.append((at, encode(CompensatorUpdate(
+            channel=1, sequence=seq, apply_index=max(at + ahead, 0), crossfade=n,
+            compensator=comp))))
+    y_py, y_c, results, counters, decoded = _run_both(c, x, 0, events)
+    # the same operations in the same order (tolerance: see the test above)
+    assert_allclose(y_c, y_py, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(y_py))))
+    assert [py for py, _ in results] == [cc for _, cc in results]
+    assert counters[0] == counters[1]
+    assert list(decoded[0].values()) == decoded[1]
