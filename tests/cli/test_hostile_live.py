@@ -264,3 +264,39 @@ def test_an_unopenable_input_is_one_line(tmp_path, monkeypatch, capsys):
     assert main(["frf", str(path), "--input", "u", "--output", "y", "--fs", "10", "--out",
                  str(tmp_path / "f.csv")]) == 2
     _one_line(capsys.readouterr().err, "r.mat", "Permission denied")
+
+
+# ------------------------------------------------------------------------- records
+@pytest.mark.parametrize(("values", "kind"), [
+    (lambda u: [f"{x:.6f}" for x in u], "String"),
+    (lambda u: u > 0, "Boolean"),
+])
+def test_a_parquet_column_of_text_or_booleans_is_named_as_such(tmp_path, capsys, values,
+                                                               kind):
+    import polars as pl
+
+    u = np.sin(np.arange(400.0) / 7)
+    path = tmp_path / "r.parquet"
+    pl.DataFrame({"t": np.arange(400.0) / 100, "u": values(u), "y": np.cos(u)}).write_parquet(
+        path)
+    assert main(["frf", str(path), "--input", "u", "--output", "y", "--out",
+                 str(tmp_path / "f.csv")]) == 2
+    _one_line(capsys.readouterr().err, "r.parquet", "'u'", kind, "not numbers")
+
+
+@pytest.mark.parametrize("suffix", [".mat", ".npz"])
+def test_a_stored_sample_time_of_zero_is_named(tmp_path, capsys, suffix):
+    import scipy.io
+
+    u, y = np.sin(np.arange(400.0) / 7), np.cos(np.arange(400.0) / 5)
+    path = tmp_path / f"r{suffix}"
+    if suffix == ".mat":
+        scipy.io.savemat(path, {"u": u, "y": y, "Ts": 0.0})
+    else:
+        np.savez(path, u=u, y=y, Ts=0.0)
+    out = str(tmp_path / "f.csv")
+    assert main(["frf", str(path), "--input", "u", "--output", "y", "--out", out]) == 2
+    _one_line(capsys.readouterr().err, path.name, "'Ts' = 0 s", "--fs")
+    # with the rate given, the stored zero is not in the way
+    assert main(["frf", str(path), "--input", "u", "--output", "y", "--fs", "100",
+                 "--out", out]) == 0
