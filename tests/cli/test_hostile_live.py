@@ -300,3 +300,14 @@ def test_a_stored_sample_time_of_zero_is_named(tmp_path, capsys, suffix):
     # with the rate given, the stored zero is not in the way
     assert main(["frf", str(path), "--input", "u", "--output", "y", "--fs", "100",
                  "--out", out]) == 0
+
+
+@pytest.mark.skipif(sys.platform == "darwin", reason="macOS file names are always UTF-8")
+def test_a_file_name_that_is_not_utf8_in_a_plot_title(tmp_path, capsys):
+    u, y = np.sin(np.arange(600.0) / 7), np.cos(np.arange(600.0) / 5)
+    name = os.fsdecode(b"r\xff.csv")  # the byte 0xff is kept as a surrogate
+    (tmp_path / name).write_text("u,y\n" + "".join(f"{a},{b}\n" for a, b in zip(u, y)))
+    assert main(["frf", str(tmp_path / name), "--input", "u", "--output", "y", "--fs",
+                 "100", "--out", str(tmp_path / "f.csv"), "--plot",
+                 str(tmp_path / "f.png")]) == 0
+    assert (tmp_path / "f.png").stat().st_size > 0
