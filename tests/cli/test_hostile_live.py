@@ -306,7 +306,8 @@ def test_a_stored_sample_time_of_zero_is_named(tmp_path, capsys, suffix):
 def test_a_file_name_that_is_not_utf8_in_a_plot_title(tmp_path, capsys):
     u, y = np.sin(np.arange(600.0) / 7), np.cos(np.arange(600.0) / 5)
     name = os.fsdecode(b"r\xff.csv")  # the byte 0xff is kept as a surrogate
-    (tmp_path / name).write_text("u,y\n" + "".join(f"{a},{b}\n" for a, b in zip(u, y)))
+    rows = "".join(f"{a},{b}\n" for a, b in zip(u, y, strict=True))
+    (tmp_path / name).write_text("u,y\n" + rows)
     assert main(["frf", str(tmp_path / name), "--input", "u", "--output", "y", "--fs",
                  "100", "--out", str(tmp_path / "f.csv"), "--plot",
                  str(tmp_path / "f.png")]) == 0
