@@ -253,7 +253,8 @@ def check_outputs(
         The files the work will write. A description (e.g. ``"the JSON sidecar of
         'run.csv'"``) is added to messages about that file.
     inputs : iterable of path
-        The files the work reads; no output may be one of them.
+        The files the work reads; no output may be one of them, nor the JSON sidecar
+        beside one of them (``run.csv`` → ``run.json``), which holds its metadata.
 
     Returns
     -------
@@ -263,8 +264,9 @@ def check_outputs(
     Raises
     ------
     DataError
-        If an output is one of the inputs (also through a symbolic or hard link), two
-        outputs are one file, or :func:`check_writable` refuses an output.
+        If an output is one of the inputs or an input's sidecar (also through a symbolic
+        or hard link), two outputs are one file, or :func:`check_writable` refuses an
+        output.
     """
     items: list[tuple[Path, str]] = []
     for item in outputs:
@@ -276,6 +278,11 @@ def check_outputs(
             if _same_file(path, src):
                 raise DataError(f"output {_name(path)}{note} is the input {_name(src)}; "
                                 "writing it would replace the input: choose another name")
+            side = sidecar_path(src)
+            if side != src and os.path.lexists(side) and _same_file(path, side):
+                raise DataError(f"output {_name(path)}{note} is the JSON sidecar of the "
+                                f"input {_name(src)} (its units, parameters and seed); "
+                                "writing it would lose them: choose another name")
     for path, _ in items:
         check_writable(path)
     for i, (path, note) in enumerate(items):

@@ -54,6 +54,14 @@ _MODEL_COLOURS = ("tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown
 
 
 # --------------------------------------------------------------------------- drawing fast
+def _shown(text: str | None) -> str:
+    """``text`` as a font can draw it: a file name that is not valid UTF-8 (its bytes
+    kept by Python as surrogates) shows with the replacement character."""
+    if not text:
+        return ""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+
+
 def decimate_for_pixels(
     x: np.ndarray, y: np.ndarray, n_columns: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -295,7 +303,7 @@ def bode_compare(
         ax.grid(True, which="both", lw=0.3, alpha=0.6)
     ax_m.legend(loc="best", fontsize=8)
     if title:
-        fig.suptitle(title)
+        fig.suptitle(_shown(title))
     if path is not None:
         save_figure(fig, path)
     return fig
@@ -373,7 +381,7 @@ def time_compare(
     ax.grid(True, lw=0.3, alpha=0.6)
     ax.legend(loc="best", fontsize=8)
     if title:
-        ax.set_title(title)
+        ax.set_title(_shown(title))
     if path is not None:
         save_figure(fig, path)
     return fig
@@ -425,7 +433,7 @@ def theta_convergence(
     ax.set_ylabel("estimate")
     ax.grid(True, lw=0.3, alpha=0.6)
     ax.legend(loc="best", fontsize=7, ncol=max(1, p // 6))
-    ax.set_title(title or "parameter convergence")
+    ax.set_title(_shown(title or "parameter convergence"))
     if path is not None:
         save_figure(fig, path)
     return fig
@@ -476,7 +484,7 @@ def residual_plot(
     for ax in (ax_e, ax_x):
         ax.grid(True, lw=0.3, alpha=0.6)
     if title:
-        fig.suptitle(title)
+        fig.suptitle(_shown(title))
     if path is not None:
         save_figure(fig, path)
     return fig
@@ -521,7 +529,7 @@ def plot_simulation(
         ax.grid(True, alpha=0.3)
     hits = result.limits_hit
     note = ", ".join(f"{k} {v:.1%}" for k, v in hits.items())
-    fig.suptitle(title or f"ehss simulate: {result.loop} loop, fs = {result.fs:g} Hz"
+    fig.suptitle(_shown(title) or f"ehss simulate: {result.loop} loop, fs = {result.fs:g} Hz"
                  + (f" (limits: {note})" if note else ""))
     if path is not None:
         save_figure(fig, path, dpi=110)

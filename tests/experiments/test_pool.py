@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import multiprocessing
+import os
+import subprocess
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +17,8 @@ from ehss.errors import EhssWarning, ParameterError
 from ehss.experiments import demonstrate
 from ehss.experiments.pool import collect, default_jobs, process_pool, submit
 from ehss.report.figures import compensation_figure, render_png
+
+SRC = str(Path(__file__).resolve().parents[2] / "src")
 
 
 @pytest.fixture(scope="module")
@@ -74,3 +80,40 @@ def test_demonstration_and_its_figure_are_bit_identical_in_a_second_process(pool
     np.testing.assert_array_equal(there.h1_with, here.h1_with)
     png_there = collect(submit(pool, render_png, compensation_figure, here))
     assert png_there == render_png(compensation_figure, here)
+
+
+_ORPHAN_SCRIPT = """
+import os, sys, time
+from ehss.experiments.pool import process_pool, submit
+with process_pool(2) as pool:
+    pid = pool.submit(os.getpid).result()
+    pool.submit(time.sleep, 120)
+    print(pid, flush=True)
+    time.sleep(120)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_worker_ends_with_its_parent_even_when_the_parent_is_killed():
+    # SIGKILL leaves the parent no clean-up at all: only the kernel can stop the worker
+    env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    parent = subprocess.Popen([sys.executable, "-c", _ORPHAN_SCRIPT], env=env,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        worker = int(parent.stdout.readline())
+    finally:
+        parent.kill()
+        parent.wait(30)
+        parent.stdout.close()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and _alive(worker):
+        time.sleep(0.1)
+    assert not _alive(worker)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split()[2] != "Z"  # a zombie has ended, awaiting its reaper
+    except FileNotFoundError:
+        return False

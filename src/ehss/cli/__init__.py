@@ -16,6 +16,7 @@ from __future__ import annotations
 # Only light modules here: the console script imports this package before main() can
 # catch Ctrl-C, so argparse and everything heavier are imported inside main().
 import contextlib
+import os
 import signal
 import sys
 from collections.abc import Iterator, Sequence
@@ -149,9 +150,24 @@ def _sigterm_as_exception() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _tolerant_streams() -> None:
+    """Let stdout and stderr replace what their encoding cannot show.
+
+    A terminal set to latin-1 or ASCII cannot encode the arrows and Greek letters ehss
+    prints; the text is still worth reading with a ``?`` in their place, where an
+    encoding error would end the command.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", "strict") == "strict":
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors="replace")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``ehss`` command line; returns the exit code."""
     command = "ehss"
+    _tolerant_streams()
     try:
         with _sigterm_as_exception():
             argv = sys.argv[1:] if argv is None else list(argv)
@@ -187,7 +203,32 @@ def _run(command: str, args: argparse.Namespace) -> int:
         print(f"{command}: error: not enough memory for this job (shorten the "
               "record or lower the sample rate)", file=sys.stderr)
         return EXIT_FAILURE
+    except OSError as exc:
+        return _os_error(command, exc)
     return EXIT_OK if code is None else int(code)
+
+
+def _os_error(command: str, exc: OSError) -> int:
+    """One line for an operating-system error no command turned into its own message.
+
+    A file the command could not open (no permission, a folder where a file was meant)
+    is bad input: exit 2, naming the file. Standard output that cannot take what the
+    command prints (a closed pipe, as in ``ehss frf ... | head -0``, or a full disk) ends
+    the command with exit 1; stdout is pointed at ``os.devnull`` so that the interpreter's
+    last flush does not fail again.
+    """
+    reason = exc.strerror or type(exc).__name__
+    if exc.filename is not None:
+        name = os.fsdecode(exc.filename).encode("utf-8", "backslashreplace").decode()
+        print(f"{command}: error: {name!r}: {reason}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass  # stdout is not a file descriptor (captured): nothing to flush to it
+    print(f"{command}: error: cannot write to standard output: {reason}", file=sys.stderr)
+    return EXIT_FAILURE
 
 
 def entry() -> None:  # pragma: no cover - console-script shim

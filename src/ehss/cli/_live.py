@@ -246,6 +246,8 @@ def _source(args: argparse.Namespace):
         allow = None if not args.allow else [a.strip() for a in args.allow.split(",")]
         try:
             return UdpSource(layout, parse_address(args.udp), fs=args.fs, allow=allow)
+        except ParameterError:  # the address or its port, already named
+            raise
         except ValueError as exc:
             raise ParameterError(f"--allow {args.allow!r}: {exc}") from None
     layout, samples, fs = rig_or_replay(args, "live")

@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ehss.live.udp import parse_address, stream_record
 
-    address = parse_address(args.to)
+    address = parse_address(args.to, destination=True)
     layout, samples, fs = rig_or_replay(args, "stream")
     spp = args.samples_per_packet or max(1, round(fs / 1000.0))
     if spp < 1:

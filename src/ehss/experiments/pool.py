@@ -18,6 +18,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import warnings
 from collections.abc import Callable, Iterator
@@ -46,12 +47,39 @@ def default_jobs() -> int:
 
 def _start_worker() -> None:
     """Worker start-up: BLAS on one thread, as in the calling process (see module doc),
-    and Ctrl-C ignored (already so from its start, see :func:`process_pool`, unless it
-    was started later, from another thread)."""
+    Ctrl-C ignored (already so from its start, see :func:`process_pool`, unless it
+    was started later, from another thread), and an end with the calling process."""
     from threadpoolctl import threadpool_limits
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _end_with_parent()
     threadpool_limits(limits=1, user_api="blas")
+
+
+def _end_with_parent() -> None:
+    """On Linux, have the kernel send this worker SIGTERM when its parent ends.
+
+    The parent stops its workers on its way out, but a second signal during that
+    clean-up, or a parent killed outright, would leave a worker running a part whose
+    result nobody takes. ``prctl(PR_SET_PDEATHSIG)`` is the kernel's own guarantee; a
+    parent that ended before it was set is caught by comparing the parent's pid.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    parent = multiprocessing.parent_process()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        return
+    if parent is not None and os.getppid() != parent.pid:
+        os._exit(1)
+
+
+#: ``prctl`` option of linux/prctl.h: the signal a process gets when its parent ends.
+_PR_SET_PDEATHSIG = 1
 
 
 @contextmanager
@@ -89,19 +117,20 @@ def process_pool(jobs: int) -> Iterator[Executor | None]:
         initializer=_start_worker,
     )
     others = set(multiprocessing.active_children())
-    workers = []
     finished = False
     try:
         _start_ignoring_ctrl_c(pool, jobs - 1)
-        workers = [p for p in multiprocessing.active_children() if p not in others]
         yield pool
         finished = True
     finally:
         if not finished:
-            # Stopped by an error or Ctrl-C: the parts already handed to a worker would
-            # run on for seconds; their results are not wanted.
-            for process in workers:
-                process.terminate()
+            # Stopped by an error, Ctrl-C or SIGTERM: the parts already handed to a
+            # worker would run on for seconds; their results are not wanted. The workers
+            # are the children this pool started, looked up now: one may have started
+            # after the pool was made (a signal can arrive at any point of that).
+            for process in multiprocessing.active_children():
+                if process not in others:
+                    process.terminate()
         pool.shutdown(wait=finished, cancel_futures=True)
 
 

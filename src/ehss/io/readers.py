@@ -92,7 +92,9 @@ class Table(Mapping[str, np.ndarray]):
         A sample rate the file stores beside its columns (Hz, and where it was found:
         ``"'Ts' = 0.001 s"``): a scalar named as in :data:`RATE_NAMES_HZ` or
         :data:`PERIOD_NAMES_S` in a MATLAB, HDF5 (also a root attribute) or ``.npz``
-        file. :func:`sample_rate` uses it when there is no time column.
+        file. :func:`sample_rate` uses it when there is no time column. The rate is
+        nan when the stored value gives none (``Ts = 0``), so that the message can say
+        what the file holds.
     """
 
     path: Path
@@ -304,6 +306,9 @@ def sample_rate(
             raise DataError(f"{where}the file stores {what}, a sample rate of {rate:.6g} Hz, "
                             f"but --fs is {fs:.6g} Hz; drop --fs or make them agree")
         if fs is None:
+            if not math.isfinite(rate):
+                raise DataError(f"{where}the file stores {what}, which is no sample time or "
+                                "rate; pass --fs HZ (or --time-column COL)")
             if not lo_fs <= rate <= hi_fs:
                 raise DataError(f"{where}the file stores {what}: a sample rate of {rate:.6g} "
                                 f"Hz, outside [{lo_fs:g}, {hi_fs:g}] Hz; pass --fs HZ")
@@ -425,8 +430,9 @@ def _stored_rate(path: Path, suffix: str) -> tuple[float, str] | None:
             with np.load(path, allow_pickle=False) as archive:
                 found = {n: archive[n] for n in names
                          if n in archive.files and archive[n].size == 1}
-    except Exception:  # the columns were read: a stored rate is only a convenience
-        return None
+    except (OSError, ValueError, TypeError, KeyError, NotImplementedError):
+        return None  # the columns were read: a stored rate is only a convenience
+    unusable = None
     for n in names:
         if n not in found:
             continue
@@ -434,12 +440,14 @@ def _stored_rate(path: Path, suffix: str) -> tuple[float, str] | None:
             value = float(np.asarray(found[n], dtype=np.float64).ravel()[0])
         except (TypeError, ValueError):
             continue
+        unit = "Hz" if n in RATE_NAMES_HZ else "s"
         if not (math.isfinite(value) and value > 0):
+            unusable = unusable or (math.nan, f"{n!r} = {value:g} {unit}")
             continue
         if n in RATE_NAMES_HZ:
             return value, f"{n!r} = {value:g} Hz"
         return 1.0 / value, f"{n!r} = {value:g} s"
-    return None
+    return unusable  # a stored value that gives no rate: said so if the rate is needed
 
 
 

@@ -213,8 +213,8 @@ def read_parquet(path: Path, wanted: list[str] | None, optional: str | None
     Raises
     ------
     DataError
-        If the file is not readable Parquet or a wanted column is missing (the message
-        lists the available ones).
+        If the file is not readable Parquet, a wanted column is missing (the message
+        lists the available ones) or holds something other than numbers.
     """
     import polars as pl
 
@@ -225,6 +225,9 @@ def read_parquet(path: Path, wanted: list[str] | None, optional: str | None
             names = available
         else:
             for name in wanted:
+                if name in schema and name not in available:
+                    raise DataError(f"{str(path)!r}: column {name!r} holds {schema[name]}, "
+                                    "not numbers")
                 if name not in available:
                     shown = ", ".join(repr(a) for a in available[:30]) or "(none)"
                     raise DataError(f"{str(path)!r}: no column {name!r}; available: {shown}")

@@ -5,6 +5,7 @@ columns."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import h5py
@@ -61,10 +62,7 @@ def replay_record(
                                  "keep their names (no FIELD=COLUMN)")
         return _renamed(path, tuple(fields), tuple(columns), fs)
     if _is_live_recording(path):
-        with h5py.File(path, "r", libver="latest", swmr=True) as h:
-            names = tuple(json.loads(h.attrs["fields"]))
-            data = h["samples"][...]
-            rate = float(h.attrs["fs"])
+        names, data, rate = _recorded_samples(path)
         if fields is not None:
             missing = [f for f in fields if f not in names]
             if missing:
@@ -75,12 +73,86 @@ def replay_record(
         return layout, np.ascontiguousarray(data), (rate if fs is None else float(fs))
     table = ehss.read_columns(path, None if fields is None else list(fields))
     if fields is None:
-        fields = tuple(n for n in table.columns
-                       if n == "t" or n.startswith("ref") or n.startswith("fb"))
+        fields = _channel_fields(tuple(table.columns))
+        if not any(f.startswith("ref") for f in fields):
+            if {"reference", "output"} <= set(table.columns):  # written by ehss simulate
+                names = ("t", "reference", "output") if "t" in table.columns else (
+                    "reference", "output")
+                return _renamed(path, ("t", "ref1", "fb1")[-len(names):], names, fs)
+            raise DataError(f"{str(path)!r} has no ref<k>/fb<k> columns (it has "
+                            f"{list(table.columns)[:8]}): name the reference and feedback "
+                            "as --fields t=TIME,ref1=COLUMN,fb1=COLUMN")
     layout = RecordLayout(tuple(fields))
     data = np.column_stack([table[n] for n in layout.fields])
     rate = ehss.sample_rate(table, fs)
     return layout, data, float(rate)
+
+
+def _channel_fields(columns: tuple[str, ...]) -> tuple[str, ...]:
+    """``t`` and every ``ref<k>``/``fb<k>`` pair among ``columns``, in their order."""
+    pairs = {c[3:] for c in columns if c.startswith("ref")} & {
+        c[2:] for c in columns if c.startswith("fb")}
+    return tuple(c for c in columns if c == "t" or (c.startswith("ref") and c[3:] in pairs)
+                 or (c.startswith("fb") and c[2:] in pairs))
+
+
+def _open_complete(path: Path) -> h5py.File:
+    """Open a recording to replay, refusing one cut short on disk.
+
+    Opened for single-writer/multiple-reader access, HDF5 reads a truncated file's
+    missing chunks as zeros without a word; opened plainly it checks the file's stored
+    length. A recording whose writer was killed is still marked open for writing and
+    only opens for SWMR reading: that one is read as it stands.
+    """
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        if "already open for write" not in str(exc):
+            raise
+    return h5py.File(path, "r", libver="latest", swmr=True)
+
+
+def _recorded_samples(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
+    """The fields, samples and rate of an ehss live recording, each checked.
+
+    Raises
+    ------
+    DataError
+        If the file cannot be read, its ``fields`` attribute is not a JSON list of
+        distinct names, its samples are not a real matrix with one column per field and
+        at least one row, or its rate is not a positive finite number.
+    """
+    where = str(path)
+    try:
+        with _open_complete(path) as h:
+            fields_text, rate_attr, dset = h.attrs["fields"], h.attrs.get("fs"), h["samples"]
+            if not isinstance(dset, h5py.Dataset) or dset.dtype.kind not in "fiu":
+                raise DataError(f"{where!r}: its samples are not numbers "
+                                f"(stored as {getattr(dset, 'dtype', 'a group')})")
+            data = np.asarray(dset[...], dtype=np.float64)
+    except (OSError, KeyError, TypeError) as exc:
+        raise DataError(f"{where!r} is not a readable ehss live recording: {exc}") from None
+    try:
+        names = json.loads(fields_text)
+    except (TypeError, ValueError):
+        names = None
+    if (not isinstance(names, list) or not names or len(set(map(str, names))) != len(names)
+            or not all(isinstance(n, str) and n for n in names)):
+        raise DataError(f"{where!r}: its 'fields' attribute must be a JSON list of distinct "
+                        f"field names, got {str(fields_text)[:60]!r}")
+    if data.ndim != 2 or data.shape[1] != len(names):
+        raise DataError(f"{where!r}: its samples have shape {data.shape}, not (n, "
+                        f"{len(names)}) for the fields {names}")
+    if data.shape[0] == 0:
+        raise DataError(f"{where!r} holds no samples: nothing to replay")
+    try:
+        rate = float(rate_attr)
+    except (TypeError, ValueError):
+        rate = math.nan
+    if not (math.isfinite(rate) and rate > 0):
+        raise DataError(f"{where!r}: its sample rate attribute 'fs' must be a positive "
+                        f"number, got {rate_attr!r}")
+    return tuple(names), np.ascontiguousarray(data), rate
 
 
 def _renamed(path: Path, fields: tuple[str, ...], columns: tuple[str, ...],

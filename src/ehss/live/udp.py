@@ -21,7 +21,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ehss.errors import ParameterError
+from ehss.errors import DataError, ParameterError
 from ehss.live.layout import MAX_DATAGRAM_BYTES, RecordLayout
 from ehss.live.source import Block, new_counters
 
@@ -36,13 +36,22 @@ _TIMESPEC = struct.Struct("@qq")
 _RCVBUF_BYTES = 8 * 1024 * 1024
 
 
-def parse_address(text: str) -> tuple[str, int]:
+def parse_address(text: str, *, destination: bool = False) -> tuple[str, int]:
     """``"HOST:PORT"`` → ``(host, port)``; the host must be an IP address.
+
+    Parameters
+    ----------
+    text : str
+    destination : bool
+        The address is one to send to, not to listen on: the port must then be named
+        (1..65535) and the host must be one machine or a multicast group, not the
+        unspecified address 0.0.0.0 nor the broadcast address 255.255.255.255.
 
     Raises
     ------
     ParameterError
-        If it is not ``IPv4:PORT`` with 0 <= PORT <= 65535.
+        If it is not ``IPv4:PORT`` with 0 <= PORT <= 65535, or not a destination where
+        one is asked for.
     """
     if not isinstance(text, str):
         raise TypeError(f"address must be a str, got {type(text).__name__}")
@@ -56,7 +65,18 @@ def parse_address(text: str) -> tuple[str, int]:
         ) from None
     if not sep or not 0 <= number <= 65535:
         raise ParameterError(f"address {text!r} must be IPv4:PORT with PORT in 0..65535")
+    if destination and number == 0:
+        raise ParameterError(f"address {text!r}: port 0 cannot be sent to; name the "
+                             "target's port (1..65535)")
+    if destination and (ip.is_unspecified or ip == ipaddress.IPv4Address("255.255.255.255")):
+        raise ParameterError(f"address {text!r} is not one machine: send to the target's "
+                             "own address (or a multicast group)")
     return str(ip), number
+
+
+#: A datagram whose first index is further than this from the expected one (2**24
+#: samples: 56 min at 5 kHz) is taken as corrupted unless the next one continues it.
+FAR_SAMPLES = 2**24
 
 
 def _force_buffer(sock: socket.socket, opt: int, force: int, size: int) -> None:
@@ -119,6 +139,7 @@ class UdpSource:
         self._sender: tuple[str, int] | None = None
         self._expected: int | None = None
         self._pending: dict[int, tuple[np.ndarray, float, float]] = {}
+        self._resync: int | None = None  # where a datagram far off the count said to go on
         self._closed = False
 
     @property
@@ -227,10 +248,27 @@ class UdpSource:
             self.counters["reordered"] += reordered
             self._deliver(self._expected, samples, arrival, out)
 
+    def _far(self, first: int) -> bool:
+        """Whether a datagram's index is too far from the count, either way, to be a
+        gap or a reordering (:data:`FAR_SAMPLES`)."""
+        return not -FAR_SAMPLES <= first - self._expected <= FAR_SAMPLES
+
     def _place(self, first: int, samples: np.ndarray, arrival: float,
                out: list[Block]) -> None:
         if self._expected is None:
             self._expected = first
+        elif self._far(first):
+            # One datagram that says it is hours ahead (or behind) is a corrupted index,
+            # not a gap: believing it would make every later sample "late". Two in a row
+            # that continue one another are a sender that restarted its count.
+            if first != self._resync:
+                self._resync = first + samples.shape[0]
+                self.counters["malformed"] += 1
+                return
+            self.counters["gaps"] += 1
+            self._pending.clear()
+            self._expected = first
+        self._resync = None
         if first < self._expected or first in self._pending:
             self.counters["late"] += 1           # its place has passed, or a repeat
             return
@@ -314,6 +352,9 @@ def stream_record(
                     break
                 except (BlockingIOError, InterruptedError):
                     time.sleep(0.0005)
+                except OSError as exc:
+                    raise DataError(f"cannot send to {address[0]}:{address[1]}: "
+                                    f"{exc.strerror or exc}") from None
             packets += 1
     finally:
         sock.close()
