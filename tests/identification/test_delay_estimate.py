@@ -33,8 +33,8 @@ def test_a_response_beyond_the_reach_is_not_guessed(rng):
 
 
 def test_the_reach_follows_the_record():
-    # 10 samples a tap, 10 taps beyond the last delay, at most 100
-    assert default_max_delay(500) == 34
+    # 10 samples a parameter: 10 taps beyond the last delay and 8 past outputs; at most 100
+    assert default_max_delay(500) == 26
     assert default_max_delay(10**6) == 100
     assert default_max_delay(100) == 0
 
@@ -42,7 +42,7 @@ def test_the_reach_follows_the_record():
 def test_bad_requests_say_why(rng):
     u = rng.standard_normal(200)
     with pytest.raises(DataError, match=r"200 samples are too few to estimate a delay up to "
-                                        r"50 samples \(need at least 671\)"):
+                                        r"50 samples \(need at least 759\)"):
         estimate_delay(u, u, max_delay=50)
     with pytest.raises(ParameterError, match="max_delay"):
         estimate_delay(u, u, max_delay=-1)
