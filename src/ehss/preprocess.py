@@ -38,6 +38,7 @@ __all__ = [
     "excitation_band",
     "EXCITATION_LEVEL_DB",
     "TARGET_OVERSAMPLING",
+    "DECIMATED_PASSBAND",
 ]
 
 #: Accepted values of ``detrend``.
@@ -49,6 +50,13 @@ DETRENDS = ("mean", "linear", None)
 #: anti-alias filter's pass band, and a loop, whose content edge lies near twice its
 #: bandwidth, is sampled at 10–20 times its bandwidth, the usual rule for identification.
 TARGET_OVERSAMPLING = 6.0
+
+#: Fraction of the decimated Nyquist frequency below which :func:`decimate` leaves the
+#: record untouched: its anti-alias filter's gain is within 0.1 dB of 1 up to 0.86 of the
+#: new Nyquist frequency and falls through its transition band above; 0.8 keeps a margin
+#: of a few of a frequency-response estimate's bins. Above it the decimated record says
+#: nothing reliable about the loop, and a model of it is not judged there.
+DECIMATED_PASSBAND = 0.8
 
 #: Shortest record :func:`decimate` leaves: an identification needs a few hundred samples.
 _MIN_DECIMATED = 256
@@ -128,7 +136,8 @@ def decimate(u, y, factor: int) -> tuple[np.ndarray, np.ndarray]:
     Both signals go through the same linear-phase FIR low-pass (Kaiser window, β = 5, cut
     off at the new Nyquist frequency, :func:`scipy.signal.resample_poly`) whose delay is
     removed, so the filtering is zero-phase over the whole record and the input/output
-    relation is unchanged below about 0.8 of the new Nyquist frequency. The ends are
+    relation is unchanged below :data:`DECIMATED_PASSBAND` (0.8) of the new Nyquist
+    frequency. The ends are
     extended by a straight line before filtering, which keeps the first and last samples
     free of filter transients for a record that is not at rest there.
     """

@@ -43,7 +43,7 @@ from ehss.frequency import FRF_METHODS, check_band, check_fs
 from ehss.identification import INITS, METHODS, ArmaxModel, estimate
 from ehss.identification.order import OrderRow, OrderSelection, select_order
 from ehss.preprocess import DETRENDS, Trend
-from ehss.validation import ValidationReport, fit_text, validate
+from ehss.validation import ValidationReport, fit_text, free_run, nrmse_fit, validate
 
 __all__ = [
     "Acceptance",
@@ -57,7 +57,34 @@ __all__ = [
     "OrderSearch",
     "select_orders",
     "validated_band",
+    "judged_band",
+    "delay_text",
+    "HOLDOUT_EXCITATION_WARN",
+    "SAMPLES_PER_PARAMETER",
+    "ERROR_TOLERANCE",
 ]
+
+#: :func:`prepare` warns when the validation input's RMS (about its own mean) is below
+#: this fraction of the estimation input's. A fit compares the output's excursions with
+#: the model's errors; the excursions shrink with the input while the noise and the
+#: errors of an imperfect model at other amplitudes do not, so an error that costs a
+#: model 1 point of fit on the estimation data costs it 10 on validation data excited
+#: 10 times less, and the 90 % acceptance no longer separates a good model from a bad
+#: one: such a fit means nothing.
+HOLDOUT_EXCITATION_WARN = 0.1
+
+#: :func:`select_orders` refuses candidates with more parameters than the estimation
+#: data have samples for at this many a parameter (the rule of ten samples a parameter:
+#: beyond it the estimate's variance, p/N of the noise, swamps its fit).
+SAMPLES_PER_PARAMETER = 10
+
+#: :func:`select_orders` treats candidates whose validation error (100 − fit, percent)
+#: is within this fraction of the best one's as equally good, and picks the one with the
+#: fewest parameters. The relative standard error of an RMS over N independent samples
+#: is 1/√(2N), 2 % at N = 1000; two candidates' errors on one record are correlated, so
+#: 5 % is a difference that one validation record does not resolve. A tolerance on the
+#: error and not on the fit: at 99.9 % a tenth of a point is 2.8 times the error.
+ERROR_TOLERANCE = 0.05
 
 #: Estimator used when none is named: ARMAX by prediction-error minimisation started from
 #: extended least squares (a batch estimate, dependable where the recursive ones stall).
@@ -206,6 +233,12 @@ class Prepared:
         Fraction held out when it was not a separate record.
     band_hz : (float, float) or None
         The band of interest given.
+    u_val_op, y_val_op : ndarray or None
+        For a separate validation record: its data about the estimation data's operating
+        point ``offsets`` (not its own), decimated alike; None for a held-out end.
+    validation_excitation : float
+        RMS of the validation input about its mean over the estimation input's
+        (:data:`HOLDOUT_EXCITATION_WARN`).
     """
 
     u: np.ndarray = field(repr=False)
@@ -221,6 +254,18 @@ class Prepared:
     separate_validation: bool
     holdout: float | None
     band_hz: tuple[float, float] | None
+    u_val_op: np.ndarray | None = field(default=None, repr=False)
+    y_val_op: np.ndarray | None = field(default=None, repr=False)
+    validation_excitation: float = 1.0
+
+    @property
+    def untouched_hz(self) -> float:
+        """Highest frequency at which the decimation left the record untouched, Hz: the
+        anti-alias filter's pass band (:data:`ehss.preprocess.DECIMATED_PASSBAND` of the
+        model's Nyquist frequency), or the record's Nyquist frequency without one."""
+        if self.decimation == 1:
+            return self.fs / 2
+        return preprocess.DECIMATED_PASSBAND * self.fs_model / 2
 
     @property
     def fs_model(self) -> float:
@@ -308,8 +353,11 @@ def prepare(
     if ue.size < 32 or uv.size < 32:
         raise DataError(f"{ue.size} estimation and {uv.size} validation samples are too few "
                         "(32 or more each)")
+    excitation = _excitation_ratio(ue, uv)
     ue, tu = preprocess.detrend(ue, detrend)
     ye, ty = preprocess.detrend(ye, detrend)
+    # a separate record about the estimation's operating point too (its fit from there)
+    op = (uv - tu.offset, yv - ty.offset) if separate else None
     uv, _ = preprocess.detrend(uv, detrend)
     yv, tyv = preprocess.detrend(yv, detrend)
     q = _decimation(decimate, ue, ye, fs, band_hz)
@@ -318,10 +366,13 @@ def prepare(
     if q > 1:
         ue, ye = preprocess.decimate(ue, ye, q)
         uv, yv = preprocess.decimate(uv, yv, q)
+        op = None if op is None else preprocess.decimate(*op, q)
     return Prepared(u=ue, y=ye, u_val=uv, y_val=yv, fs=fs, decimation=q, detrend=detrend,
                     trend_u=tu, trend_y=ty, trend_y_val=tyv, separate_validation=separate,
-                    holdout=holdout,
-                    band_hz=band_hz)
+                    holdout=holdout, band_hz=band_hz,
+                    u_val_op=None if op is None else op[0],
+                    y_val_op=None if op is None else op[1],
+                    validation_excitation=excitation)
 
 
 # --------------------------------------------------------------------------- identify
@@ -393,10 +444,11 @@ class Identification:
             lines.append(f"operating point removed ({p.detrend}): input {p.trend_u.offset!r}, "
                          f"output {p.trend_y.offset!r}")
         if p.decimation > 1:
+            given = delay_text(self.orders[3], decimation=p.decimation, fs=p.fs)
             lines.append(f"decimated by {p.decimation} (zero-phase anti-alias filter): the "
-                         f"model is at {p.fs_model:g} Hz, not the record's {p.fs:g} Hz; its "
-                         f"delay is {self.model.delay} sample(s) at that rate (given: "
-                         f"{self.orders[3]} at {p.fs:g} Hz)")
+                         f"model is at {p.fs_model:g} Hz, not the record's {p.fs:g} Hz; the "
+                         f"given {given}; judged up to {p.untouched_hz:.4g} Hz, below which "
+                         "the decimation left the record untouched")
         lines.append(self.report.format())
         if self.model.band_hz is not None:
             lo, hi = self.model.band_hz
@@ -568,13 +620,19 @@ def assess(
         At the prepared rate (``model.dt == 1 / prepared.fs_model``), about the
         operating point (its input and output are deviations, as the prepared data).
     prepared : Prepared
-        From :func:`prepare`; its band (or ``(0, 0.45 fs_model)``) is the band compared.
+        From :func:`prepare`; its band (or ``(0, 0.45 fs_model)``) is the band compared,
+        up to the frequency the decimation left untouched (:attr:`Prepared.untouched_hz`):
+        above it the anti-alias filter has acted on the record, and the model is not
+        judged there.
     acceptance, nperseg, frf_method, initial, horizons
         As for :func:`identify`.
 
     Returns
     -------
     report : ValidationReport
+        For a separate validation record, with ``operating_point_fit_pct``: the
+        simulation fit of the record taken about the estimation data's operating point
+        (the printed ``simulation_fit_pct`` takes it about its own mean).
     verdict : Verdict
     """
     acceptance = Acceptance() if acceptance is None else acceptance
@@ -584,14 +642,27 @@ def assess(
     if not math.isclose(model.dt, 1.0 / fs_m, rel_tol=1e-9):
         raise ParameterError(f"the model's dt={model.dt!r} s is not the prepared data's "
                              f"{1.0 / fs_m!r} s")
-    band = prepared.band_hz if prepared.band_hz is not None else (0.0, 0.45 * fs_m)
-    report = validate(model, prepared.u_val, prepared.y_val, fs=fs_m, band_hz=band,
-                      holdout=None, min_coherence=acceptance.min_coherence,
-                      horizons=horizons, nperseg=nperseg, initial=initial,
-                      frf_method=frf_method)
+    report = validate(model, prepared.u_val, prepared.y_val, fs=fs_m,
+                      band_hz=judged_band(prepared), holdout=None,
+                      min_coherence=acceptance.min_coherence, horizons=horizons,
+                      nperseg=nperseg, initial=initial, frf_method=frf_method)
     if not prepared.separate_validation:  # the held-out end: say how much came before it
         report = dataclasses.replace(report, n_estimation=int(prepared.u.size))
+    elif prepared.u_val_op is not None and prepared.y_val_op is not None:
+        with np.errstate(all="ignore"):
+            yhat = free_run(model, prepared.u_val_op, prepared.y_val_op, initial=initial)
+        report = dataclasses.replace(
+            report, operating_point_fit_pct=nrmse_fit(prepared.y_val_op, yhat))
     return report, acceptance.judge(report)
+
+
+def judged_band(prepared: Prepared) -> tuple[float, float]:
+    """The band a model of ``prepared`` is judged over: the band of interest, or
+    ``(0, 0.45 fs_model)``, up to :attr:`Prepared.untouched_hz`."""
+    fs_m = prepared.fs_model
+    lo, hi = prepared.band_hz if prepared.band_hz is not None else (0.0, 0.45 * fs_m)
+    hi = min(hi, prepared.untouched_hz)
+    return (lo if lo < hi else 0.0), hi
 
 
 # ------------------------------------------------------------------------ order search
@@ -768,6 +839,39 @@ def select_orders(
 
 
 # ---------------------------------------------------------------------------- helpers
+def delay_text(delay: int, *, decimation: int, fs: float) -> str:
+    """A delay given in samples of the record, and what it is at the model's rate.
+
+    ``"delay 6 samples at 1000 Hz = 2 samples of the model at 333.333 Hz"``; without
+    decimation ``"delay 6 samples at 1000 Hz"``. The model's delay is rounded down (the
+    model never waits longer than the loop; its first B tap takes the rest), and the
+    text says so when it was.
+    """
+    d, q = int(delay), int(decimation)
+    text = f"delay {d} sample{'' if d == 1 else 's'} at {fs:g} Hz"
+    if q == 1:
+        return text
+    dm = d // q
+    rounded = "" if d % q == 0 else " (rounded down)"
+    return (f"{text} = {dm} sample{'' if dm == 1 else 's'} of the model at {fs / q:g} Hz"
+            f"{rounded}")
+
+
+def _excitation_ratio(u_est: np.ndarray, u_val: np.ndarray) -> float:
+    """RMS of the validation input about its mean over the estimation input's; warns
+    below :data:`HOLDOUT_EXCITATION_WARN`."""
+    est = float(np.std(u_est))
+    ratio = float(np.std(u_val)) / est if est > 0 else math.inf
+    if ratio < HOLDOUT_EXCITATION_WARN:
+        warnings.warn(
+            f"the validation input's RMS is {100 * ratio:.3g} % of the estimation "
+            f"input's (below {100 * HOLDOUT_EXCITATION_WARN:g} %): the validation data are "
+            "barely excited, and a fit on them says nothing of the model; validate on a "
+            "part of the record (or a record) excited like the estimation data",
+            EhssWarning, stacklevel=3)
+    return ratio
+
+
 def _warn_if_clipped(y: np.ndarray) -> None:
     """Warn when the output sits at one extreme value for more than
     :data:`ehss.preprocess.CLIP_SHARE_WARN` of the record (and at least 5 samples)."""
