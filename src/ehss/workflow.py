@@ -41,6 +41,7 @@ from ehss._checks import as_record, check_int
 from ehss.errors import DataError, EhssWarning, ParameterError
 from ehss.frequency import FRF_METHODS, check_band, check_fs
 from ehss.identification import INITS, METHODS, ArmaxModel, estimate
+from ehss.identification.delay import DelayScan, scan_delays
 from ehss.identification.order import OrderRow, OrderSelection, select_order
 from ehss.preprocess import DETRENDS, Trend
 from ehss.validation import ValidationReport, fit_text, free_run, nrmse_fit, validate
@@ -691,6 +692,10 @@ class OrderSearch:
     delays : tuple of int
         The record delay (samples of the record, as given) of each row; the rows' own
         ``delay`` is at the prepared rate (``delay // prepared.decimation``).
+    delay_scan : DelayScan or None
+        When no delays were given: what the prepared estimation data said about the
+        delay (:func:`ehss.identification.delay.scan_delays`, at the model's rate), from
+        which the delays (and, without ``nb``, the nb) were chosen.
     """
 
     selection: OrderSelection
@@ -701,6 +706,7 @@ class OrderSearch:
     init: str
     initial: str
     delays: tuple[int, ...]
+    delay_scan: DelayScan | None = None
 
     @property
     def best(self) -> OrderRow:
@@ -731,9 +737,9 @@ def select_orders(
     *,
     fs: float,
     na,
-    nb,
+    nb=None,
     nc,
-    delay=1,
+    delay=None,
     method: str = DEFAULT_METHOD,
     init: str = "batch",
     validation: float | tuple[Any, Any] = 0.3,
@@ -742,7 +748,7 @@ def select_orders(
     decimate: int | str | None = "auto",
     initial: str = "estimate",
     criterion: str = "fit",
-    fit_tolerance: float = 0.1,
+    error_tolerance: float = ERROR_TOLERANCE,
     acceptance: Acceptance | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> OrderSearch:
@@ -765,14 +771,23 @@ def select_orders(
         Sample rate, Hz.
     na, nb, nc, delay : int or iterable of int
         Candidate orders; delays in samples of the record (as :func:`identify` takes
-        them), each divided by the decimation factor for the model.
+        them), each divided by the decimation factor for the model. Without ``delay``,
+        the delays are read from the prepared estimation data
+        (:func:`ehss.identification.delay.scan_delays`: the estimated delay and the one
+        a sample of the model's rate shorter when the record supports it, else a few
+        delays over the response's rise); without ``nb``, 0 to the nb that scan asks for
+        (3 when the delay is supported). Every candidate must have at most one parameter
+        per :data:`SAMPLES_PER_PARAMETER` estimation samples.
     method, init, validation, band_hz, detrend, decimate, initial
         As for :func:`identify`.
     criterion : {"fit", "aic", "fpe", "mdl"}, default "fit"
         How the pick is made: the validation fit, or an information criterion on the
         estimation data's one-step prediction errors.
-    fit_tolerance : float, default 0.1
-        As for :func:`ehss.identification.select_order`.
+    error_tolerance : float, default :data:`ERROR_TOLERANCE`
+        With ``criterion="fit"``, candidates whose validation error ``100 − fit`` is at
+        most ``(1 + error_tolerance)`` times the best one's are taken as equally good,
+        and the one with the fewest parameters is picked (then the first in the grid),
+        among those that meet the acceptance whenever any does.
     acceptance : Acceptance, optional
         For the verdict of each row (default ``Acceptance()``).
     progress : callable, optional
@@ -788,8 +803,13 @@ def select_orders(
     IdentificationError
         If no candidate is stable.
     ParameterError, DataError
-        For bad settings or records, as :func:`prepare`.
+        For bad settings or records, as :func:`prepare`; DataError also for a grid whose
+        largest candidate has more parameters than the estimation data support.
     """
+    tol = error_tolerance
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not (
+            math.isfinite(tol) and tol >= 0):
+        raise ParameterError(f"error_tolerance={tol!r} must be a number >= 0")
     if method not in METHODS:
         raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
     if initial not in ("estimate", "zero"):
@@ -797,15 +817,20 @@ def select_orders(
     acceptance = Acceptance() if acceptance is None else acceptance
     if not isinstance(acceptance, Acceptance):
         raise TypeError(f"acceptance must be an Acceptance, not {type(acceptance).__name__}")
-    delays = [delay] if isinstance(delay, (int, np.integer)) else list(delay)
-    for d in delays:
-        if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0:
-            raise ParameterError(f"delay={delay!r} must hold integers >= 0")
-    if not delays:
-        raise ParameterError(f"delay={delay!r} must list at least one delay")
+    delays = None if delay is None else _int_list("delay", delay, 0)
     prep = prepare(u, y, fs=fs, validation=validation, band_hz=band_hz, detrend=detrend,
                    decimate=decimate)
     q = prep.decimation
+    scan = None
+    if delays is None:
+        try:
+            scan = scan_delays(prep.u, prep.y)
+        except DataError as exc:
+            raise DataError(f"{exc}; give the candidate delays") from None
+        delays = [d * q for d in scan.delays]
+    nb = list(range(0, 1 + (3 if scan is None else scan.max_nb))) if nb is None else nb
+    _check_grid_size(prep, _int_list("na", na, 1), _int_list("nb", nb, 0),
+                     [0] if method in ("arx", "oe") else _int_list("nc", nc, 0))
     # delays at the model's rate (as identify rounds them), each with the first record
     # delay that gives it, so that identify's --delay refits the same model
     record_delay: dict[int, int] = {}
@@ -814,7 +839,9 @@ def select_orders(
     assessed: dict[tuple[int, ...], tuple[ValidationReport, Verdict]] = {}
 
     def score(model: ArmaxModel) -> float:
-        report, verdict = assess(model, prep, acceptance=acceptance, initial=initial)
+        with warnings.catch_warnings():  # said once by prepare, not again per candidate
+            warnings.simplefilter("ignore", EhssWarning)
+            report, verdict = assess(model, prep, acceptance=acceptance, initial=initial)
         assessed[(model.na, model.nb, model.nc, model.delay)] = (report, verdict)
         if progress is not None:
             progress(f"({model.na},{model.nb},{model.nc},{model.delay}): fit "
@@ -826,16 +853,66 @@ def select_orders(
 
     sel = select_order(prep.u, prep.y, na=na, nb=nb, nc=nc, delay=list(record_delay),
                        dt=1.0 / prep.fs_model, criterion=criterion, score=score,
-                       method=method, init=init, fit_tolerance=fit_tolerance,
+                       method=method, init=init, fit_tolerance=0.0,
                        admissible=accepted)
     reports, verdicts = [], []
     for r in sel.table:
         got = assessed.get((r.na, r.nb, r.nc, r.delay)) if math.isfinite(r.loss) else None
         reports.append(None if got is None else got[0])
         verdicts.append(None if got is None else got[1])
+    if criterion == "fit":
+        sel = _simplest_near_best(sel, verdicts, tol, prep, method=method, init=init)
     return OrderSearch(selection=sel, reports=tuple(reports), verdicts=tuple(verdicts),
                        prepared=prep, method=method, init=init, initial=initial,
-                       delays=tuple(record_delay[r.delay] for r in sel.table))
+                       delays=tuple(record_delay[r.delay] for r in sel.table),
+                       delay_scan=scan)
+
+
+def _simplest_near_best(sel: OrderSelection, verdicts, tolerance: float, prep: Prepared,
+                        *, method: str, init: str) -> OrderSelection:
+    """The candidate with the fewest parameters among those whose error 100 − fit is
+    within ``(1 + tolerance)`` of the best's (of those that meet the acceptance whenever
+    any does); its model refitted (every estimator is deterministic)."""
+    rows = sel.table
+    ok = [i for i, r in enumerate(rows) if r.stable and math.isfinite(r.fit)]
+    pool = [i for i in ok if verdicts[i] is not None and verdicts[i].accepted] or ok
+    best_error = 100.0 - max(rows[i].fit for i in pool)
+    near = [i for i in pool if 100.0 - rows[i].fit <= best_error * (1.0 + tolerance)]
+    pick = rows[min(near, key=lambda i: (rows[i].n_params, i))]
+    if pick is sel.best:
+        return sel
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", EhssWarning)
+        model = estimate(prep.u, prep.y, method=method, na=pick.na, nb=pick.nb,
+                         nc=pick.nc, delay=pick.delay, dt=1.0 / prep.fs_model, init=init)
+    return dataclasses.replace(sel, best=pick, model=model)
+
+
+def _int_list(name: str, value, lo: int) -> list[int]:
+    vals = [value] if isinstance(value, (int, np.integer)) else list(value)
+    for v in vals:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise ParameterError(f"{name}={value!r} must hold integers >= {lo}")
+    if not vals:
+        raise ParameterError(f"{name}={value!r} must list at least one {name}")
+    return [int(v) for v in vals]
+
+
+def _check_grid_size(prep: Prepared, na: list[int], nb: list[int], nc: list[int]) -> None:
+    """Refuse a grid whose largest candidate has more parameters than the estimation data
+    have :data:`SAMPLES_PER_PARAMETER` samples for."""
+    n = int(prep.u.size)
+    largest = max(na) + max(nb) + 1 + max(nc)
+    if largest * SAMPLES_PER_PARAMETER <= n:
+        return
+    rate = f" at the model's {prep.fs_model:g} Hz" if prep.decimation > 1 else ""
+    held = (f"; --holdout {prep.holdout:g} keeps {prep.u_val.size} of them for validation"
+            if prep.holdout is not None and prep.holdout > 0.5 else "")
+    raise DataError(
+        f"the grid's largest candidate (na {max(na)}, nb {max(nb)}, nc {max(nc)}) has "
+        f"{largest} parameters, more than {n} estimation samples{rate} support "
+        f"({SAMPLES_PER_PARAMETER} a parameter: at most {n // SAMPLES_PER_PARAMETER})"
+        f"{held}; search lower orders or give more estimation data")
 
 
 # ---------------------------------------------------------------------------- helpers
