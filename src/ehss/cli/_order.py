@@ -30,7 +30,7 @@ from ehss.cli._dataargs import (
 )
 from ehss.cli._identify import _decimate_arg
 from ehss.cli._outputs import InputFile, OutputTable
-from ehss.errors import DataError, ParameterError
+from ehss.errors import ParameterError
 
 __all__ = ["register", "run", "identify_command"]
 
@@ -64,14 +64,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_record_arguments(p)
     p.add_argument("--na", type=int_list, default=list(DEFAULT_NA), metavar="LIST",
                    help="candidate orders of A (default: 1-4)")
-    p.add_argument("--nb", type=int_list, default=list(DEFAULT_NB), metavar="LIST",
-                   help="candidate orders of B (default: 0-3)")
+    p.add_argument("--nb", type=int_list, metavar="LIST",
+                   help="candidate orders of B (default: 0-3, or up to 6 to span the "
+                   "response's rise when the record does not support a delay estimate)")
     p.add_argument("--nc", type=int_list, default=list(DEFAULT_NC), metavar="LIST",
                    help="candidate orders of C (default: 1-2)")
     p.add_argument("--delay", type=int_list, metavar="LIST",
                    help="candidate input delays in samples of the record (default: the "
-                   "delay estimated from the prepared record's impulse response, and the "
-                   "one a sample of the model's rate shorter)")
+                   "delay estimated from the prepared record's impulse response and the "
+                   "one a sample of the model's rate shorter, when each half of the record "
+                   "gives the same; else up to 4 delays over the response's rise)")
     p.add_argument("--criterion", choices=("fit", "aic", "fpe", "mdl"), default="fit",
                    help="how the best is chosen: the free-run fit on the validation data "
                    "(the one identify reports), or an information criterion on the "
@@ -90,7 +92,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "rate) instead of the held-out end; the whole DATA is then estimation data")
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="band of interest (Hz), as in identify: the fit is scored there and "
-                   "the decimation aims at it (default: up to 0.45 fs)")
+                   "the decimation aims at it (default: the band the input excites, where "
+                   "its power spectrum is within 20 dB of its peak; the identify command "
+                   "printed carries it)")
     p.add_argument("--detrend", choices=("mean", "linear", "none"), default="mean",
                    help="remove the mean (operating point) or a straight line from the "
                    "estimation and the validation data (default: %(default)s)")
@@ -125,7 +129,8 @@ def _check_args(args: argparse.Namespace) -> dict:
         bad = [v for v in getattr(args, name) or [] if v < low]
         if bad:
             raise ParameterError(f"--{name} {bad[0]} must be >= {low}")
-    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay or [0, 1])
+    n_grid = (len(args.na) * len(args.nb or DEFAULT_NB) * len(args.nc)
+               * len(args.delay or [0, 1]))
     if n_grid > 500:
         raise ParameterError(f"the grid has {n_grid} candidates; keep it to 500 or fewer")
     return {"holdout": None if args.validate is not None else holdout, "band": band,
@@ -140,26 +145,22 @@ def run(args: argparse.Namespace) -> int:
     rec = load_record(args)
     val = load_validation(args, rec)
     validation = opts["holdout"] if val is None else (val.u, val.y)
-    delays = args.delay if args.delay is not None else _estimated_delays(rec, validation,
-                                                                          opts)
+    if opts["band"] is None:
+        opts["band"] = _input_band(rec)
+    args.band = opts["band"]  # the identify command carries it
     from rich.console import Console
 
-    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(delays)
-    done = 0
-    with (report_warnings("order"),
-          Console(stderr=True).status(f"fitting {n_grid} candidates") as status):
-
-        def progress(line: str) -> None:  # a spinner on a terminal, nothing otherwise
-            nonlocal done
-            done += 1
-            status.update(f"fitted {done} of {n_grid} candidates; last {line}")
-
+    console = Console(stderr=True)
+    with report_warnings("order"), console.status("preparing the record") as status:
+        progress = _Progress(status, tty=console.is_terminal)
         search = select_orders(
-            rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=delays,
+            rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
             method=args.method, init=args.init, validation=validation,
             band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
             initial=args.initial, criterion=args.criterion, progress=progress,
         )
+    if search.delay_scan is not None:
+        print(_delay_message(search), file=sys.stderr)
     command = identify_command(args, search)
     _print_table(search, rec, args)
     if not any(v is not None and v.accepted for v in search.verdicts):
@@ -207,31 +208,66 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _estimated_delays(rec, validation, opts: dict) -> list[int]:
-    """Candidate delays (samples of the record) from the prepared estimation data: the
-    estimated delay and the one a sample of the model's rate shorter, as it may be
-    placed late (:func:`ehss.identification.estimate_delay`). Says what it found."""
-    from ehss.identification.delay import default_max_delay, estimate_delay
-    from ehss.workflow import prepare
+class _Progress:
+    """How far the search is: a spinner on a terminal; elsewhere (a log, a pipe) a line
+    on stderr at every tenth of a grid of 20 candidates or more."""
 
-    p = prepare(rec.u, rec.y, fs=rec.fs, validation=validation, band_hz=opts["band"],
-                detrend=opts["detrend"], decimate=opts["decimate"])
-    longest = default_max_delay(p.u.size)
-    try:
-        found = estimate_delay(p.u, p.y, max_delay=longest)
-    except DataError as exc:
-        raise DataError(f"{exc}; give the candidate delays with --delay") from None
-    rate = f" at the model's {p.fs_model:g} Hz" if p.decimation > 1 else ""
-    if found is None:
-        print(f"no delay estimated: the output shows no significant response to the "
-              f"input within {longest} samples{rate} (check --input and --output, or "
-              "give --delay); trying delays 0 and 1", file=sys.stderr)
-        found = 1
-    else:
-        tried = f"{found - 1} and {found}" if found else "0"
-        print(f"delay estimated from the record's impulse response: {found} sample(s)"
-              f"{rate}; trying {tried} (--delay sets the candidates)", file=sys.stderr)
-    return sorted({max(found - 1, 0) * p.decimation, found * p.decimation})
+    def __init__(self, status, *, tty: bool) -> None:
+        self.status, self.tty, self.done = status, tty, 0
+
+    def __call__(self, line: str) -> None:
+        self.done += 1
+        text = f"fitted {self.done} candidates; last {line}"
+        if self.tty:
+            self.status.update(text)
+        elif self.done % 20 == 0:
+            print(f"ehss order: {text}", file=sys.stderr, flush=True)
+
+
+def _input_band(rec) -> tuple[float, float] | None:
+    """The band the input excites (:func:`ehss.preprocess.excitation_band`), said on
+    stderr; None when that is the default band anyway (from DC to 0.45 fs)."""
+    from ehss.preprocess import EXCITATION_LEVEL_DB, excitation_band
+
+    lo, hi = excitation_band(rec.u, rec.fs)
+    hi = min(hi, 0.45 * rec.fs)
+    if lo == 0.0 and hi >= 0.45 * rec.fs:
+        return None
+    band = (float(f"{lo:.4g}"), float(f"{hi:.4g}"))
+    print(f"band of interest read from the input's spectrum: {band[0]:g}-{band[1]:g} Hz "
+          f"(where its power is within {EXCITATION_LEVEL_DB:g} dB of its peak; --band LO "
+          "HI sets it)", file=sys.stderr)
+    return band
+
+
+def _delay_message(search) -> str:
+    """What the record said about its delay and which delays were tried, at both rates."""
+    from ehss.workflow import delay_text
+
+    scan, p = search.delay_scan, search.prepared
+    q = p.decimation
+
+    def at_both(d_model: int) -> str:
+        return delay_text(d_model * q, decimation=q, fs=p.fs)
+
+    tried = ", ".join(str(d) for d in sorted(set(search.delays)))
+    nbs = sorted({r.nb for r in search.table})
+    nb = f"nb {nbs[0]}-{nbs[-1]}" if len(nbs) > 1 else f"nb {nbs[0]}"
+    if scan.supported:
+        return (f"{at_both(scan.delay)} estimated from the record's impulse response "
+                f"(each half gives the same); trying delays {tried} samples of the record "
+                "(--delay sets the candidates)")
+
+    def found(d) -> str:
+        return "none" if d is None else str(d)
+
+    rise = ("" if scan.rise is None else
+            f"; its step response reaches 10 % of its peak at {at_both(scan.rise[0])} "
+            f"and 50 % at {scan.rise[1]} samples of the model")
+    return (f"the record does not pin its delay down (estimates of {found(scan.whole)} "
+            f"samples of the model from the whole record, {found(scan.halves[0])} and "
+            f"{found(scan.halves[1])} from its halves){rise}: trying delays {tried} "
+            f"samples of the record with {nb} (--delay and --nb set the candidates)")
 
 
 def identify_command(args: argparse.Namespace, search) -> str:
