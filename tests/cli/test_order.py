@@ -291,3 +291,58 @@ def test_a_record_too_short_to_estimate_its_delay_asks_for_it(tmp_path, rng, cap
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert "too few to estimate a delay" in err and "give the candidate delays with --delay" in err
+
+
+def test_a_slow_record_is_searched_over_its_rise_without_doubting_the_columns(tmp_path,
+                                                                            rng, capsys):
+    # two cascaded lags of 40 samples (a tank draining into another), levels held for
+    # 25 samples: no tap of the impulse response stands out, yet the columns are right
+    n, tau = 1024, 40.0
+    u = np.repeat(rng.uniform(-1.0, 1.0, n // 25 + 1), 25)[:n]
+    a = np.exp(-1.0 / tau)
+    y = np.convolve(u, (1 - a) ** 2 * np.arange(1, 400) * a ** np.arange(0, 399))[:n]
+    y = y + 0.02 * np.std(y) * rng.standard_normal(n)
+    path = tmp_path / "tanks.csv"
+    write_csv(path, {"t": np.arange(n) * 4.0, "u": u, "y": y})
+    out = tmp_path / "orders.csv"
+    code = main(["order", str(path), "--input", "u", "--output", "y", "--na", "2", "--nc",
+                 "1", "--method", "arx", "--decimate", "none", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "check --input" not in captured.err
+    assert "the record does not pin its delay down" in captured.err
+    table = read_columns(out)
+    # delays over the rise (up to 10 % of the peak near 21 samples) and nb up to 6
+    assert table["delay"].max() > 1 and table["nb"].max() == 6
+
+
+def test_a_clipped_output_is_said_once_in_one_clean_line(tmp_path, data_csv, capsys):
+    table = read_columns(data_csv)
+    y = np.minimum(table["y"], np.quantile(table["y"], 0.95))  # 5 % at the top
+    path = tmp_path / "clipped.csv"
+    write_csv(path, {"t": table["t"], "u": table["u"], "y": y})
+    code = main(["order", str(path), "--input", "u", "--output", "y", "--na", "2", "--nb",
+                 "1", "--nc", "0", "--delay", "1", "--method", "arx"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    lines = [ln for ln in err.splitlines() if "clipped" in ln]
+    assert len(lines) == 1 and lines[0].startswith("ehss order: warning: the output sits")
+    assert ".py" not in err and "EhssWarning" not in err
+
+
+@pytest.mark.parametrize("n,extra,match", [
+    (400, ["--na", "1-60", "--nb", "1", "--nc", "1"],
+     "more than 280 estimation samples support (10 a parameter: at most 28)"),
+    (4000, ["--holdout", "0.99", "--na", "2", "--nb", "1", "--nc", "1"],
+     "more than 40 estimation samples support (10 a parameter: at most 4); --holdout "
+     "0.99 keeps 3960 of them for validation"),
+])
+def test_a_grid_the_record_cannot_support_is_refused_at_once(tmp_path, rng, capsys, n,
+                                                             extra, match):
+    u = rng.standard_normal(n)
+    path = tmp_path / "short.csv"
+    write_csv(path, {"t": np.arange(u.size) / FS, "u": u, "y": np.roll(u, 1)})
+    code = main(["order", str(path), "--input", "u", "--output", "y", "--delay", "1",
+                 "--decimate", "none", *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and match in err, err
