@@ -14,6 +14,7 @@ import scipy.signal
 from ehss import workflow
 from ehss.errors import DataError, EhssWarning
 from ehss.preprocess import DECIMATED_PASSBAND
+from ehss.validation import validate
 from ehss.workflow import (
     HOLDOUT_EXCITATION_WARN,
     Acceptance,
@@ -107,6 +108,10 @@ def test_a_decimated_model_is_judged_only_where_the_record_is_untouched(rng):
     assert p.untouched_hz == pytest.approx(DECIMATED_PASSBAND * p.fs_model / 2, rel=1e-12)
     assert res.report.frf_error.compared_hz[1] <= p.untouched_hz
     assert res.model.band_hz[1] <= p.untouched_hz
+    # the coherence is high above it: up to 0.45 fs the comparison would reach there
+    whole = validate(res.model, p.u_val, p.y_val, fs=p.fs_model, holdout=None,
+                     band_hz=(0.0, 0.45 * p.fs_model), initial="estimate")
+    assert whole.frf_error.compared_hz[1] > p.untouched_hz
     text = res.format()
     assert delay_text(0, decimation=p.decimation, fs=fs) in text
 

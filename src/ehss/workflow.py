@@ -906,7 +906,8 @@ def _check_grid_size(prep: Prepared, na: list[int], nb: list[int], nc: list[int]
     if largest * SAMPLES_PER_PARAMETER <= n:
         return
     rate = f" at the model's {prep.fs_model:g} Hz" if prep.decimation > 1 else ""
-    held = (f"; --holdout {prep.holdout:g} keeps {prep.u_val.size} of them for validation"
+    held = (f"; the held-out fraction {prep.holdout:g} keeps {prep.u_val.size} of them "
+            "for validation"
             if prep.holdout is not None and prep.holdout > 0.5 else "")
     raise DataError(
         f"the grid's largest candidate (na {max(na)}, nb {max(nb)}, nc {max(nc)}) has "

@@ -246,8 +246,8 @@ def test_order_with_no_grid_searches_low_orders_around_the_estimated_delay(tmp_p
     code = main(["order", str(path), "--input", "u", "--output", "y", "--out", str(out)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert "delay estimated from the record's impulse response: 3 sample(s); trying 2 " \
-           "and 3" in captured.err
+    assert ("delay 3 samples at 1000 Hz estimated from the record's impulse response (each "
+            "half gives the same); trying delays 2, 3 samples of the record") in captured.err
     table = read_columns(out)
     assert table.n_rows == 4 * 4 * 2 * 2
     assert sorted(set(table["delay"])) == [2.0, 3.0]
@@ -265,8 +265,11 @@ def test_the_pick_meets_the_acceptance_when_a_candidate_does(tmp_path, capsys):
     assert main(["simulate", "--loop", "position", "--signal", "random", "--band", "0.5",
                  "20", "--duration", "40", "--seed", "3", "--out", str(rec)]) == 0
     out = tmp_path / "orders.csv"
+    # judged from DC up to the decimated record's untouched band (0.8 of 62.5 Hz), not
+    # over the band the reference excites, where the highest fit would also be accepted
     code = main(["order", str(rec), "--input", "reference", "--output", "output", "--nc",
-                 "1", "--delay", "0", "--out", str(out)])
+                 "1", "--delay", "0", "--decimate", "8", "--band", "0", "49",
+                 "--out", str(out)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     table = read_columns(out)
@@ -334,8 +337,8 @@ def test_a_clipped_output_is_said_once_in_one_clean_line(tmp_path, data_csv, cap
     (400, ["--na", "1-60", "--nb", "1", "--nc", "1"],
      "more than 280 estimation samples support (10 a parameter: at most 28)"),
     (4000, ["--holdout", "0.99", "--na", "2", "--nb", "1", "--nc", "1"],
-     "more than 40 estimation samples support (10 a parameter: at most 4); --holdout "
-     "0.99 keeps 3960 of them for validation"),
+     "more than 40 estimation samples support (10 a parameter: at most 4); the "
+     "held-out fraction 0.99 keeps 3960 of them for validation"),
 ])
 def test_a_grid_the_record_cannot_support_is_refused_at_once(tmp_path, rng, capsys, n,
                                                              extra, match):

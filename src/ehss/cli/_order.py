@@ -30,7 +30,7 @@ from ehss.cli._dataargs import (
 )
 from ehss.cli._identify import _decimate_arg
 from ehss.cli._outputs import InputFile, OutputTable
-from ehss.errors import ParameterError
+from ehss.errors import DataError, ParameterError
 
 __all__ = ["register", "run", "identify_command"]
 
@@ -153,12 +153,17 @@ def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     with report_warnings("order"), console.status("preparing the record") as status:
         progress = _Progress(status, tty=console.is_terminal)
-        search = select_orders(
-            rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
-            method=args.method, init=args.init, validation=validation,
-            band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
-            initial=args.initial, criterion=args.criterion, progress=progress,
-        )
+        try:
+            search = select_orders(
+                rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc,
+                delay=args.delay, method=args.method, init=args.init, validation=validation,
+                band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
+                initial=args.initial, criterion=args.criterion, progress=progress,
+            )
+        except DataError as exc:
+            if args.delay is None and "to estimate a delay" in str(exc):
+                raise DataError(f"{exc} with --delay") from None
+            raise
     if search.delay_scan is not None:
         print(_delay_message(search), file=sys.stderr)
     command = identify_command(args, search)
@@ -328,8 +333,8 @@ def _print_table(search, rec, args) -> None:
     p = search.prepared
     where = (f"validated on {Path(args.validate).name}" if args.validate is not None
              else f"validated on the held-out {p.holdout:g}")
-    rate = (f", decimated by {p.decimation} to {p.fs_model:g} Hz" if p.decimation > 1
-            else "")
+    rate = (f", decimated by {p.decimation} to {p.fs_model:g} Hz, delays in samples of "
+            f"the record at {p.fs:g} Hz" if p.decimation > 1 else "")
     table = Table(title=f"Orders for {args.input} → {args.output} ({rec.path.name}, "
                   f"{p.u.size} estimation samples{rate}, {args.method}, {where})")
     band = p.band_hz is not None and any(r is not None and r.band_fit_pct is not None
@@ -360,5 +365,10 @@ def _print_table(search, rec, args) -> None:
     verdict = search.verdicts[search.best_index]
     among = ("the best that meets the acceptance" if verdict is not None
              and verdict.accepted else "none meets the acceptance")
+    from ehss.workflow import delay_text
+
+    delay = "" if p.decimation == 1 else (
+        f"{delay_text(d, decimation=p.decimation, fs=p.fs)}; ")
     console.print(f"best by {search.selection.criterion}: --na {na} --nb {nb} --nc {nc} "
-                  f"--delay {d} (method {search.method}; {fit}; {among}; never unstable)")
+                  f"--delay {d} ({delay}method {search.method}; {fit}; {among}; never "
+                  "unstable)")
