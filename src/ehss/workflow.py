@@ -432,6 +432,8 @@ class Identification:
                 "validation": "separate record" if p.separate_validation else
                 f"held-out end ({p.holdout:g} of the record)",
                 "band_hz": None if p.band_hz is None else list(p.band_hz),
+                "judged_band_hz": list(judged_band(p)),
+                "validation_input_rms_ratio": p.validation_excitation,
             },
             "validation": self.report.summary(),
             "verdict": self.verdict.summary(),

@@ -145,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
     rec = load_record(args)
     val = load_validation(args, rec)
     validation = opts["holdout"] if val is None else (val.u, val.y)
+    args.band_given = opts["band"] is not None
     if opts["band"] is None:
         opts["band"] = _input_band(rec)
     args.band = opts["band"]  # the identify command carries it
@@ -201,6 +202,14 @@ def run(args: argparse.Namespace) -> int:
             "fs_data_hz": p.fs,
             "fs_model_hz": p.fs_model,
             "band_hz": None if opts["band"] is None else list(opts["band"]),
+            "band_from": "--band" if args.band_given else "the input's spectrum",
+            "delay_scan": None if search.delay_scan is None else {
+                "supported": search.delay_scan.supported,
+                "whole": search.delay_scan.whole,
+                "halves": list(search.delay_scan.halves),
+                "rise_10_50_pct": (None if search.delay_scan.rise is None
+                                   else list(search.delay_scan.rise)),
+                "unit": "samples of the model"},
             "initial_state": args.initial,
             "n_estimation_samples": int(p.u.size),
             "n_validation_samples": int(p.u_val.size),
