@@ -147,3 +147,26 @@ def test_a_separate_record_is_also_fitted_about_the_estimation_operating_point(r
     assert rep.summary()["operating_point_fit_pct"] == rep.operating_point_fit_pct
     held = identify(u, y, fs=100.0, orders=(2, 1, 0, 1), method="arx", decimate=None)
     assert held.report.operating_point_fit_pct is None  # a held-out end is one record
+
+
+def test_the_band_of_interest_can_be_read_from_the_input(rng):
+    # a 4th-order 40 Hz loop driven by noise band-passed to 5-100 Hz at 1 kHz: the
+    # decimation follows the output's content as without a band (by 3, to 333 Hz), and
+    # the band is the input's (its filter skirts 20 dB down a little outside 5-100 Hz)
+    fs = 1000.0
+    sos = scipy.signal.butter(4, [5.0, 100.0], "bandpass", fs=fs, output="sos")
+    u = scipy.signal.sosfiltfilt(sos, rng.standard_normal(40_000))
+    y = scipy.signal.lfilter(*scipy.signal.cheby1(4, 0.5, 40.0, fs=fs), u)
+    plain = prepare(u, y, fs=fs)
+    read = prepare(u, y, fs=fs, band_hz="input")
+    assert read.decimation == plain.decimation == 3
+    lo, hi = read.band_hz
+    # Welch segments of 2048 samples: 0.5 Hz bins, leakage of a Hann window 2 bins wide
+    assert 3.0 < lo < 5.0 and 100.0 < hi < 130.0
+    assert hi < read.untouched_hz
+    # the band and factor read prepare the same data again, as identify will
+    again = prepare(u, y, fs=fs, band_hz=read.band_hz, decimate=read.decimation)
+    np.testing.assert_array_equal(again.u, read.u)
+    # a white input excites everything: no band narrower than the default
+    assert prepare(rng.standard_normal(4000), rng.standard_normal(4000), fs=fs,
+                   band_hz="input").band_hz is None

@@ -300,8 +300,14 @@ def prepare(
     validation : float or (u_val, y_val), default 0.3
         A fraction in (0, 1): the end of the record kept for validation; or a separate
         validation record (same sample rate, same meaning of the columns).
-    band_hz : (float, float), optional
+    band_hz : (float, float) or "input", optional
         Band of interest (for the decimation factor); ``hi`` must be below fs/2.
+        ``"input"``: the band the estimation input excites
+        (:func:`ehss.preprocess.excitation_band`: where its power spectrum is within
+        20 dB of its peak), read after the decimation factor is chosen from the record's
+        content and kept below what the decimation leaves untouched; None when that is
+        everything up to 0.45 of the model's rate. ``Prepared.band_hz`` holds the band
+        read, and refitting with it and the factor chosen prepares the same data.
     detrend : {"mean", "linear", None}, default "mean"
         Removed from the estimation data and, separately, from the validation data (a
         record's operating point or drift is its own; MATLAB users do the same with
@@ -326,7 +332,10 @@ def prepare(
     _warn_if_clipped(y)
     if detrend not in DETRENDS:
         raise ParameterError(f"detrend={detrend!r} must be 'mean', 'linear' or None")
-    if band_hz is not None:
+    from_input = isinstance(band_hz, str)
+    if from_input and band_hz != "input":
+        raise ParameterError(f"band_hz={band_hz!r} must be (lo, hi) in Hz, 'input' or None")
+    if band_hz is not None and not from_input:
         band_hz = check_band(band_hz)
         if band_hz[1] > fs / 2:
             raise ParameterError(f"band upper edge {band_hz[1]:g} Hz is above fs/2 = "
@@ -361,9 +370,11 @@ def prepare(
     op = (uv - tu.offset, yv - ty.offset) if separate else None
     uv, _ = preprocess.detrend(uv, detrend)
     yv, tyv = preprocess.detrend(yv, detrend)
-    q = _decimation(decimate, ue, ye, fs, band_hz)
+    q = _decimation(decimate, ue, ye, fs, None if from_input else band_hz)
     if decimate == "auto":  # leave the validation data enough samples too
         q = max(1, min(q, uv.size // 256))
+    if from_input:
+        band_hz = _input_band(ue, fs, q)
     if q > 1:
         ue, ye = preprocess.decimate(ue, ye, q)
         uv, yv = preprocess.decimate(uv, yv, q)
@@ -935,6 +946,20 @@ def delay_text(delay: int, *, decimation: int, fs: float) -> str:
     rounded = "" if d % q == 0 else " (rounded down)"
     return (f"{text} = {dm} sample{'' if dm == 1 else 's'} of the model at {fs / q:g} Hz"
             f"{rounded}")
+
+
+def _input_band(u: np.ndarray, fs: float, q: int) -> tuple[float, float] | None:
+    """The band the estimation input excites (:func:`ehss.preprocess.excitation_band`),
+    up to what the decimation by ``q`` leaves untouched (and 0.45 of the model's rate);
+    None when that is the whole default band anyway."""
+    lo, hi = preprocess.excitation_band(u, fs)
+    top = 0.45 * fs / q if q == 1 else min(0.45, preprocess.DECIMATED_PASSBAND / 2) * fs / q
+    # strictly inside the pass band, so that the same band and factor prepare again
+    top = float(np.nextafter(top, 0.0)) if q > 1 else top
+    hi = min(hi, top)
+    if lo == 0.0 and hi >= top:
+        return None
+    return (lo if lo < hi else 0.0), hi
 
 
 def _excitation_ratio(u_est: np.ndarray, u_val: np.ndarray) -> float:

@@ -146,9 +146,6 @@ def run(args: argparse.Namespace) -> int:
     val = load_validation(args, rec)
     validation = opts["holdout"] if val is None else (val.u, val.y)
     args.band_given = opts["band"] is not None
-    if opts["band"] is None:
-        opts["band"] = _input_band(rec)
-    args.band = opts["band"]  # the identify command carries it
     from rich.console import Console
 
     console = Console(stderr=True)
@@ -158,13 +155,16 @@ def run(args: argparse.Namespace) -> int:
             search = select_orders(
                 rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc,
                 delay=args.delay, method=args.method, init=args.init, validation=validation,
-                band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
+                band_hz=opts["band"] or "input", detrend=opts["detrend"],
+                decimate=opts["decimate"],
                 initial=args.initial, criterion=args.criterion, progress=progress,
             )
         except DataError as exc:
             if args.delay is None and "to estimate a delay" in str(exc):
                 raise DataError(f"{exc} with --delay") from None
             raise
+    if not args.band_given:
+        _say_input_band(args, opts, search.prepared)
     if search.delay_scan is not None:
         print(_delay_message(search), file=sys.stderr)
     command = identify_command(args, search)
@@ -238,20 +238,20 @@ class _Progress:
             print(f"ehss order: {text}", file=sys.stderr, flush=True)
 
 
-def _input_band(rec) -> tuple[float, float] | None:
-    """The band the input excites (:func:`ehss.preprocess.excitation_band`), said on
-    stderr; None when that is the default band anyway (from DC to 0.45 fs)."""
-    from ehss.preprocess import EXCITATION_LEVEL_DB, excitation_band
+def _say_input_band(args, opts: dict, prepared) -> None:
+    """Say the band read from the input's spectrum, and carry it (with the decimation
+    chosen before it was read) into the identify command."""
+    from ehss.preprocess import EXCITATION_LEVEL_DB
 
-    lo, hi = excitation_band(rec.u, rec.fs)
-    hi = min(hi, 0.45 * rec.fs)
-    if lo == 0.0 and hi >= 0.45 * rec.fs:
-        return None
-    band = (float(f"{lo:.4g}"), float(f"{hi:.4g}"))
-    print(f"band of interest read from the input's spectrum: {band[0]:g}-{band[1]:g} Hz "
-          f"(where its power is within {EXCITATION_LEVEL_DB:g} dB of its peak; --band LO "
-          "HI sets it)", file=sys.stderr)
-    return band
+    band = prepared.band_hz
+    if band is None:
+        return
+    opts["band"] = args.band = band
+    if prepared.decimation > 1 and opts["decimate"] == "auto":
+        args.decimate = str(prepared.decimation)  # the band would change auto's factor
+    print(f"band of interest read from the input's spectrum: {band[0]:.4g}-{band[1]:.4g} "
+          f"Hz (where its power is within {EXCITATION_LEVEL_DB:g} dB of its peak, below "
+          f"what the decimation leaves untouched; --band LO HI sets it)", file=sys.stderr)
 
 
 def _delay_message(search) -> str:
