@@ -65,6 +65,9 @@ __all__ = [
     "ERROR_TOLERANCE",
 ]
 
+#: nb searched up to by :func:`select_orders` when the record supports its delay estimate
+_DEFAULT_MAX_NB = 3
+
 #: :func:`prepare` warns when the validation input's RMS (about its own mean) is below
 #: this fraction of the estimation input's. A fit compares the output's excursions with
 #: the model's errors; the excursions shrink with the input while the noise and the
@@ -834,6 +837,9 @@ def select_orders(
     prep = prepare(u, y, fs=fs, validation=validation, band_hz=band_hz, detrend=detrend,
                    decimate=decimate)
     q = prep.decimation
+    na, nc = _int_list("na", na, 1), _int_list("nc", nc, 0)
+    nb = None if nb is None else _int_list("nb", nb, 0)
+    _check_grid_size(prep, na, nb or [0], [0] if method in ("arx", "oe") else nc)
     scan = None
     if delays is None:
         try:
@@ -841,9 +847,10 @@ def select_orders(
         except DataError as exc:
             raise DataError(f"{exc}; give the candidate delays") from None
         delays = [d * q for d in scan.delays]
-    nb = list(range(0, 1 + (3 if scan is None else scan.max_nb))) if nb is None else nb
-    _check_grid_size(prep, _int_list("na", na, 1), _int_list("nb", nb, 0),
-                     [0] if method in ("arx", "oe") else _int_list("nc", nc, 0))
+    if nb is None:  # 0-3, or what the scan asks for, as far as the record supports it
+        top = _DEFAULT_MAX_NB if scan is None else scan.max_nb
+        room = prep.u.size // SAMPLES_PER_PARAMETER - max(na) - 1 - max(nc)
+        nb = list(range(0, 1 + max(0, min(top, room))))
     # delays at the model's rate (as identify rounds them), each with the first record
     # delay that gives it, so that identify's --delay refits the same model
     record_delay: dict[int, int] = {}

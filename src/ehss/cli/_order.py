@@ -261,26 +261,31 @@ def _delay_message(search) -> str:
     scan, p = search.delay_scan, search.prepared
     q = p.decimation
 
-    def at_both(d_model: int) -> str:
-        return delay_text(d_model * q, decimation=q, fs=p.fs)
+    def samples(d_model: int) -> str:  # model samples, and the record's when decimated
+        if q == 1:
+            return f"{d_model} samples"
+        return f"{d_model} samples of the model at {p.fs_model:g} Hz ({d_model * q} at " \
+               f"{p.fs:g} Hz)"
 
     tried = ", ".join(str(d) for d in sorted(set(search.delays)))
     nbs = sorted({r.nb for r in search.table})
     nb = f"nb {nbs[0]}-{nbs[-1]}" if len(nbs) > 1 else f"nb {nbs[0]}"
     if scan.supported:
-        return (f"{at_both(scan.delay)} estimated from the record's impulse response "
-                f"(each half gives the same); trying delays {tried} samples of the record "
-                "(--delay sets the candidates)")
-
-    def found(d) -> str:
-        return "none" if d is None else str(d)
-
+        return (f"{delay_text(scan.delay * q, decimation=q, fs=p.fs)} estimated from the "
+                "record's impulse response (each half gives the same); trying delays "
+                f"{tried} samples of the record (--delay sets the candidates)")
+    found = [d for d in (scan.whole, *scan.halves) if d is not None]
+    if found:
+        how = (f"the whole record and its halves place it at {scan.whole}, "
+               f"{scan.halves[0]} and {scan.halves[1]} samples"
+               f"{'' if q == 1 else ' of the model'}")
+    else:
+        how = (f"no tap up to {samples(scan.max_delay)} stands out of the noise, in the "
+               "whole record or its halves")
     rise = ("" if scan.rise is None else
-            f"; its step response reaches 10 % of its peak at {at_both(scan.rise[0])} "
-            f"and 50 % at {scan.rise[1]} samples of the model")
-    return (f"the record does not pin its delay down (estimates of {found(scan.whole)} "
-            f"samples of the model from the whole record, {found(scan.halves[0])} and "
-            f"{found(scan.halves[1])} from its halves){rise}: trying delays {tried} "
+            f"; its step response reaches 10 % of its peak at {samples(scan.rise[0])} and "
+            f"50 % at {samples(scan.rise[1])}")
+    return (f"the record does not pin its delay down ({how}){rise}: trying delays {tried} "
             f"samples of the record with {nb} (--delay and --nb set the candidates)")
 
 
