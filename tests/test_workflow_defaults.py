@@ -66,7 +66,7 @@ def test_a_grid_beyond_what_the_record_supports_is_refused(rng):
 def test_a_holdout_that_leaves_too_few_estimation_samples_is_refused(rng):
     u, y = _white_record(rng, n=4000)
     with pytest.raises(DataError, match=r"more than 40 estimation samples support.*"
-                                        r"--holdout 0.99 keeps 3960 of them"):
+                                        r"the held-out fraction 0.99 keeps 3960 of them"):
         select_orders(u, y, fs=100.0, na=[1, 2], nb=[0, 1], nc=[1], delay=1,
                       validation=0.99, decimate=None)
 
