@@ -6,7 +6,10 @@ A thin adapter over :func:`ehss.workflow.select_orders`: the record is prepared 
 uses (same ``--method`` vocabulary) and validated as ``identify`` validates, ranked by that
 fit (AIC, FPE and MDL are columns; the verdict too), never recommending an unstable model;
 the exact ``ehss identify`` command that refits the pick is printed, and running it
-reports the same fit.
+reports the same fit. What is not given follows the record: the band of interest from
+the input's spectrum, the delays (and nb) from its impulse response where each half of
+the record agrees, else over the response's rise (:func:`ehss.identification.delay.
+scan_delays`); the messages say delays at the record's rate and at the model's.
 """
 
 from __future__ import annotations
@@ -93,8 +96,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="band of interest (Hz), as in identify: the fit is scored there and "
                    "the decimation aims at it (default: the band the input excites, where "
-                   "its power spectrum is within 20 dB of its peak; the identify command "
-                   "printed carries it)")
+                   "its power spectrum is within 20 dB of its peak, read once the "
+                   "decimation is chosen from the record's content; the identify command "
+                   "printed carries it and the factor)")
     p.add_argument("--detrend", choices=("mean", "linear", "none"), default="mean",
                    help="remove the mean (operating point) or a straight line from the "
                    "estimation and the validation data (default: %(default)s)")
