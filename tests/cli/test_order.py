@@ -376,3 +376,13 @@ def test_a_delay_the_record_does_not_support_does_not_drive_the_grid(tmp_path, c
     assert best is not None and best.group(1) == "0"
     assert float(best.group(2)) > 95  # only sensor noise on the output: 98 % here
     assert "--decimate 3 --band 0.0 100.5859375" in captured.out
+
+
+def test_a_long_grid_shows_its_progress_off_a_terminal(data_csv, capsys):
+    # 20 candidates, stderr captured (not a terminal): a line at the 20th
+    code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1-4",
+                 "--nb", "0-4", "--nc", "0", "--delay", "1", "--method", "arx"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("ehss order: fitted ")]
+    assert len(lines) == 1 and lines[0].startswith("ehss order: fitted 20 candidates; last (")
