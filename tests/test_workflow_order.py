@@ -63,7 +63,7 @@ def test_no_unstable_recommendation(rng):
     u = rng.standard_normal(600)
     y = lfilter([0.0, 1.0], [1.0, -1.02], u)
     with pytest.raises(IdentificationError, match="none of the 2 candidate orders"):
-        select_orders(u, y, fs=1.0, na=[1, 2], nb=[0], nc=[0], method="arx",
+        select_orders(u, y, fs=1.0, na=[1, 2], nb=[0], nc=[0], delay=1, method="arx",
                       decimate=None)
 
 

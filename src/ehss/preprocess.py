@@ -35,7 +35,10 @@ __all__ = [
     "decimate",
     "auto_decimation",
     "content_edge_hz",
+    "excitation_band",
+    "EXCITATION_LEVEL_DB",
     "TARGET_OVERSAMPLING",
+    "DECIMATED_PASSBAND",
 ]
 
 #: Accepted values of ``detrend``.
@@ -47,6 +50,13 @@ DETRENDS = ("mean", "linear", None)
 #: anti-alias filter's pass band, and a loop, whose content edge lies near twice its
 #: bandwidth, is sampled at 10–20 times its bandwidth, the usual rule for identification.
 TARGET_OVERSAMPLING = 6.0
+
+#: Fraction of the decimated Nyquist frequency below which :func:`decimate` leaves the
+#: record untouched: its anti-alias filter's gain is within 0.1 dB of 1 up to 0.86 of the
+#: new Nyquist frequency and falls through its transition band above; 0.8 keeps a margin
+#: of a few of a frequency-response estimate's bins. Above it the decimated record says
+#: nothing reliable about the loop, and a model of it is not judged there.
+DECIMATED_PASSBAND = 0.8
 
 #: Shortest record :func:`decimate` leaves: an identification needs a few hundred samples.
 _MIN_DECIMATED = 256
@@ -126,7 +136,8 @@ def decimate(u, y, factor: int) -> tuple[np.ndarray, np.ndarray]:
     Both signals go through the same linear-phase FIR low-pass (Kaiser window, β = 5, cut
     off at the new Nyquist frequency, :func:`scipy.signal.resample_poly`) whose delay is
     removed, so the filtering is zero-phase over the whole record and the input/output
-    relation is unchanged below about 0.8 of the new Nyquist frequency. The ends are
+    relation is unchanged below :data:`DECIMATED_PASSBAND` (0.8) of the new Nyquist
+    frequency. The ends are
     extended by a straight line before filtering, which keeps the first and last samples
     free of filter transients for a record that is not at rest there.
     """
@@ -158,6 +169,72 @@ def content_edge_hz(x, fs: float, *, fraction: float = 0.99) -> float:
         raise DataError("the signal is constant: it has no spectrum")
     cum = np.cumsum(p) / total
     return float(f[min(int(np.searchsorted(cum, fraction)), f.size - 1)])
+
+
+#: :func:`excitation_band` keeps the frequencies where the input's power spectral density
+#: is within this many dB of its peak: 1 % of the peak power per hertz. A band-limited
+#: test's filter skirts fall through it within a fraction of an octave, so the band found
+#: is the test's band; beyond it the input excites the loop 10 times (in amplitude) less
+#: than in the band, and a model is not asked to hold there.
+EXCITATION_LEVEL_DB = 20.0
+
+
+def excitation_band(u, fs: float, *, level_db: float = EXCITATION_LEVEL_DB
+                    ) -> tuple[float, float]:
+    """The band an input excites: where its power spectrum is within ``level_db`` of its
+    peak, Hz.
+
+    The power spectrum is the Welch estimate of :func:`content_edge_hz` (segments of an
+    eighth of the record, so the edges are resolved to about 8 fs / n). The band runs
+    from the lowest to the highest frequency at or above the level (gaps inside count as
+    in the band); a lower edge in the first two bins is taken as 0 (DC), which the
+    estimate cannot resolve from its first bin.
+
+    Parameters
+    ----------
+    u : array_like, shape (n_samples,)
+    fs : float
+        Sample rate, Hz.
+    level_db : float, default :data:`EXCITATION_LEVEL_DB`
+
+    Returns
+    -------
+    (lo, hi) : (float, float)
+        ``0 <= lo < hi <= fs / 2``.
+
+    Raises
+    ------
+    DataError
+        If the input is constant.
+
+    Examples
+    --------
+    White noise excites everything; band-passed noise its pass band:
+
+    >>> import numpy as np, scipy.signal
+    >>> u = np.random.default_rng(0).standard_normal(40_000)
+    >>> excitation_band(u, 1000.0)
+    (0.0, 500.0)
+    >>> sos = scipy.signal.butter(8, [2, 100], "bandpass", fs=1000.0, output="sos")
+    >>> lo, hi = excitation_band(scipy.signal.sosfiltfilt(sos, u), 1000.0)
+    >>> round(lo, 1), round(hi, 1)  # the skirts reach 20 dB a little outside 2-100 Hz
+    (1.7, 111.8)
+    """
+    x = as_signal(u, "u")
+    fs = _fs(fs)
+    if not (math.isfinite(level_db) and level_db > 0):
+        raise ParameterError(f"{level_db=} must be a positive number of dB")
+    nperseg = max(8, min(x.size, 2 ** int(math.log2(max(8, x.size // 8)))))
+    f, p = scipy.signal.welch(x, fs=fs, nperseg=nperseg, detrend="constant")
+    peak = float(np.max(p))
+    if not peak > 0.0:
+        raise DataError("the input is constant: it excites no band")
+    kept = np.flatnonzero(p >= peak * 10.0 ** (-level_db / 10.0))
+    lo = 0.0 if kept[0] <= 1 else float(f[kept[0]])
+    hi = float(f[kept[-1]])
+    if hi <= lo:  # a single line: the bin around it
+        hi = min(lo + float(f[1]), fs / 2)
+    return lo, hi
 
 
 def auto_decimation(

@@ -603,6 +603,11 @@ class ValidationReport:
         Tests of the one-step residuals on the validation part.
     simulated : ndarray, shape (n_samples,)
         The model's simulated output over the record given (for plots).
+    operating_point_fit_pct : float or None
+        For a separate validation record (:func:`ehss.workflow.assess`): the simulation
+        fit with the record taken about the estimation data's operating point instead of
+        its own mean. A record that drifted from the operating point fits worse so; the
+        two differ by what the model does not know about the drift. None otherwise.
     """
 
     n_estimation: int
@@ -618,6 +623,7 @@ class ValidationReport:
     frf_error: FrfError | None
     residuals: ResidualTests = field(repr=False)
     simulated: np.ndarray = field(repr=False)
+    operating_point_fit_pct: float | None = None
 
     @property
     def diverged(self) -> bool:
@@ -649,6 +655,7 @@ class ValidationReport:
             "diverged": self.diverged,
             "simulation_fit_pct": fit(self.simulation_fit_pct),
             "band_fit_pct": fit(self.band_fit_pct),
+            "operating_point_fit_pct": fit(self.operating_point_fit_pct),
             "prediction_fit_pct": {str(k): fit(v) for k, v in
                                    self.prediction_fit_pct.items()},
             "frf_error": None if self.frf_error is None else self.frf_error.summary(),
@@ -671,7 +678,11 @@ class ValidationReport:
             f"validation on {where}",
             f"  stable: {'yes' if self.stable else 'NO'} "
             f"(max pole radius {self.max_pole_radius:.6f})",
-            f"  simulation fit ({start}): {fit_text(self.simulation_fit_pct)}",
+            f"  simulation fit ({start}): {fit_text(self.simulation_fit_pct)}"
+            + ("" if self.operating_point_fit_pct is None else
+               " with the record about its own mean; "
+               f"{fit_text(self.operating_point_fit_pct)} about the estimation data's "
+               "operating point"),
         ]
         if self.band_fit_pct is not None and self.frf_error is not None:
             lo, hi = self.frf_error.band_hz

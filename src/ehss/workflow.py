@@ -41,9 +41,10 @@ from ehss._checks import as_record, check_int
 from ehss.errors import DataError, EhssWarning, ParameterError
 from ehss.frequency import FRF_METHODS, check_band, check_fs
 from ehss.identification import INITS, METHODS, ArmaxModel, estimate
+from ehss.identification.delay import DelayScan, scan_delays
 from ehss.identification.order import OrderRow, OrderSelection, select_order
 from ehss.preprocess import DETRENDS, Trend
-from ehss.validation import ValidationReport, fit_text, validate
+from ehss.validation import ValidationReport, fit_text, free_run, nrmse_fit, validate
 
 __all__ = [
     "Acceptance",
@@ -57,7 +58,37 @@ __all__ = [
     "OrderSearch",
     "select_orders",
     "validated_band",
+    "judged_band",
+    "delay_text",
+    "HOLDOUT_EXCITATION_WARN",
+    "SAMPLES_PER_PARAMETER",
+    "ERROR_TOLERANCE",
 ]
+
+#: nb searched up to by :func:`select_orders` when the record supports its delay estimate
+_DEFAULT_MAX_NB = 3
+
+#: :func:`prepare` warns when the validation input's RMS (about its own mean) is below
+#: this fraction of the estimation input's. A fit compares the output's excursions with
+#: the model's errors; the excursions shrink with the input while the noise and the
+#: errors of an imperfect model at other amplitudes do not, so an error that costs a
+#: model 1 point of fit on the estimation data costs it 10 on validation data excited
+#: 10 times less, and the 90 % acceptance no longer separates a good model from a bad
+#: one: such a fit means nothing.
+HOLDOUT_EXCITATION_WARN = 0.1
+
+#: :func:`select_orders` refuses candidates with more parameters than the estimation
+#: data have samples for at this many a parameter (the rule of ten samples a parameter:
+#: beyond it the estimate's variance, p/N of the noise, swamps its fit).
+SAMPLES_PER_PARAMETER = 10
+
+#: :func:`select_orders` treats candidates whose validation error (100 − fit, percent)
+#: is within this fraction of the best one's as equally good, and picks the one with the
+#: fewest parameters. The relative standard error of an RMS over N independent samples
+#: is 1/√(2N), 2 % at N = 1000; two candidates' errors on one record are correlated, so
+#: 5 % is a difference that one validation record does not resolve. A tolerance on the
+#: error and not on the fit: at 99.9 % a tenth of a point is 2.8 times the error.
+ERROR_TOLERANCE = 0.05
 
 #: Estimator used when none is named: ARMAX by prediction-error minimisation started from
 #: extended least squares (a batch estimate, dependable where the recursive ones stall).
@@ -206,6 +237,12 @@ class Prepared:
         Fraction held out when it was not a separate record.
     band_hz : (float, float) or None
         The band of interest given.
+    u_val_op, y_val_op : ndarray or None
+        For a separate validation record: its data about the estimation data's operating
+        point ``offsets`` (not its own), decimated alike; None for a held-out end.
+    validation_excitation : float
+        RMS of the validation input about its mean over the estimation input's
+        (:data:`HOLDOUT_EXCITATION_WARN`).
     """
 
     u: np.ndarray = field(repr=False)
@@ -221,6 +258,18 @@ class Prepared:
     separate_validation: bool
     holdout: float | None
     band_hz: tuple[float, float] | None
+    u_val_op: np.ndarray | None = field(default=None, repr=False)
+    y_val_op: np.ndarray | None = field(default=None, repr=False)
+    validation_excitation: float = 1.0
+
+    @property
+    def untouched_hz(self) -> float:
+        """Highest frequency at which the decimation left the record untouched, Hz: the
+        anti-alias filter's pass band (:data:`ehss.preprocess.DECIMATED_PASSBAND` of the
+        model's Nyquist frequency), or the record's Nyquist frequency without one."""
+        if self.decimation == 1:
+            return self.fs / 2
+        return preprocess.DECIMATED_PASSBAND * self.fs_model / 2
 
     @property
     def fs_model(self) -> float:
@@ -254,8 +303,14 @@ def prepare(
     validation : float or (u_val, y_val), default 0.3
         A fraction in (0, 1): the end of the record kept for validation; or a separate
         validation record (same sample rate, same meaning of the columns).
-    band_hz : (float, float), optional
+    band_hz : (float, float) or "input", optional
         Band of interest (for the decimation factor); ``hi`` must be below fs/2.
+        ``"input"``: the band the estimation input excites
+        (:func:`ehss.preprocess.excitation_band`: where its power spectrum is within
+        20 dB of its peak), read after the decimation factor is chosen from the record's
+        content and kept below what the decimation leaves untouched; None when that is
+        everything up to 0.45 of the model's rate. ``Prepared.band_hz`` holds the band
+        read, and refitting with it and the factor chosen prepares the same data.
     detrend : {"mean", "linear", None}, default "mean"
         Removed from the estimation data and, separately, from the validation data (a
         record's operating point or drift is its own; MATLAB users do the same with
@@ -280,7 +335,10 @@ def prepare(
     _warn_if_clipped(y)
     if detrend not in DETRENDS:
         raise ParameterError(f"detrend={detrend!r} must be 'mean', 'linear' or None")
-    if band_hz is not None:
+    from_input = isinstance(band_hz, str)
+    if from_input and band_hz != "input":
+        raise ParameterError(f"band_hz={band_hz!r} must be (lo, hi) in Hz, 'input' or None")
+    if band_hz is not None and not from_input:
         band_hz = check_band(band_hz)
         if band_hz[1] > fs / 2:
             raise ParameterError(f"band upper edge {band_hz[1]:g} Hz is above fs/2 = "
@@ -308,20 +366,28 @@ def prepare(
     if ue.size < 32 or uv.size < 32:
         raise DataError(f"{ue.size} estimation and {uv.size} validation samples are too few "
                         "(32 or more each)")
+    excitation = _excitation_ratio(ue, uv)
     ue, tu = preprocess.detrend(ue, detrend)
     ye, ty = preprocess.detrend(ye, detrend)
+    # a separate record about the estimation's operating point too (its fit from there)
+    op = (uv - tu.offset, yv - ty.offset) if separate else None
     uv, _ = preprocess.detrend(uv, detrend)
     yv, tyv = preprocess.detrend(yv, detrend)
-    q = _decimation(decimate, ue, ye, fs, band_hz)
+    q = _decimation(decimate, ue, ye, fs, None if from_input else band_hz)
     if decimate == "auto":  # leave the validation data enough samples too
         q = max(1, min(q, uv.size // 256))
+    if from_input:
+        band_hz = _input_band(ue, fs, q)
     if q > 1:
         ue, ye = preprocess.decimate(ue, ye, q)
         uv, yv = preprocess.decimate(uv, yv, q)
+        op = None if op is None else preprocess.decimate(*op, q)
     return Prepared(u=ue, y=ye, u_val=uv, y_val=yv, fs=fs, decimation=q, detrend=detrend,
                     trend_u=tu, trend_y=ty, trend_y_val=tyv, separate_validation=separate,
-                    holdout=holdout,
-                    band_hz=band_hz)
+                    holdout=holdout, band_hz=band_hz,
+                    u_val_op=None if op is None else op[0],
+                    y_val_op=None if op is None else op[1],
+                    validation_excitation=excitation)
 
 
 # --------------------------------------------------------------------------- identify
@@ -380,6 +446,8 @@ class Identification:
                 "validation": "separate record" if p.separate_validation else
                 f"held-out end ({p.holdout:g} of the record)",
                 "band_hz": None if p.band_hz is None else list(p.band_hz),
+                "judged_band_hz": list(judged_band(p)),
+                "validation_input_rms_ratio": p.validation_excitation,
             },
             "validation": self.report.summary(),
             "verdict": self.verdict.summary(),
@@ -393,10 +461,11 @@ class Identification:
             lines.append(f"operating point removed ({p.detrend}): input {p.trend_u.offset!r}, "
                          f"output {p.trend_y.offset!r}")
         if p.decimation > 1:
+            given = delay_text(self.orders[3], decimation=p.decimation, fs=p.fs)
             lines.append(f"decimated by {p.decimation} (zero-phase anti-alias filter): the "
-                         f"model is at {p.fs_model:g} Hz, not the record's {p.fs:g} Hz; its "
-                         f"delay is {self.model.delay} sample(s) at that rate (given: "
-                         f"{self.orders[3]} at {p.fs:g} Hz)")
+                         f"model is at {p.fs_model:g} Hz, not the record's {p.fs:g} Hz; the "
+                         f"given {given}; judged up to {p.untouched_hz:.4g} Hz, below which "
+                         "the decimation left the record untouched")
         lines.append(self.report.format())
         if self.model.band_hz is not None:
             lo, hi = self.model.band_hz
@@ -568,13 +637,19 @@ def assess(
         At the prepared rate (``model.dt == 1 / prepared.fs_model``), about the
         operating point (its input and output are deviations, as the prepared data).
     prepared : Prepared
-        From :func:`prepare`; its band (or ``(0, 0.45 fs_model)``) is the band compared.
+        From :func:`prepare`; its band (or ``(0, 0.45 fs_model)``) is the band compared,
+        up to the frequency the decimation left untouched (:attr:`Prepared.untouched_hz`):
+        above it the anti-alias filter has acted on the record, and the model is not
+        judged there.
     acceptance, nperseg, frf_method, initial, horizons
         As for :func:`identify`.
 
     Returns
     -------
     report : ValidationReport
+        For a separate validation record, with ``operating_point_fit_pct``: the
+        simulation fit of the record taken about the estimation data's operating point
+        (the printed ``simulation_fit_pct`` takes it about its own mean).
     verdict : Verdict
     """
     acceptance = Acceptance() if acceptance is None else acceptance
@@ -584,14 +659,27 @@ def assess(
     if not math.isclose(model.dt, 1.0 / fs_m, rel_tol=1e-9):
         raise ParameterError(f"the model's dt={model.dt!r} s is not the prepared data's "
                              f"{1.0 / fs_m!r} s")
-    band = prepared.band_hz if prepared.band_hz is not None else (0.0, 0.45 * fs_m)
-    report = validate(model, prepared.u_val, prepared.y_val, fs=fs_m, band_hz=band,
-                      holdout=None, min_coherence=acceptance.min_coherence,
-                      horizons=horizons, nperseg=nperseg, initial=initial,
-                      frf_method=frf_method)
+    report = validate(model, prepared.u_val, prepared.y_val, fs=fs_m,
+                      band_hz=judged_band(prepared), holdout=None,
+                      min_coherence=acceptance.min_coherence, horizons=horizons,
+                      nperseg=nperseg, initial=initial, frf_method=frf_method)
     if not prepared.separate_validation:  # the held-out end: say how much came before it
         report = dataclasses.replace(report, n_estimation=int(prepared.u.size))
+    elif prepared.u_val_op is not None and prepared.y_val_op is not None:
+        with np.errstate(all="ignore"):
+            yhat = free_run(model, prepared.u_val_op, prepared.y_val_op, initial=initial)
+        report = dataclasses.replace(
+            report, operating_point_fit_pct=nrmse_fit(prepared.y_val_op, yhat))
     return report, acceptance.judge(report)
+
+
+def judged_band(prepared: Prepared) -> tuple[float, float]:
+    """The band a model of ``prepared`` is judged over: the band of interest, or
+    ``(0, 0.45 fs_model)``, up to :attr:`Prepared.untouched_hz`."""
+    fs_m = prepared.fs_model
+    lo, hi = prepared.band_hz if prepared.band_hz is not None else (0.0, 0.45 * fs_m)
+    hi = min(hi, prepared.untouched_hz)
+    return (lo if lo < hi else 0.0), hi
 
 
 # ------------------------------------------------------------------------ order search
@@ -620,6 +708,10 @@ class OrderSearch:
     delays : tuple of int
         The record delay (samples of the record, as given) of each row; the rows' own
         ``delay`` is at the prepared rate (``delay // prepared.decimation``).
+    delay_scan : DelayScan or None
+        When no delays were given: what the prepared estimation data said about the
+        delay (:func:`ehss.identification.delay.scan_delays`, at the model's rate), from
+        which the delays (and, without ``nb``, the nb) were chosen.
     """
 
     selection: OrderSelection
@@ -630,6 +722,7 @@ class OrderSearch:
     init: str
     initial: str
     delays: tuple[int, ...]
+    delay_scan: DelayScan | None = None
 
     @property
     def best(self) -> OrderRow:
@@ -660,9 +753,9 @@ def select_orders(
     *,
     fs: float,
     na,
-    nb,
+    nb=None,
     nc,
-    delay=1,
+    delay=None,
     method: str = DEFAULT_METHOD,
     init: str = "batch",
     validation: float | tuple[Any, Any] = 0.3,
@@ -671,7 +764,7 @@ def select_orders(
     decimate: int | str | None = "auto",
     initial: str = "estimate",
     criterion: str = "fit",
-    fit_tolerance: float = 0.1,
+    error_tolerance: float = ERROR_TOLERANCE,
     acceptance: Acceptance | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> OrderSearch:
@@ -694,14 +787,23 @@ def select_orders(
         Sample rate, Hz.
     na, nb, nc, delay : int or iterable of int
         Candidate orders; delays in samples of the record (as :func:`identify` takes
-        them), each divided by the decimation factor for the model.
+        them), each divided by the decimation factor for the model. Without ``delay``,
+        the delays are read from the prepared estimation data
+        (:func:`ehss.identification.delay.scan_delays`: the estimated delay and the one
+        a sample of the model's rate shorter when the record supports it, else a few
+        delays over the response's rise); without ``nb``, 0 to the nb that scan asks for
+        (3 when the delay is supported). Every candidate must have at most one parameter
+        per :data:`SAMPLES_PER_PARAMETER` estimation samples.
     method, init, validation, band_hz, detrend, decimate, initial
         As for :func:`identify`.
     criterion : {"fit", "aic", "fpe", "mdl"}, default "fit"
         How the pick is made: the validation fit, or an information criterion on the
         estimation data's one-step prediction errors.
-    fit_tolerance : float, default 0.1
-        As for :func:`ehss.identification.select_order`.
+    error_tolerance : float, default :data:`ERROR_TOLERANCE`
+        With ``criterion="fit"``, candidates whose validation error ``100 − fit`` is at
+        most ``(1 + error_tolerance)`` times the best one's are taken as equally good,
+        and the one with the fewest parameters is picked (then the first in the grid),
+        among those that meet the acceptance whenever any does.
     acceptance : Acceptance, optional
         For the verdict of each row (default ``Acceptance()``).
     progress : callable, optional
@@ -717,8 +819,13 @@ def select_orders(
     IdentificationError
         If no candidate is stable.
     ParameterError, DataError
-        For bad settings or records, as :func:`prepare`.
+        For bad settings or records, as :func:`prepare`; DataError also for a grid whose
+        largest candidate has more parameters than the estimation data support.
     """
+    tol = error_tolerance
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not (
+            math.isfinite(tol) and tol >= 0):
+        raise ParameterError(f"error_tolerance={tol!r} must be a number >= 0")
     if method not in METHODS:
         raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
     if initial not in ("estimate", "zero"):
@@ -726,15 +833,24 @@ def select_orders(
     acceptance = Acceptance() if acceptance is None else acceptance
     if not isinstance(acceptance, Acceptance):
         raise TypeError(f"acceptance must be an Acceptance, not {type(acceptance).__name__}")
-    delays = [delay] if isinstance(delay, (int, np.integer)) else list(delay)
-    for d in delays:
-        if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 0:
-            raise ParameterError(f"delay={delay!r} must hold integers >= 0")
-    if not delays:
-        raise ParameterError(f"delay={delay!r} must list at least one delay")
+    delays = None if delay is None else _int_list("delay", delay, 0)
     prep = prepare(u, y, fs=fs, validation=validation, band_hz=band_hz, detrend=detrend,
                    decimate=decimate)
     q = prep.decimation
+    na, nc = _int_list("na", na, 1), _int_list("nc", nc, 0)
+    nb = None if nb is None else _int_list("nb", nb, 0)
+    _check_grid_size(prep, na, nb or [0], [0] if method in ("arx", "oe") else nc)
+    scan = None
+    if delays is None:
+        try:
+            scan = scan_delays(prep.u, prep.y)
+        except DataError as exc:
+            raise DataError(f"{exc}; give the candidate delays") from None
+        delays = [d * q for d in scan.delays]
+    if nb is None:  # 0-3, or what the scan asks for, as far as the record supports it
+        top = _DEFAULT_MAX_NB if scan is None else scan.max_nb
+        room = prep.u.size // SAMPLES_PER_PARAMETER - max(na) - 1 - max(nc)
+        nb = list(range(0, 1 + max(0, min(top, room))))
     # delays at the model's rate (as identify rounds them), each with the first record
     # delay that gives it, so that identify's --delay refits the same model
     record_delay: dict[int, int] = {}
@@ -743,7 +859,9 @@ def select_orders(
     assessed: dict[tuple[int, ...], tuple[ValidationReport, Verdict]] = {}
 
     def score(model: ArmaxModel) -> float:
-        report, verdict = assess(model, prep, acceptance=acceptance, initial=initial)
+        with warnings.catch_warnings():  # said once by prepare, not again per candidate
+            warnings.simplefilter("ignore", EhssWarning)
+            report, verdict = assess(model, prep, acceptance=acceptance, initial=initial)
         assessed[(model.na, model.nb, model.nc, model.delay)] = (report, verdict)
         if progress is not None:
             progress(f"({model.na},{model.nb},{model.nc},{model.delay}): fit "
@@ -755,19 +873,117 @@ def select_orders(
 
     sel = select_order(prep.u, prep.y, na=na, nb=nb, nc=nc, delay=list(record_delay),
                        dt=1.0 / prep.fs_model, criterion=criterion, score=score,
-                       method=method, init=init, fit_tolerance=fit_tolerance,
+                       method=method, init=init, fit_tolerance=0.0,
                        admissible=accepted)
     reports, verdicts = [], []
     for r in sel.table:
         got = assessed.get((r.na, r.nb, r.nc, r.delay)) if math.isfinite(r.loss) else None
         reports.append(None if got is None else got[0])
         verdicts.append(None if got is None else got[1])
+    if criterion == "fit":
+        sel = _simplest_near_best(sel, verdicts, tol, prep, method=method, init=init)
     return OrderSearch(selection=sel, reports=tuple(reports), verdicts=tuple(verdicts),
                        prepared=prep, method=method, init=init, initial=initial,
-                       delays=tuple(record_delay[r.delay] for r in sel.table))
+                       delays=tuple(record_delay[r.delay] for r in sel.table),
+                       delay_scan=scan)
+
+
+def _simplest_near_best(sel: OrderSelection, verdicts, tolerance: float, prep: Prepared,
+                        *, method: str, init: str) -> OrderSelection:
+    """The candidate with the fewest parameters among those whose error 100 − fit is
+    within ``(1 + tolerance)`` of the best's (of those that meet the acceptance whenever
+    any does); its model refitted (every estimator is deterministic)."""
+    rows = sel.table
+    ok = [i for i, r in enumerate(rows) if r.stable and math.isfinite(r.fit)]
+    pool = [i for i in ok if verdicts[i] is not None and verdicts[i].accepted] or ok
+    best_error = 100.0 - max(rows[i].fit for i in pool)
+    near = [i for i in pool if 100.0 - rows[i].fit <= best_error * (1.0 + tolerance)]
+    pick = rows[min(near, key=lambda i: (rows[i].n_params, i))]
+    if pick is sel.best:
+        return sel
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", EhssWarning)
+        model = estimate(prep.u, prep.y, method=method, na=pick.na, nb=pick.nb,
+                         nc=pick.nc, delay=pick.delay, dt=1.0 / prep.fs_model, init=init)
+    return dataclasses.replace(sel, best=pick, model=model)
+
+
+def _int_list(name: str, value, lo: int) -> list[int]:
+    vals = [value] if isinstance(value, (int, np.integer)) else list(value)
+    for v in vals:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise ParameterError(f"{name}={value!r} must hold integers >= {lo}")
+    if not vals:
+        raise ParameterError(f"{name}={value!r} must list at least one {name}")
+    return [int(v) for v in vals]
+
+
+def _check_grid_size(prep: Prepared, na: list[int], nb: list[int], nc: list[int]) -> None:
+    """Refuse a grid whose largest candidate has more parameters than the estimation data
+    have :data:`SAMPLES_PER_PARAMETER` samples for."""
+    n = int(prep.u.size)
+    largest = max(na) + max(nb) + 1 + max(nc)
+    if largest * SAMPLES_PER_PARAMETER <= n:
+        return
+    rate = f" at the model's {prep.fs_model:g} Hz" if prep.decimation > 1 else ""
+    held = (f"; the held-out fraction {prep.holdout:g} keeps {prep.u_val.size} of them "
+            "for validation"
+            if prep.holdout is not None and prep.holdout > 0.5 else "")
+    raise DataError(
+        f"the grid's largest candidate (na {max(na)}, nb {max(nb)}, nc {max(nc)}) has "
+        f"{largest} parameters, more than {n} estimation samples{rate} support "
+        f"({SAMPLES_PER_PARAMETER} a parameter: at most {n // SAMPLES_PER_PARAMETER})"
+        f"{held}; search lower orders or give more estimation data")
 
 
 # ---------------------------------------------------------------------------- helpers
+def delay_text(delay: int, *, decimation: int, fs: float) -> str:
+    """A delay given in samples of the record, and what it is at the model's rate.
+
+    ``"delay 6 samples at 1000 Hz = 2 samples of the model at 333.333 Hz"``; without
+    decimation ``"delay 6 samples at 1000 Hz"``. The model's delay is rounded down (the
+    model never waits longer than the loop; its first B tap takes the rest), and the
+    text says so when it was.
+    """
+    d, q = int(delay), int(decimation)
+    text = f"delay {d} sample{'' if d == 1 else 's'} at {fs:g} Hz"
+    if q == 1:
+        return text
+    dm = d // q
+    rounded = "" if d % q == 0 else " (rounded down)"
+    return (f"{text} = {dm} sample{'' if dm == 1 else 's'} of the model at {fs / q:g} Hz"
+            f"{rounded}")
+
+
+def _input_band(u: np.ndarray, fs: float, q: int) -> tuple[float, float] | None:
+    """The band the estimation input excites (:func:`ehss.preprocess.excitation_band`),
+    up to what the decimation by ``q`` leaves untouched (and 0.45 of the model's rate);
+    None when that is the whole default band anyway."""
+    lo, hi = preprocess.excitation_band(u, fs)
+    top = 0.45 * fs / q if q == 1 else min(0.45, preprocess.DECIMATED_PASSBAND / 2) * fs / q
+    # strictly inside the pass band, so that the same band and factor prepare again
+    top = float(np.nextafter(top, 0.0)) if q > 1 else top
+    hi = min(hi, top)
+    if lo == 0.0 and hi >= top:
+        return None
+    return (lo if lo < hi else 0.0), hi
+
+
+def _excitation_ratio(u_est: np.ndarray, u_val: np.ndarray) -> float:
+    """RMS of the validation input about its mean over the estimation input's; warns
+    below :data:`HOLDOUT_EXCITATION_WARN`."""
+    est = float(np.std(u_est))
+    ratio = float(np.std(u_val)) / est if est > 0 else math.inf
+    if ratio < HOLDOUT_EXCITATION_WARN:
+        warnings.warn(
+            f"the validation input's RMS is {100 * ratio:.3g} % of the estimation "
+            f"input's (below {100 * HOLDOUT_EXCITATION_WARN:g} %): the validation data are "
+            "barely excited, and a fit on them says nothing of the model; validate on a "
+            "part of the record (or a record) excited like the estimation data",
+            EhssWarning, stacklevel=3)
+    return ratio
+
+
 def _warn_if_clipped(y: np.ndarray) -> None:
     """Warn when the output sits at one extreme value for more than
     :data:`ehss.preprocess.CLIP_SHARE_WARN` of the record (and at least 5 samples)."""

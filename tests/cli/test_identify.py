@@ -300,3 +300,18 @@ def test_plot_window_follows_the_record(tmp_path, rng, capsys):
                  "--plot", str(plot)])
     assert code == 0, capsys.readouterr().err
     assert (tmp_path / "b_time.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_decimated_model_says_what_the_given_delay_became(tmp_path, data_csv, capsys):
+    out = tmp_path / "model.json"
+    code = main(["identify", str(data_csv), "--input", "u", "--output", "y", "--na", "2",
+                 "--nb", "1", "--nc", "1", "--delay", "2", "--decimate", "3", "--out",
+                 str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    said = "delay 2 samples at 1000 Hz = 0 samples of the model at 333.333 Hz (rounded down)"
+    # in the model's heading and in the preprocessing lines, the same words both times
+    assert captured.out.count(said) == 2
+    # judged below the anti-alias filter's transition: 0.8 of 166.7 Hz
+    assert "judged up to 133.3 Hz" in captured.out
+    assert ArmaxModel.load_json(out).band_hz[1] <= 1000.0 / 3 * 0.4

@@ -326,8 +326,11 @@ def _print_model(res, rec, args) -> None:
 
     model, prep = res.model, res.prepared
     console = Console(width=120, highlight=False)
-    console.print(f"{res.method.upper()} model ({model.na},{model.nb},{model.nc}), delay "
-                  f"{model.delay}, dt = {model.dt!r} s, from {prep.u.size} samples of "
+    from ehss.workflow import delay_text
+
+    delay = delay_text(args.delay, decimation=prep.decimation, fs=prep.fs)
+    console.print(f"{res.method.upper()} model ({model.na},{model.nb},{model.nc}), {delay}, "
+                  f"dt = {model.dt!r} s, from {prep.u.size} samples of "
                   f"{rec.path.name} ({args.input} → {args.output})")
     console.print(model.format_paper(), soft_wrap=True)
     console.print(f"C(q^-1) = {_poly(model.c)}", soft_wrap=True)

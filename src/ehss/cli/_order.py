@@ -6,7 +6,10 @@ A thin adapter over :func:`ehss.workflow.select_orders`: the record is prepared 
 uses (same ``--method`` vocabulary) and validated as ``identify`` validates, ranked by that
 fit (AIC, FPE and MDL are columns; the verdict too), never recommending an unstable model;
 the exact ``ehss identify`` command that refits the pick is printed, and running it
-reports the same fit.
+reports the same fit. What is not given follows the record: the band of interest from
+the input's spectrum, the delays (and nb) from its impulse response where each half of
+the record agrees, else over the response's rise (:func:`ehss.identification.delay.
+scan_delays`); the messages say delays at the record's rate and at the model's.
 """
 
 from __future__ import annotations
@@ -64,14 +67,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_record_arguments(p)
     p.add_argument("--na", type=int_list, default=list(DEFAULT_NA), metavar="LIST",
                    help="candidate orders of A (default: 1-4)")
-    p.add_argument("--nb", type=int_list, default=list(DEFAULT_NB), metavar="LIST",
-                   help="candidate orders of B (default: 0-3)")
+    p.add_argument("--nb", type=int_list, metavar="LIST",
+                   help="candidate orders of B (default: 0-3, or up to 6 to span the "
+                   "response's rise when the record does not support a delay estimate)")
     p.add_argument("--nc", type=int_list, default=list(DEFAULT_NC), metavar="LIST",
                    help="candidate orders of C (default: 1-2)")
     p.add_argument("--delay", type=int_list, metavar="LIST",
                    help="candidate input delays in samples of the record (default: the "
-                   "delay estimated from the prepared record's impulse response, and the "
-                   "one a sample of the model's rate shorter)")
+                   "delay estimated from the prepared record's impulse response and the "
+                   "one a sample of the model's rate shorter, when each half of the record "
+                   "gives the same; else up to 4 delays over the response's rise)")
     p.add_argument("--criterion", choices=("fit", "aic", "fpe", "mdl"), default="fit",
                    help="how the best is chosen: the free-run fit on the validation data "
                    "(the one identify reports), or an information criterion on the "
@@ -90,7 +95,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "rate) instead of the held-out end; the whole DATA is then estimation data")
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="band of interest (Hz), as in identify: the fit is scored there and "
-                   "the decimation aims at it (default: up to 0.45 fs)")
+                   "the decimation aims at it (default: the band the input excites, where "
+                   "its power spectrum is within 20 dB of its peak, read once the "
+                   "decimation is chosen from the record's content; the identify command "
+                   "printed carries it and the factor)")
     p.add_argument("--detrend", choices=("mean", "linear", "none"), default="mean",
                    help="remove the mean (operating point) or a straight line from the "
                    "estimation and the validation data (default: %(default)s)")
@@ -125,7 +133,8 @@ def _check_args(args: argparse.Namespace) -> dict:
         bad = [v for v in getattr(args, name) or [] if v < low]
         if bad:
             raise ParameterError(f"--{name} {bad[0]} must be >= {low}")
-    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(args.delay or [0, 1])
+    n_grid = (len(args.na) * len(args.nb or DEFAULT_NB) * len(args.nc)
+               * len(args.delay or [0, 1]))
     if n_grid > 500:
         raise ParameterError(f"the grid has {n_grid} candidates; keep it to 500 or fewer")
     return {"holdout": None if args.validate is not None else holdout, "band": band,
@@ -140,26 +149,28 @@ def run(args: argparse.Namespace) -> int:
     rec = load_record(args)
     val = load_validation(args, rec)
     validation = opts["holdout"] if val is None else (val.u, val.y)
-    delays = args.delay if args.delay is not None else _estimated_delays(rec, validation,
-                                                                          opts)
+    args.band_given = opts["band"] is not None
     from rich.console import Console
 
-    n_grid = len(args.na) * len(args.nb) * len(args.nc) * len(delays)
-    done = 0
-    with (report_warnings("order"),
-          Console(stderr=True).status(f"fitting {n_grid} candidates") as status):
-
-        def progress(line: str) -> None:  # a spinner on a terminal, nothing otherwise
-            nonlocal done
-            done += 1
-            status.update(f"fitted {done} of {n_grid} candidates; last {line}")
-
-        search = select_orders(
-            rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc, delay=delays,
-            method=args.method, init=args.init, validation=validation,
-            band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
-            initial=args.initial, criterion=args.criterion, progress=progress,
-        )
+    console = Console(stderr=True)
+    with report_warnings("order"), console.status("preparing the record") as status:
+        progress = _Progress(status, tty=console.is_terminal)
+        try:
+            search = select_orders(
+                rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc,
+                delay=args.delay, method=args.method, init=args.init, validation=validation,
+                band_hz=opts["band"] or "input", detrend=opts["detrend"],
+                decimate=opts["decimate"],
+                initial=args.initial, criterion=args.criterion, progress=progress,
+            )
+        except DataError as exc:
+            if args.delay is None and "to estimate a delay" in str(exc):
+                raise DataError(f"{exc} with --delay") from None
+            raise
+    if not args.band_given:
+        _say_input_band(args, opts, search.prepared)
+    if search.delay_scan is not None:
+        print(_delay_message(search), file=sys.stderr)
     command = identify_command(args, search)
     _print_table(search, rec, args)
     if not any(v is not None and v.accepted for v in search.verdicts):
@@ -195,6 +206,14 @@ def run(args: argparse.Namespace) -> int:
             "fs_data_hz": p.fs,
             "fs_model_hz": p.fs_model,
             "band_hz": None if opts["band"] is None else list(opts["band"]),
+            "band_from": "--band" if args.band_given else "the input's spectrum",
+            "delay_scan": None if search.delay_scan is None else {
+                "supported": search.delay_scan.supported,
+                "whole": search.delay_scan.whole,
+                "halves": list(search.delay_scan.halves),
+                "rise_10_50_pct": (None if search.delay_scan.rise is None
+                                   else list(search.delay_scan.rise)),
+                "unit": "samples of the model"},
             "initial_state": args.initial,
             "n_estimation_samples": int(p.u.size),
             "n_validation_samples": int(p.u_val.size),
@@ -207,31 +226,71 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _estimated_delays(rec, validation, opts: dict) -> list[int]:
-    """Candidate delays (samples of the record) from the prepared estimation data: the
-    estimated delay and the one a sample of the model's rate shorter, as it may be
-    placed late (:func:`ehss.identification.estimate_delay`). Says what it found."""
-    from ehss.identification.delay import default_max_delay, estimate_delay
-    from ehss.workflow import prepare
+class _Progress:
+    """How far the search is: a spinner on a terminal; elsewhere (a log, a pipe) a line
+    on stderr at every tenth of a grid of 20 candidates or more."""
 
-    p = prepare(rec.u, rec.y, fs=rec.fs, validation=validation, band_hz=opts["band"],
-                detrend=opts["detrend"], decimate=opts["decimate"])
-    longest = default_max_delay(p.u.size)
-    try:
-        found = estimate_delay(p.u, p.y, max_delay=longest)
-    except DataError as exc:
-        raise DataError(f"{exc}; give the candidate delays with --delay") from None
-    rate = f" at the model's {p.fs_model:g} Hz" if p.decimation > 1 else ""
-    if found is None:
-        print(f"no delay estimated: the output shows no significant response to the "
-              f"input within {longest} samples{rate} (check --input and --output, or "
-              "give --delay); trying delays 0 and 1", file=sys.stderr)
-        found = 1
+    def __init__(self, status, *, tty: bool) -> None:
+        self.status, self.tty, self.done = status, tty, 0
+
+    def __call__(self, line: str) -> None:
+        self.done += 1
+        text = f"fitted {self.done} candidates; last {line}"
+        if self.tty:
+            self.status.update(text)
+        elif self.done % 20 == 0:
+            print(f"ehss order: {text}", file=sys.stderr, flush=True)
+
+
+def _say_input_band(args, opts: dict, prepared) -> None:
+    """Say the band read from the input's spectrum, and carry it (with the decimation
+    chosen before it was read) into the identify command."""
+    from ehss.preprocess import EXCITATION_LEVEL_DB
+
+    band = prepared.band_hz
+    if band is None:
+        return
+    opts["band"] = args.band = band
+    if prepared.decimation > 1 and opts["decimate"] == "auto":
+        args.decimate = str(prepared.decimation)  # the band would change auto's factor
+    print(f"band of interest read from the input's spectrum: {band[0]:.4g}-{band[1]:.4g} "
+          f"Hz (where its power is within {EXCITATION_LEVEL_DB:g} dB of its peak, below "
+          f"what the decimation leaves untouched; --band LO HI sets it)", file=sys.stderr)
+
+
+def _delay_message(search) -> str:
+    """What the record said about its delay and which delays were tried, at both rates."""
+    from ehss.workflow import delay_text
+
+    scan, p = search.delay_scan, search.prepared
+    q = p.decimation
+
+    def samples(d_model: int) -> str:  # model samples, and the record's when decimated
+        if q == 1:
+            return f"{d_model} samples"
+        return f"{d_model} samples of the model at {p.fs_model:g} Hz ({d_model * q} at " \
+               f"{p.fs:g} Hz)"
+
+    tried = ", ".join(str(d) for d in sorted(set(search.delays)))
+    nbs = sorted({r.nb for r in search.table})
+    nb = f"nb {nbs[0]}-{nbs[-1]}" if len(nbs) > 1 else f"nb {nbs[0]}"
+    if scan.supported:
+        return (f"{delay_text(scan.delay * q, decimation=q, fs=p.fs)} estimated from the "
+                "record's impulse response (each half gives the same); trying delays "
+                f"{tried} samples of the record (--delay sets the candidates)")
+    found = [d for d in (scan.whole, *scan.halves) if d is not None]
+    if found:
+        how = (f"the whole record and its halves place it at {scan.whole}, "
+               f"{scan.halves[0]} and {scan.halves[1]} samples"
+               f"{'' if q == 1 else ' of the model'}")
     else:
-        tried = f"{found - 1} and {found}" if found else "0"
-        print(f"delay estimated from the record's impulse response: {found} sample(s)"
-              f"{rate}; trying {tried} (--delay sets the candidates)", file=sys.stderr)
-    return sorted({max(found - 1, 0) * p.decimation, found * p.decimation})
+        how = (f"no tap up to {samples(scan.max_delay)} stands out of the noise, in the "
+               "whole record or its halves")
+    rise = ("" if scan.rise is None else
+            f"; its step response reaches 10 % of its peak at {samples(scan.rise[0])} and "
+            f"50 % at {samples(scan.rise[1])}")
+    return (f"the record does not pin its delay down ({how}){rise}: trying delays {tried} "
+            f"samples of the record with {nb} (--delay and --nb set the candidates)")
 
 
 def identify_command(args: argparse.Namespace, search) -> str:
@@ -292,8 +351,8 @@ def _print_table(search, rec, args) -> None:
     p = search.prepared
     where = (f"validated on {Path(args.validate).name}" if args.validate is not None
              else f"validated on the held-out {p.holdout:g}")
-    rate = (f", decimated by {p.decimation} to {p.fs_model:g} Hz" if p.decimation > 1
-            else "")
+    rate = (f", decimated by {p.decimation} to {p.fs_model:g} Hz, delays in samples of "
+            f"the record at {p.fs:g} Hz" if p.decimation > 1 else "")
     table = Table(title=f"Orders for {args.input} → {args.output} ({rec.path.name}, "
                   f"{p.u.size} estimation samples{rate}, {args.method}, {where})")
     band = p.band_hz is not None and any(r is not None and r.band_fit_pct is not None
@@ -324,5 +383,10 @@ def _print_table(search, rec, args) -> None:
     verdict = search.verdicts[search.best_index]
     among = ("the best that meets the acceptance" if verdict is not None
              and verdict.accepted else "none meets the acceptance")
+    from ehss.workflow import delay_text
+
+    delay = "" if p.decimation == 1 else (
+        f"{delay_text(d, decimation=p.decimation, fs=p.fs)}; ")
     console.print(f"best by {search.selection.criterion}: --na {na} --nb {nb} --nc {nc} "
-                  f"--delay {d} (method {search.method}; {fit}; {among}; never unstable)")
+                  f"--delay {d} ({delay}method {search.method}; {fit}; {among}; never "
+                  "unstable)")
