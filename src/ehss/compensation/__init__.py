@@ -17,18 +17,25 @@ from __future__ import annotations
 from ehss.compensation.apply import (
     OUTSIDE_BAND,
     OUTSIDE_SHARE_WARN,
+    Compensation,
     apply_inverse,
     as_reference,
     compensate,
+    compensation,
+    model_offsets,
+    outside_band_note,
     warn_if_outside_band,
 )
 from ehss.compensation.checks import (
     DEFAULT_MAX_GAIN,
+    DEFAULT_MIN_GAIN,
     REST_TOLERANCE,
     DriveCheck,
     DriveLimits,
     check_at_rest,
     check_drive,
+    check_rig,
+    checked_drive,
     fade_to_rest,
 )
 from ehss.compensation.inverse import (
@@ -54,6 +61,13 @@ from ehss.compensation.iteration import (
 
 __all__ = [
     "compensate",
+    "compensation",
+    "Compensation",
+    "model_offsets",
+    "outside_band_note",
+    "DEFAULT_MIN_GAIN",
+    "check_rig",
+    "checked_drive",
     "apply_inverse",
     "warn_if_outside_band",
     "OUTSIDE_SHARE_WARN",

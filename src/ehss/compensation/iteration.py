@@ -198,6 +198,30 @@ class IterationState:
     base_rms_error: float
     halvings: int = 0
 
+    def __post_init__(self) -> None:
+        # a state read back from a drive file's metadata may have been edited: refuse
+        # what no update could have left
+        gain, base, halvings = self.gain, self.base_rms_error, self.halvings
+        if not (_is_real(gain) and 0.0 < gain < 2.0):
+            raise ParameterError(f"gain={gain!r} must be a number in (0, 2)")
+        if not (_is_real(base) and base >= 0.0):
+            raise ParameterError(f"base_rms_error={base!r} must be a finite number >= 0")
+        if isinstance(halvings, bool) or not isinstance(halvings, (int, np.integer)) or not (
+                0 <= halvings <= MAX_HALVINGS):
+            raise ParameterError(f"halvings={halvings!r} must be an integer in "
+                                 f"[0, {MAX_HALVINGS}]")
+        b = as_signal(self.base_drive, "base_drive")
+        c = as_signal(self.correction, "correction")
+        if b.size != c.size:
+            raise ParameterError(f"base_drive and correction differ in length ({b.size} != "
+                                 f"{c.size})")
+
+
+def _is_real(x: Any) -> bool:
+    """A finite real number (bools refused)."""
+    return (not isinstance(x, bool) and isinstance(x, (int, float, np.integer, np.floating))
+            and math.isfinite(x))
+
 
 @dataclass(frozen=True, kw_only=True)
 class DriveUpdate:

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
+from ehss._checks import check_int
 from ehss.compensation import InverseModel, design_inverse
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine, rms
@@ -292,6 +293,7 @@ def demonstrate(
 
     if loop not in LOOP_SETTINGS:
         raise ParameterError(f"loop={loop!r} must be one of {sorted(LOOP_SETTINGS)}")
+    check_int(seed, "seed", lo=0)
     if not (math.isfinite(duration_s) and duration_s >= 4.0):
         raise ParameterError(f"duration_s={duration_s!r} must be at least 4 s")
     cfg = LOOP_SETTINGS[loop]
