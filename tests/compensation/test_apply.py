@@ -86,3 +86,24 @@ def test_fade_brings_the_reference_to_rest():
     result = compensation(_model(), r, fs=FS, fade_s=0.2)
     assert result.reference[0] == pytest.approx(0.0, abs=1e-15)
     assert result.reference[-1] == pytest.approx(0.0, abs=1e-15)
+
+
+def test_iteration_step_runs_the_same_sequence():
+    """corrected_drive: about the operating point and checked, as the one-shot drive."""
+    from ehss.compensation import corrected_drive
+
+    m = _model(offsets=(2.0, 1.5))
+    r = 1.5 + _reference()
+    first = compensation(m, r, fs=FS)
+
+    def plant(u):  # the loop 10 % weaker than the model, about the same operating point
+        return 1.5 + 0.9 * m.simulate(u - 2.0)
+
+    nxt, step = corrected_drive(m, r, first.drive, plant(first.drive), fs=FS)
+    assert nxt.offsets == (2.0, 1.5) and nxt.check is not None and step.accepted
+    e0, e1 = r - plant(first.drive), r - plant(nxt.drive)
+    # gain 1, exact inverse in the band: |1 − 0.9| = 0.1 of the error is left (rounding)
+    assert_allclose(e1, 0.1 * e0, rtol=0, atol=1e-9 * np.max(np.abs(e0)))
+    with pytest.raises(ParameterError, match=r"bound 0\.5×"):
+        corrected_drive(m, r, first.drive, plant(first.drive), fs=FS,
+                        checks={"max_gain": 0.5})

@@ -210,32 +210,48 @@ def _one_shot(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
 
 def _iterated(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
               band: tuple[float, float], checks: dict[str, Any]) -> tuple[Any, dict, dict]:
-    """A drive-file iteration step, checked as the one-shot drive is."""
-    from ehss.compensation import (
-        Compensation,
-        check_at_rest,
-        checked_drive,
-        fade_to_rest,
-        model_offsets,
-    )
+    """A drive-file iteration step: the library's, kept even when a check fails."""
+    from ehss.compensation import corrected_drive, model_offsets
     from ehss.compensation.rates import rate_factor
+    from ehss.io import read_columns, sample_rate
 
-    q = rate_factor(fs, model.dt)  # the model's rate, or a decimated one: DataError if not
-    u0, y0 = model_offsets(model, None if args.ignore_offsets else "model")
-    r_dev = r - y0
-    if args.fade is not None:
-        r_dev = fade_to_rest(r_dev, fs, args.fade)
-    check_at_rest(r_dev)
-    drive_dev, columns, extra = _update(args, model, r_dev, fs, band, u0, y0)
-    if extra["iteration"].get("stopped"):
-        # the best drive so far was already played and checked
-        checks = {**checks, "max_gain": None, "min_gain": None}
-    check, failure = checked_drive(drive_dev, r_dev, fs, force=True, drive_offset=u0,
-                                   **checks)
-    result = Compensation(drive=u0 + drive_dev, reference=r_dev + y0, fs=fs, inverse=None,
-                          check=check, failed_check=failure, warnings=(), offsets=(u0, y0),
-                          decimation=q)
-    return result, columns, extra
+    rate_factor(fs, model.dt)  # the model's rate, or a decimated one: DataError if not
+    run_table = read_columns(args.update, [args.drive_column, args.output_column],
+                             time_column=args.time_column)
+    run_fs = sample_rate(run_table, args.fs)
+    if abs(run_fs - fs) > 1e-9 * fs:
+        raise DataError(f"{args.update!r} is sampled at {run_fs:g} Hz, the reference at "
+                        f"{fs:g} Hz")
+    u = np.asarray(run_table[args.drive_column], dtype=float)
+    y = np.asarray(run_table[args.output_column], dtype=float)
+    if u.size != r.size or y.size != r.size:
+        raise DataError(f"{args.update!r} has {u.size} samples, the reference {r.size}")
+    offsets = None if args.ignore_offsets else "model"
+    state, log = None, []
+    if args.previous is not None:
+        state, log = _previous(args.previous, u, model_offsets(model, offsets)[0])
+    method = "frf" if args.method == "frf" else "model"
+    result, step = corrected_drive(
+        model, r, u, y, fs=fs, offsets=offsets, fade_s=args.fade, force=True, checks=checks,
+        method=method, inverse_method="stable" if method == "frf" else args.method,
+        band_hz=band, gain=args.gain, state=state, reidentify=args.reidentify)
+    entry = {"run": str(args.update), **step.record.to_dict(), "accepted": step.accepted,
+             "gain_next": step.gain, "decision": step.message}
+    log = [*log, entry]
+    print(f"run {len(log)}: RMS error {step.record.rms_error:.6g} "
+          f"({step.record.nrmse_percent:.3g} %), lag {step.record.lag_samples:.2f} samples; "
+          f"{step.message}")
+    st = step.state
+    extra = {"iteration": {
+        "log": log, "gain": step.gain, "base_rms_error": st.base_rms_error,
+        "halvings": st.halvings, "stopped": step.stopped, "method": method,
+        "reidentify": bool(args.reidentify), "previous": args.previous,
+    }, "update": {"run": str(args.update), "gain": step.gain,
+                  "rms_error_of_run": step.record.rms_error}}
+    if step.stopped:
+        return result, {}, extra
+    u0 = result.offsets[0]
+    return result, {"base_drive": u0 + st.base_drive, "correction": st.correction}, extra
 
 
 def run(args: argparse.Namespace) -> int:
@@ -327,50 +343,6 @@ def _say(args: argparse.Namespace, model: Any, result: Any, band: tuple[float, f
              f"; drive/reference gain rms {chk.rms_gain:.3g}, peak {chk.peak_gain:.3g}")
     print(f"{out}: {result.drive.size} samples at {result.fs:g} Hz{rate}, {args.method} "
           f"inverse within {band[0]:g}-{band[1]:g} Hz{gains}")
-
-
-def _update(args: argparse.Namespace, model: Any, r_dev: np.ndarray, fs: float,
-            band: tuple[float, float], u0: float, y0: float
-            ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
-    """Drive-file iteration from a run: (drive deviation, extra columns, sidecar part)."""
-    from ehss.compensation import update_drive
-    from ehss.io import read_columns, sample_rate
-
-    run_table = read_columns(args.update, [args.drive_column, args.output_column],
-                             time_column=args.time_column)
-    run_fs = sample_rate(run_table, args.fs)
-    if abs(run_fs - fs) > 1e-9 * fs:
-        raise DataError(f"{args.update!r} is sampled at {run_fs:g} Hz, the reference at "
-                        f"{fs:g} Hz")
-    u = np.asarray(run_table[args.drive_column], dtype=float)
-    y = np.asarray(run_table[args.output_column], dtype=float)
-    if u.size != r_dev.size or y.size != r_dev.size:
-        raise DataError(f"{args.update!r} has {u.size} samples, the reference {r_dev.size}")
-    state, log = None, []
-    if args.previous is not None:
-        state, log = _previous(args.previous, u, u0)
-    method = "frf" if args.method == "frf" else "model"
-    step = update_drive(r_dev, u - u0, y - y0, fs=fs, model=model, method=method,
-                        inverse_method="stable" if method == "frf" else args.method,
-                        band_hz=band, gain=args.gain, state=state,
-                        reidentify=args.reidentify)
-    entry = {"run": str(args.update), **step.record.to_dict(), "accepted": step.accepted,
-             "gain_next": step.gain, "decision": step.message}
-    log = [*log, entry]
-    print(f"run {len(log)}: RMS error {step.record.rms_error:.6g} "
-          f"({step.record.nrmse_percent:.3g} %), lag {step.record.lag_samples:.2f} samples; "
-          f"{step.message}")
-    st = step.state
-    extra = {"iteration": {
-        "log": log, "gain": step.gain, "base_rms_error": st.base_rms_error,
-        "halvings": st.halvings, "stopped": step.stopped, "method": method,
-        "reidentify": bool(args.reidentify), "previous": args.previous,
-    }, "update": {"run": str(args.update), "gain": step.gain,
-                  "rms_error_of_run": step.record.rms_error}}
-    if step.stopped:
-        return step.drive, {}, extra
-    columns = {"base_drive": u0 + st.base_drive, "correction": st.correction}
-    return step.drive, columns, extra
 
 
 def _previous(path: str, played: np.ndarray, u0: float) -> tuple[Any, list]:
