@@ -159,8 +159,8 @@ class CompensationDemo:
         (:data:`ehss.experiments.loop_identification.ACCEPTANCE`).
     compensation_model : ArmaxModel
         ``model`` carrying the band that validation confirms
-        (:func:`ehss.workflow.validated_band`) and the operating point it was identified
-        about: what ``ehss compensate`` takes for references of the loop's working band.
+        (:func:`ehss.workflow.validated_band`): what ``ehss compensate`` takes for
+        references of the loop's working band.
     """
 
     loop: str
@@ -375,15 +375,15 @@ def _validate(model: Any, identification: tuple[np.ndarray, np.ndarray],
               band: tuple[float, float]) -> tuple[Any, Any, Any]:
     """Validate ``model`` on a separate record as ``ehss identify --validate`` does (each
     record about its own mean, no decimation, compared over ``band``) and give it the
-    band that validation confirms and the identification record's operating point."""
+    band that validation confirms. Its operating point stays the model's: the records
+    start at rest at 0 and the model was fitted on them as they are."""
     from ehss.experiments.loop_identification import ACCEPTANCE
     from ehss.workflow import assess, prepare, validated_band
 
     prepared = prepare(*identification, fs=fs, validation=validation, band_hz=band,
                        detrend="mean", decimate=None)
     report, verdict = assess(model, prepared, acceptance=ACCEPTANCE)
-    checked = dataclasses.replace(model, band_hz=validated_band(report, fs),
-                                  offsets=prepared.offsets)
+    checked = dataclasses.replace(model, band_hz=validated_band(report, fs))
     return report, verdict, checked
 
 
