@@ -74,19 +74,26 @@ def _model_entry(chk: ModelCheck) -> dict[str, Any]:
     return entry
 
 
+def _compensation_label(demo: Any) -> str:
+    """How a demonstration's model was identified, e.g. ``"RML (4,3,2,1) from a 0–100 Hz
+    random test"``."""
+    cfg = LOOP_SETTINGS[demo.loop]
+    o = cfg["orders"]
+    lo, hi = cfg["ident_hz"]
+    text = f"RML ({o['na']},{o['nb']},{o['nc']},{o['delay']}) from a {lo:g}–{hi:g} Hz random test"
+    if demo.inverse.known_num.size > 1 or demo.inverse.known_den.size > 1:
+        text += ", behind the known generator and accelerometer coupling"
+    return text
+
+
 def _compensation_entry(demo: Any) -> dict[str, Any]:
     """The demonstration's model (JSON layout of :meth:`ArmaxModel.to_dict`, with the band
     its validation confirmed) plus how it was obtained and its verdict."""
     entry = demo.compensation_model.to_dict()
-    lo, hi = LOOP_SETTINGS[demo.loop]["ident_hz"]
-    entry["label"] = (f"RML ({_orders(demo.model)}) from a {lo:g}–{hi:g} Hz random test, "
-                      "validated on the uncompensated random test of the working band")
+    entry["label"] = (_compensation_label(demo) + "; validated on the uncompensated random "
+                      "test of the working band")
     entry["meets_acceptance"] = bool(demo.verdict.accepted)
     return entry
-
-
-def _orders(m: ArmaxModel) -> str:
-    return f"{m.na},{m.nb},{m.nc},{m.delay}"
 
 
 def compensation_file(loop: str) -> str:
@@ -302,10 +309,13 @@ def _compensation_models_markdown(result: ProgrammeResult) -> list[str]:
         "**Which model to compensate with.** Use the models of this section, "
         "`compensation_models.json` (one file per loop for `ehss compensate`: "
         + ", ".join(f"`{compensation_file(n)}`" for n in result.compensation)
-        + "), not those of the identification section. Each is identified (RML from the "
-        "batch estimate) on a random test excited over the loop's working band from near "
-        "DC and validated, as `ehss identify --validate` does, on the uncompensated random "
-        "run above; it carries the band that validation confirms:",
+        + "), not those of the identification section. Each is identified by RML from the "
+        "batch estimate on a random test that covers the loop's working band from its low "
+        "end (the position loop's from DC; the acceleration loop's from 2 Hz, below which "
+        "its slow high-passes are known factors the rest is identified behind), "
+        "validated, as `ehss identify --validate` "
+        "does, on the uncompensated random run above, and carries the band that "
+        "validation confirms (the complete model: `ehss compensate` inverts it as it is):",
         "",
         "| loop | model | validated band | meets acceptance | one-shot: random RMS error "
         "without → with |",
@@ -316,7 +326,7 @@ def _compensation_models_markdown(result: ProgrammeResult) -> list[str]:
         shown = "none" if band is None else f"{band[0]:.3g}–{band[1]:.3g} Hz"
         one = d.one_shot_rms_error["random"]
         lines.append(
-            f"| {name} | RML ({_orders(d.model)}) | {shown} | "
+            f"| {name} | {_compensation_label(d)} | {shown} | "
             f"{'yes' if d.verdict.accepted else 'no'} | {d.rms_error_without['random']:.3g} → "
             f"{one:.3g} {d.unit} ({d.rms_error_without['random'] / one:.0f}×) |")
     lines += [
