@@ -122,7 +122,7 @@ def apply_inverse(
     return drive
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Compensation:
     """A checked drive and everything that made it (:func:`compensation`).
 
