@@ -464,8 +464,10 @@ def _generator_response(a_r: NDArray[np.float64], params: RigParams, fs: float):
     sys = scipy.signal.cont2discrete(
         (np.array([[0.0, 1.0], [-dg, -wg]]), np.array([[0.0], [t.kg]]), np.eye(2),
          np.zeros((2, 1))), 1.0 / fs, method="zoh")
-    _, y, _ = scipy.signal.dlsim((sys[0], sys[1], sys[2], sys[3], 1.0 / fs), a_r)
-    return y[:, 0], y[:, 1]
+    # dlsim's recursion (x⁺ = A x + B u, y = C x, from rest) as one transfer function per
+    # output: lfilter runs it in C, dlsim in a Python loop (0.4 s for 16 s at 1 kHz)
+    num, den = scipy.signal.ss2tf(sys[0], sys[1], sys[2], sys[3])  # num: one row per output
+    return scipy.signal.lfilter(num[0], den, a_r), scipy.signal.lfilter(num[1], den, a_r)
 
 
 def check_feasible(

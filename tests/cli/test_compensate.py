@@ -9,6 +9,7 @@ import pytest
 import scipy.signal
 from numpy.testing import assert_allclose
 
+from ehss._files import SIDECAR_KEY
 from ehss.cli import main
 from ehss.compensation.rates import to_model_rate
 from ehss.io import read_columns, write_csv
@@ -149,8 +150,9 @@ def test_drive_breaking_the_rig_limits_is_refused(tmp_path, capsys):
     assert "peak velocity" in err and "0.2 m/s" in err and not out.exists()
     assert main([*args, "--max-velocity", "0.2"]) == 2
     assert "peak rate" in capsys.readouterr().err and not out.exists()
+    # --loop alone checks the default preset's limits, as `ehss simulate` does
     assert main([*args, "--loop", "position"]) == 2
-    assert "--params or --preset" in capsys.readouterr().err
+    assert "peak velocity" in capsys.readouterr().err and not out.exists()
     assert main([*args, "--max-velocity", "1.0", "--max-stroke", "0.05"]) == 0
 
 
@@ -333,3 +335,157 @@ def test_time_column_by_name_and_the_summary_line(tmp_path, reference, capsys):
     side = json.loads(out.with_suffix(".json").read_text())
     assert side["fs_hz"] == pytest.approx(1 / DT)
     assert_allclose(read_columns(out, ["t"])["t"], np.arange(reference.size) * DT)
+
+
+def test_cli_drive_is_the_librarys(tmp_path, reference):
+    """One pipeline: the CLI writes what ``ehss.compensation.compensation`` returns, with
+    the operating point, checks and offsets it used."""
+    from ehss.compensation import compensation
+    from ehss.identification.model import ArmaxModel
+
+    model = _write_model(tmp_path / "m.json", offsets={"input": 2.0, "output": 1.5})
+    r = 1.5 + reference
+    ref = _write_reference(tmp_path / "r.csv", r)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 0
+    result = compensation(ArmaxModel.load_json(model), r, fs=1 / DT)
+    assert result.offsets == (2.0, 1.5) and result.failed_check is None
+    assert_allclose(read_columns(out)["drive"], result.drive, rtol=0, atol=0)
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["checks"]["figures"] == result.check.to_dict()
+    assert side["offsets_applied"] == {"input": 2.0, "output": 1.5}
+
+
+def test_drive_far_below_the_reference_is_refused(tmp_path, reference, capsys):
+    # B 100× too large (a unit error): G(1) = 75, the exact drive is ~1/75 of the reference,
+    # under the 1/3 bound (checks.py notes: a closed servo loop does not amplify by 10 dB).
+    model = _write_model(tmp_path / "m.json", b=(10.0, 5.0))
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "× the reference's (bound 0.333×)" in err and "nothing written" in err
+    assert err.count("\n") == 1 and not out.exists()
+    assert main(["compensate", str(model), str(ref), "--out", str(out), "--min-gain",
+                 "0.001"]) == 0
+
+
+def test_non_finite_drive_is_one_error_type(tmp_path, reference, capsys):
+    """A drive that overflows is a ParameterError in the library and exit 2 in the CLI."""
+    from ehss.compensation import compensate
+    from ehss.errors import ParameterError
+    from ehss.identification.model import ArmaxModel
+
+    # b = 1e-310 (subnormal): the exact inverse multiplies by 1e310, beyond float64
+    model = _write_model(tmp_path / "m.json", b=(1e-310, 0.0))
+    with pytest.raises(ParameterError, match="not finite") as library:
+        with np.errstate(over="ignore", invalid="ignore"):
+            compensate(ArmaxModel.load_json(model), reference, fs=1 / DT, max_gain=None)
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    with np.errstate(over="ignore", invalid="ignore"):
+        assert main(["compensate", str(model), str(ref), "--out", str(out), "--force"]) == 2
+    # the CLI's line is the library's error, word for word: the same check raised it
+    assert str(library.value) in capsys.readouterr().err and not out.exists()
+
+
+def test_a_drive_compensate_accepts_for_a_loop_is_one_simulate_plays(tmp_path, capsys):
+    """One rig check: a drive within the stroke but beyond the velocity limit is refused by
+    both commands with the same figure, and one inside the limits is played."""
+    model = _write_model(tmp_path / "m.json")
+    t = np.arange(2000) * DT
+    ref = _write_reference(tmp_path / "r.csv", 0.02 * np.sin(2 * np.pi * 4 * t) * np.exp(
+        -(((t - 1.0) / 0.2) ** 2)))
+    out = tmp_path / "drive.csv"
+    # without --loop the rig's limits are not checked, and the user is told so
+    assert main(["compensate", str(model), str(ref), "--out", str(out)]) == 0
+    assert "not checked against a rig's limits" in capsys.readouterr().err
+    assert main(["simulate", "--loop", "position", "--reference", str(out), "--column",
+                 "drive", "--out", str(tmp_path / "run.csv")]) == 2
+    refused_by_simulate = capsys.readouterr().err.strip().split("exceeds")[0].split()[-2]
+    out2 = tmp_path / "drive2.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out2), "--loop",
+                 "position"]) == 2
+    err = capsys.readouterr().err
+    assert f"peak velocity {refused_by_simulate} m/s" in err and not out2.exists()
+    small = _write_reference(tmp_path / "small.csv", 0.002 * np.sin(2 * np.pi * 4 * t) * np.exp(
+        -(((t - 1.0) / 0.2) ** 2)))
+    assert main(["compensate", str(model), str(small), "--out", str(out2), "--loop",
+                 "position"]) == 0
+    assert main(["simulate", "--loop", "position", "--reference", str(out2), "--column",
+                 "drive", "--out", str(tmp_path / "run.csv")]) == 0
+
+
+def _iteration_files(tmp_path, reference, suffix):
+    """A one-shot drive, its run, the first update (written as ``suffix``), its run."""
+    model = _write_model(tmp_path / "m.json")
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    d0 = tmp_path / f"d0{suffix}"
+    assert main(["compensate", str(model), str(ref), "--out", str(d0)]) == 0
+    u0 = read_columns(d0)["drive"]
+    run0 = tmp_path / "run0.csv"
+    write_csv(run0, {"t": np.arange(u0.size) * DT, "reference": u0,
+                     "output": _plant(u0, 0.9)})
+    d1 = tmp_path / f"d1{suffix}"
+    assert main(["compensate", str(model), str(ref), "--update", str(run0), "--previous",
+                 str(d0), "--out", str(d1)]) == 0
+    u1 = read_columns(d1)["drive"]
+    run1 = tmp_path / "run1.csv"
+    write_csv(run1, {"t": np.arange(u1.size) * DT, "reference": u1,
+                     "output": _plant(u1, 0.9)})
+    return model, ref, d1, run1
+
+
+@pytest.mark.parametrize("suffix", [".parquet", ".npz", ".h5"])
+def test_previous_drive_in_a_binary_table(tmp_path, reference, capsys, suffix):
+    """The iteration record travels inside a binary table: --previous reads it there."""
+    model, ref, d1, run1 = _iteration_files(tmp_path, reference, suffix)
+    d2 = tmp_path / "d2.csv"
+    assert main(["compensate", str(model), str(ref), "--update", str(run1), "--previous",
+                 str(d1), "--out", str(d2)]) == 0
+    assert len(json.loads(d2.with_suffix(".json").read_text())["iteration"]["log"]) == 2
+
+
+@pytest.mark.parametrize("edit", [
+    lambda d: "a string",
+    lambda d: {**d, "iteration": "a string"},
+    lambda d: {**d, "iteration": {k: v for k, v in d["iteration"].items() if k != "gain"}},
+    lambda d: {**d, "iteration": {k: v for k, v in d["iteration"].items()
+                                  if k != "base_rms_error"}},
+    lambda d: {**d, "iteration": {**d["iteration"], "gain": -0.5}},
+    lambda d: {**d, "iteration": {**d["iteration"], "gain": float("nan")}},
+    lambda d: {**d, "iteration": {**d["iteration"], "base_rms_error": "x"}},
+    lambda d: {**d, "iteration": {**d["iteration"], "halvings": -1}},
+])
+def test_edited_previous_sidecar_is_one_line_and_nothing_written(tmp_path, reference, capsys,
+                                                                 edit):
+    model, ref, d1, run1 = _iteration_files(tmp_path, reference, ".csv")
+    side = d1.with_suffix(".json")
+    doc = json.loads(side.read_text())
+    edited = edit(doc)
+    if isinstance(edited, dict):  # still this table's sidecar, so it may be replaced
+        edited[SIDECAR_KEY] = doc[SIDECAR_KEY]
+    side.write_text(json.dumps(edited))
+    capsys.readouterr()
+    d2 = tmp_path / "d2.csv"
+    assert main(["compensate", str(model), str(ref), "--update", str(run1), "--previous",
+                 str(d1), "--out", str(d2)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ehss compensate: error:") and err.count("\n") == 1
+    assert "Traceback" not in err and str(d1) in err
+    assert not d2.exists() and not d2.with_suffix(".json").exists()
+
+
+@pytest.mark.parametrize("command", [
+    ["compensate-demo", "--loop", "position", "--seed", "-3"],
+    ["simulate", "--loop", "position", "--signal", "sine", "--seed", "-1"],
+])
+def test_negative_seed_is_one_line(tmp_path, capsys, command):
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exc:
+        main([*command, "--out", str(out if command[0] == "compensate-demo"
+                                        else tmp_path / "run.csv")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--seed" in err and ">= 0" in err and err.count("\n") == 1
+    assert not out.exists() and not (tmp_path / "run.csv").exists()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +10,7 @@ import numpy as np
 
 from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
+from ehss.cli._simulate import seed_argument
 from ehss.errors import DataError, ParameterError
 
 __all__ = ["register"]
@@ -19,7 +19,7 @@ _DRIVE_LOOPS = ("position", "acceleration", "force", "valve")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ehss.compensation import DEFAULT_MAX_GAIN
+    from ehss.compensation import DEFAULT_MAX_GAIN, DEFAULT_MIN_GAIN
     from ehss.params import PRESETS
 
     p = sub.add_parser(
@@ -66,18 +66,25 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "`ehss identify`); by default drive = u0 + F (r - y0)")
     ck = p.add_argument_group(
         "drive checks",
-        "A drive whose RMS or peak exceeds --max-gain times the reference's, or that breaks "
-        "the rig's limits, is an error (exit 2) and nothing is written.",
+        "A drive whose RMS or peak exceeds --max-gain times the reference's, whose RMS is "
+        "under --min-gain times the reference's, or that breaks the rig's limits (with "
+        "--loop: those `ehss simulate` checks, on the default preset unless --params or "
+        "--preset), is an error (exit 2) and nothing is written.",
     )
     ck.add_argument("--max-gain", type=float, default=DEFAULT_MAX_GAIN, metavar="G",
                     help="bound on the drive/reference RMS and peak ratios (default: "
                     "%(default)s)")
+    ck.add_argument("--min-gain", type=float, default=DEFAULT_MIN_GAIN, metavar="G",
+                    help="lower bound on the drive/reference RMS ratio: a drive far smaller "
+                    "than its reference means a model whose gain is wrong (default: "
+                    "%(default).3g)")
     ck.add_argument("--force", action="store_true",
                     help="write the drive even if it fails the checks (recorded in the "
                     "sidecar)")
     ck.add_argument("--loop", choices=_DRIVE_LOOPS,
                     help="loop the drive is played into, whose limits it must respect "
-                    "(with --params or --preset)")
+                    "(of --params or --preset; default preset otherwise, as `ehss "
+                    "simulate`)")
     par = ck.add_mutually_exclusive_group()
     par.add_argument("--params", metavar="FILE.toml", type=InputFile,
                      help="(partial) TOML parameter file")
@@ -128,7 +135,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--out", default=OutputFolder("compensation"), metavar="DIR",
                    type=OutputFolder,
                    help="output folder (default: %(default)s)")
-    d.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
+    d.add_argument("--seed", type=seed_argument, default=0,
+                   help="random seed, >= 0 (default: %(default)s)")
     d.add_argument("--duration", type=float, default=None, metavar="S",
                    help="length of each test record in seconds")
     d.add_argument("--method", default="stable", choices=("stable", "zpetc", "zmetc"))
@@ -148,16 +156,19 @@ def _limits(args: argparse.Namespace) -> Any:
 
 
 def _rig(args: argparse.Namespace) -> tuple[str | None, Any]:
+    """The loop the drive is played into and its rig: as ``ehss simulate`` plays it (the
+    default preset unless --params or --preset), so a drive written here is one it
+    plays."""
     from ehss.params import load_params, preset
 
     given = args.params is not None or args.preset is not None
     if given and args.loop is None:
         raise ParameterError("--params/--preset need --loop: the loop the drive is played into")
-    if args.loop is not None and not given:
-        raise ParameterError("--loop needs --params or --preset (whose limits to respect)")
-    if not given:
+    if args.loop is None:
         return None, None
-    return args.loop, load_params(args.params) if args.params else preset(args.preset)
+    if args.params is not None:
+        return args.loop, load_params(args.params)
+    return args.loop, preset(args.preset or "default")
 
 
 def _band(args: argparse.Namespace, model: Any) -> tuple[float, float]:
@@ -171,125 +182,40 @@ def _band(args: argparse.Namespace, model: Any) -> tuple[float, float]:
     return model.band_hz
 
 
-def run(args: argparse.Namespace) -> int:
-    from ehss._provenance import versions
-    from ehss.cli._dataargs import report_warnings, write_outputs
-    from ehss.compensation import (
-        apply_inverse,
-        check_at_rest,
-        check_drive,
-        design_inverse,
-        fade_to_rest,
-        warn_if_outside_band,
-    )
-    from ehss.compensation.rates import rate_factor
-    from ehss.identification.model import ArmaxModel
-    from ehss.io import read_columns, sample_rate, table_writers
-
+def _check_flags(args: argparse.Namespace) -> None:
     if args.update is None:
         for flag, given in (("--previous", args.previous is not None),
                             ("--gain", args.gain is not None), ("--reidentify", args.reidentify)):
             if given:
                 raise ParameterError(f"{flag} belongs to a drive-file iteration: give "
                                      "--update RUN.csv")
-    if args.reidentify and args.method == "frf":
-        raise ParameterError("--reidentify re-identifies the model of a model-based update; "
-                             "--method frf uses no model")
-    model = ArmaxModel.load_json(args.model)
-    band = _band(args, model)
-    limits = _limits(args)
-    loop, params = _rig(args)
-    offsets = None if args.ignore_offsets else model.offsets
-    u0, y0 = offsets if offsets is not None else (0.0, 0.0)
-    table = read_columns(args.reference, [args.column], time_column=args.time_column)
-    fs = sample_rate(table, args.fs)
-    q = rate_factor(fs, model.dt)  # the model's rate, or a decimated one: DataError if not
-    r = np.asarray(table[args.column], dtype=float)
-    r_dev = r - y0
-    if args.fade is not None:
-        r_dev = fade_to_rest(r_dev, fs, args.fade)
-        r = r_dev + y0
-    check_at_rest(r_dev)
-    max_gain = None if args.force else args.max_gain
-    extra: dict[str, Any] = {}
-    columns: dict[str, np.ndarray] = {}
-    if args.update is None:
         if args.method == "frf":
             raise ParameterError(
                 "--method frf corrects a measured run: give --update RUN.csv (play the "
                 "reference itself, or a model-based drive, first)")
-        inverse = design_inverse(model, method=args.method, band_hz=band)
-        # the model maps deviations from the operating point (u0, y0) it was identified
-        # about: y − y0 = G (u − u0), so the drive for r is u0 + G⁻¹ (r − y0)
-        drive_dev = apply_inverse(inverse, r_dev, fs)
-        with report_warnings("compensate"):
-            warn_if_outside_band(r_dev, fs, inverse)
-        extra["iteration"] = {"log": [], "gain": None}
-    else:
-        drive_dev, columns, extra = _update(args, model, r_dev, fs, band, u0, y0)
-        if extra["iteration"].get("stopped"):
-            max_gain = None  # the best drive so far was already played and checked
-    if not np.all(np.isfinite(drive_dev)):
-        raise DataError("the compensated drive is not finite (badly conditioned model?)")
-    try:
-        checked = check_drive(drive_dev, r_dev, fs, max_gain=max_gain, limits=limits,
-                              loop=loop, params=params, drive_offset=u0)
-    except ParameterError as exc:
-        if args.force:
-            checked = None
-            print(f"ehss compensate: warning: --force: {exc}")
-        else:
-            raise ParameterError(f"{exc} (nothing written; --max-gain or --force to override)"
-                                 ) from None
-    drive = u0 + drive_dev
-    t = table.time if table.time is not None else np.arange(r.size) / fs
-    out = Path(args.out)
-    sidecar = {
-        "what": f"{args.method} inverse-model drive",
-        "model": str(args.model),
-        "reference": str(args.reference),
-        "column": args.column,
-        "fs_hz": fs,
-        "model_fs_hz": 1.0 / model.dt,
-        "resampled": (None if q == 1 else
-                      f"model at fs/{q}: the inverse ran at its rate between polyphase "
-                      "resampling (ehss.compensation.rates)"),
-        "outside_band": ("reference: outside band_hz the drive is the reference itself"
-                         if args.update is None else
-                         "the update's correction is limited to band_hz (Q-filter)"),
-        "method": args.method,
-        "band_hz": list(band),
-        "band_from": "--band" if args.band is not None else "model band_hz",
-        "fade_s": args.fade,
-        "offsets_applied": (None if offsets is None
-                            else {"input": offsets[0], "output": offsets[1]}),
-        "checks": {"forced": bool(args.force),
-                   "figures": None if checked is None else checked.to_dict(),
-                   "limits": None if limits is None else {
-                       "max_abs": limits.max_abs, "max_rate": limits.max_rate,
-                       "max_rate2": limits.max_rate2},
-                   "loop": loop},
-        "units": "drive and reference in the units of the model's input and output",
-        "versions": versions(),
-        **extra,
-    }
-    cols = {"t": t, "reference": r, "drive": drive, **columns}
-    write_outputs(table_writers(out, cols, sidecar))
-    rate = "" if q == 1 else f" (model at fs/{q}, {1.0 / model.dt:g} Hz)"
-    gains = ("" if checked is None else
-             f"; drive/reference gain rms {checked.rms_gain:.3g}, peak {checked.peak_gain:.3g}")
-    print(f"{out}: {r.size} samples at {fs:g} Hz{rate}, {args.method} inverse within "
-          f"{band[0]:g}-{band[1]:g} Hz{gains}")
-    return 0
+    if args.reidentify and args.method == "frf":
+        raise ParameterError("--reidentify re-identifies the model of a model-based update; "
+                             "--method frf uses no model")
 
 
-def _update(args: argparse.Namespace, model: Any, r_dev: np.ndarray, fs: float,
-            band: tuple[float, float], u0: float, y0: float
-            ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
-    """Drive-file iteration from a run: (drive deviation, extra columns, sidecar part)."""
-    from ehss.compensation import update_drive
+def _one_shot(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
+              band: tuple[float, float], checks: dict[str, Any]) -> Any:
+    """The library's compensation, kept even when a check fails (:func:`run` decides)."""
+    from ehss.compensation import compensation
+
+    return compensation(model, r, fs=fs, method=args.method, band_hz=band,
+                        offsets=None if args.ignore_offsets else "model", fade_s=args.fade,
+                        force=True, **checks)
+
+
+def _iterated(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
+              band: tuple[float, float], checks: dict[str, Any]) -> tuple[Any, dict, dict]:
+    """A drive-file iteration step: the library's, kept even when a check fails."""
+    from ehss.compensation import corrected_drive, model_offsets
+    from ehss.compensation.rates import rate_factor
     from ehss.io import read_columns, sample_rate
 
+    rate_factor(fs, model.dt)  # the model's rate, or a decimated one: DataError if not
     run_table = read_columns(args.update, [args.drive_column, args.output_column],
                              time_column=args.time_column)
     run_fs = sample_rate(run_table, args.fs)
@@ -298,16 +224,17 @@ def _update(args: argparse.Namespace, model: Any, r_dev: np.ndarray, fs: float,
                         f"{fs:g} Hz")
     u = np.asarray(run_table[args.drive_column], dtype=float)
     y = np.asarray(run_table[args.output_column], dtype=float)
-    if u.size != r_dev.size or y.size != r_dev.size:
-        raise DataError(f"{args.update!r} has {u.size} samples, the reference {r_dev.size}")
+    if u.size != r.size or y.size != r.size:
+        raise DataError(f"{args.update!r} has {u.size} samples, the reference {r.size}")
+    offsets = None if args.ignore_offsets else "model"
     state, log = None, []
     if args.previous is not None:
-        state, log = _previous(args.previous, u, u0)
+        state, log = _previous(args.previous, u, model_offsets(model, offsets)[0])
     method = "frf" if args.method == "frf" else "model"
-    step = update_drive(r_dev, u - u0, y - y0, fs=fs, model=model, method=method,
-                        inverse_method="stable" if method == "frf" else args.method,
-                        band_hz=band, gain=args.gain, state=state,
-                        reidentify=args.reidentify)
+    result, step = corrected_drive(
+        model, r, u, y, fs=fs, offsets=offsets, fade_s=args.fade, force=True, checks=checks,
+        method=method, inverse_method="stable" if method == "frf" else args.method,
+        band_hz=band, gain=args.gain, state=state, reidentify=args.reidentify)
     entry = {"run": str(args.update), **step.record.to_dict(), "accepted": step.accepted,
              "gain_next": step.gain, "decision": step.message}
     log = [*log, entry]
@@ -322,15 +249,105 @@ def _update(args: argparse.Namespace, model: Any, r_dev: np.ndarray, fs: float,
     }, "update": {"run": str(args.update), "gain": step.gain,
                   "rms_error_of_run": step.record.rms_error}}
     if step.stopped:
-        return step.drive, {}, extra
-    columns = {"base_drive": u0 + st.base_drive, "correction": st.correction}
-    return step.drive, columns, extra
+        return result, {}, extra
+    u0 = result.offsets[0]
+    return result, {"base_drive": u0 + st.base_drive, "correction": st.correction}, extra
+
+
+def run(args: argparse.Namespace) -> int:
+    from ehss._provenance import versions
+    from ehss.cli._dataargs import write_outputs
+    from ehss.identification.model import ArmaxModel
+    from ehss.io import read_columns, sample_rate, table_writers
+
+    _check_flags(args)
+    model = ArmaxModel.load_json(args.model)
+    band = _band(args, model)
+    loop, params = _rig(args)
+    checks = {"max_gain": args.max_gain, "min_gain": args.min_gain, "limits": _limits(args),
+              "loop": loop, "params": params}
+    table = read_columns(args.reference, [args.column], time_column=args.time_column)
+    fs = sample_rate(table, args.fs)
+    r = np.asarray(table[args.column], dtype=float)
+    if args.update is None:
+        result = _one_shot(args, model, r, fs, band, checks)
+        columns, extra = {}, {"iteration": {"log": [], "gain": None}}
+    else:
+        result, columns, extra = _iterated(args, model, r, fs, band, checks)
+    if result.failed_check is not None and not args.force:
+        hint = ("--max-gain/--min-gain or --force" if "reference's (bound" in
+                result.failed_check else "--force")
+        raise ParameterError(f"{result.failed_check} (nothing written; {hint} to override)")
+    sidecar = _sidecar(args, model, result, band, checks, versions())
+    out = Path(args.out)
+    t = table.time if table.time is not None else np.arange(r.size) / fs
+    cols = {"t": t, "reference": result.reference, "drive": result.drive, **columns}
+    write_outputs(table_writers(out, cols, {**sidecar, **extra}))
+    _say(args, model, result, band, loop, out)
+    return 0
+
+
+def _sidecar(args: argparse.Namespace, model: Any, result: Any, band: tuple[float, float],
+             checks: dict[str, Any], versions: dict[str, Any]) -> dict[str, Any]:
+    q, limits = result.decimation, checks["limits"]
+    u0, y0 = result.offsets
+    return {
+        "what": f"{args.method} inverse-model drive",
+        "model": str(args.model),
+        "reference": str(args.reference),
+        "column": args.column,
+        "fs_hz": result.fs,
+        "model_fs_hz": 1.0 / model.dt,
+        "resampled": (None if q == 1 else
+                      f"model at fs/{q}: the inverse ran at its rate between polyphase "
+                      "resampling (ehss.compensation.rates)"),
+        "outside_band": ("reference: outside band_hz the drive is the reference itself"
+                         if args.update is None else
+                         "the update's correction is limited to band_hz (Q-filter)"),
+        "method": args.method,
+        "band_hz": list(band),
+        "band_from": "--band" if args.band is not None else "model band_hz",
+        "fade_s": args.fade,
+        "offsets_applied": (None if args.ignore_offsets or model.offsets is None
+                            else {"input": u0, "output": y0}),
+        "checks": {"forced": bool(args.force),
+                   "failed": result.failed_check,
+                   "figures": None if result.check is None else result.check.to_dict(),
+                   "limits": None if limits is None else {
+                       "max_abs": limits.max_abs, "max_rate": limits.max_rate,
+                       "max_rate2": limits.max_rate2},
+                   "loop": checks["loop"],
+                   "rig": None if checks["params"] is None else checks["params"].name},
+        "warnings": list(result.warnings),
+        "units": "drive and reference in the units of the model's input and output",
+        "versions": versions,
+    }
+
+
+def _say(args: argparse.Namespace, model: Any, result: Any, band: tuple[float, float],
+         loop: str | None, out: Path) -> None:
+    """Format the result: warnings on stderr, one summary line on stdout."""
+    import sys
+
+    for text in result.warnings:
+        print(f"ehss compensate: warning: {text}", file=sys.stderr)
+    if result.failed_check is not None:
+        print(f"ehss compensate: warning: --force: {result.failed_check}")
+    if loop is None:
+        print("ehss compensate: note: the drive was not checked against a rig's limits; "
+              "give --loop L (with --params/--preset, the default preset otherwise) to "
+              "check it as `ehss simulate` will", file=sys.stderr)
+    q, chk = result.decimation, result.check
+    rate = "" if q == 1 else f" (model at fs/{q}, {1.0 / model.dt:g} Hz)"
+    gains = ("" if chk is None else
+             f"; drive/reference gain rms {chk.rms_gain:.3g}, peak {chk.peak_gain:.3g}")
+    print(f"{out}: {result.drive.size} samples at {result.fs:g} Hz{rate}, {args.method} "
+          f"inverse within {band[0]:g}-{band[1]:g} Hz{gains}")
 
 
 def _previous(path: str, played: np.ndarray, u0: float) -> tuple[Any, list]:
     """Iteration state of a drive file written by this command, checked against the run."""
-    from ehss.compensation import IterationState
-    from ehss.io import read_columns
+    from ehss.io import read_columns, read_metadata
 
     table = read_columns(path)
     if "drive" not in table.columns:
@@ -339,21 +356,41 @@ def _previous(path: str, played: np.ndarray, u0: float) -> tuple[Any, list]:
     if drive.size != played.size or not np.allclose(drive, played, rtol=1e-9,
                                                      atol=1e-12 * np.max(np.abs(drive))):
         raise DataError(f"the run did not play {path!r}: its drive differs from the file's")
-    side = Path(path).with_suffix(".json")
+    # the metadata travels with the table: the JSON sidecar of a CSV, inside the others
     try:
-        doc = json.loads(side.read_text())
-        it = doc.get("iteration") or {}
-        log = list(it.get("log") or [])
-    except (OSError, ValueError, AttributeError):
-        raise DataError(f"cannot read the sidecar {str(side)!r} of the previous drive "
-                        "file") from None
-    if "base_drive" not in table.columns or it.get("gain") is None:
-        return None, log  # a one-shot drive: nothing to compare with yet
-    state = IterationState(base_drive=np.asarray(table["base_drive"], float) - u0,
-                           correction=np.asarray(table["correction"], float),
-                           gain=float(it["gain"]), base_rms_error=float(it["base_rms_error"]),
-                           halvings=int(it.get("halvings", 0)))
-    return state, log
+        doc = read_metadata(path)
+    except (OSError, ValueError) as exc:
+        raise DataError(f"cannot read the metadata of the previous drive file {path!r}: "
+                        f"{exc}") from None
+    it = doc.get("iteration") if isinstance(doc, dict) else None
+    if not isinstance(it, dict) or not isinstance(it.get("log", []), list):
+        raise DataError(f"the previous drive file {path!r} carries no iteration record "
+                        "(field 'iteration' with its 'log'): not a drive file of this command")
+    log = list(it.get("log") or [])
+    if "base_drive" not in table.columns:
+        return None, log  # a one-shot drive (or the best one handed back): nothing to compare
+    return _state(path, table, it, u0), log
+
+
+def _state(path: str, table: Any, it: dict[str, Any], u0: float) -> Any:
+    """The iteration state a previous drive file records; DataError naming the file and the
+    field when it is missing or edited beyond what an update leaves."""
+    from ehss.compensation import IterationState
+
+    if "correction" not in table.columns:
+        raise DataError(f"the previous drive file {path!r} has 'base_drive' but no "
+                        "'correction' column")
+    for key in ("gain", "base_rms_error"):
+        if key not in it:
+            raise DataError(f"the previous drive file {path!r}: field 'iteration.{key}' is "
+                            "missing")
+    try:
+        return IterationState(base_drive=np.asarray(table["base_drive"], float) - u0,
+                              correction=np.asarray(table["correction"], float),
+                              gain=it["gain"], base_rms_error=it["base_rms_error"],
+                              halvings=it.get("halvings", 0))
+    except (ParameterError, DataError) as exc:
+        raise DataError(f"the previous drive file {path!r}: iteration {exc}") from None
 
 
 def run_demo(args: argparse.Namespace) -> int:

@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from ehss.experiments import ProgrammeSettings, run_programme
     from ehss.experiments.pool import PROGRAMME_STRANDS, default_jobs, process_pool
     from ehss.params import load_params, preset
-    from ehss.report import write_report
+    from ehss.report import compensation_file, write_report
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -104,6 +104,13 @@ def run(args: argparse.Namespace) -> int:
                 f"{'':>12}  {p.label}: {p.error.max_magnitude_db:.2f} dB, "
                 f"{p.error.max_phase_deg:.2f} deg, fit {_pct(p.fit_pct)} % -> meets acceptance"
             )
+    for name, demo in result.compensation.items():
+        band = demo.compensation_model.band_hz
+        where = "no validated band" if band is None else f"band {band[0]:g}-{band[1]:g} Hz"
+        gain = demo.rms_error_without["random"] / demo.one_shot_rms_error["random"]
+        lines.append(f"{name:>12}: compensate with {out / compensation_file(name)} "
+                     f"({where}; one shot {gain:.0f}x less RMS error on the demonstration's "
+                     "random reference)")
     print("\n".join(lines))
     print(f"report: {html_path}")
     sys.stdout.flush()

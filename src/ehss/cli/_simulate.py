@@ -21,7 +21,8 @@ from ehss.cli._params import warn_if_unstable
 from ehss.errors import ParameterError
 from ehss.params import GRAVITY_M_S2, PRESETS, RigParams, load_params, params_to_dict, preset
 
-__all__ = ["register", "run", "SIGNALS", "DEFAULT_AMPLITUDE", "DEFAULT_BAND_HZ"]
+__all__ = ["register", "run", "seed_argument", "SIGNALS", "DEFAULT_AMPLITUDE",
+           "DEFAULT_BAND_HZ"]
 
 SIGNALS = ("step", "sine", "random", "sweep", "multisine")
 #: Default size of a test per loop (SI units: m, m/s², N).
@@ -30,6 +31,17 @@ DEFAULT_AMPLITUDE = {"position": 1.0e-3, "acceleration": 0.05 * GRAVITY_M_S2, "f
 DEFAULT_BAND_HZ = {"position": (1.0, 20.0), "acceleration": (1.0, 50.0), "force": (1.0, 20.0)}
 _LONG_RUN_S = 2.0  # show a progress indicator when the run should take longer than this
 _EXPECTED_REAL_TIME_FACTOR = 400.0
+
+
+def seed_argument(text: str) -> int:
+    """The value of a ``--seed`` option: a whole number >= 0 (what numpy seeds with)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} must be a whole number >= 0 (a seed)")
+    return value
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -66,8 +78,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="length of a generated signal (default: %(default)s s)")
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="control rate (default: the parameter set's, or the file's t column)")
-    p.add_argument("--seed", type=int, default=0,
-                   help="seed of the signal and the sensor noise (default: %(default)s)")
+    p.add_argument("--seed", type=seed_argument, default=0,
+                   help="seed of the signal and the sensor noise, >= 0 (default: "
+                   "%(default)s)")
     par = p.add_mutually_exclusive_group()
     par.add_argument("--params", metavar="FILE.toml", type=InputFile,
                      help="(partial) TOML parameter file")
@@ -129,10 +142,12 @@ def run(args: argparse.Namespace) -> int:
         kind = getattr(sig, "kind", args.signal)
         settings = dict(getattr(sig, "settings", {}) or {})
 
+    from ehss.compensation.checks import check_rig
     from ehss.simulation import simulate, with_control_rate
 
     checked = with_control_rate(params, fs)  # fs must divide the internal rate: fail before work
-    _check_feasible(values, args.loop, checked, fs, step=kind == "step")
+    # the one check of what a loop plays, the one `ehss compensate --loop` applies to a drive
+    check_rig(values, args.loop, checked, fs, step=kind == "step")
     source = f"--params {args.params}" if args.params else f"--preset {args.preset}"
     warn_if_unstable("simulate", params, args.loop, source)
 
@@ -155,26 +170,6 @@ def run(args: argparse.Namespace) -> int:
         note = ", ".join(f"{k} {v:.1%}" for k, v in hits.items())
         print(f"ehss simulate: warning: the test hit a limit ({note})", file=sys.stderr)
     return 0
-
-
-def _check_feasible(values, loop: str, params: RigParams, fs: float, *, step: bool) -> None:
-    """Refuse a test that would leave the stroke, velocity or valve limits.
-
-    A position *step* asks for an infinite reference velocity by design (the loop and the
-    valve limit the actual one), so for it only the stroke is checked.
-    """
-    from ehss.signals import STROKE_MARGIN, check_feasible
-
-    if step and loop == "position":
-        stroke = STROKE_MARGIN * params.actuator.stroke_m
-        peak = float(np.max(np.abs(values)))
-        if peak > stroke:
-            raise ParameterError(
-                f"position step to {peak:.4g} m exceeds {STROKE_MARGIN:.0%} of the stroke "
-                f"({stroke:.4g} m of actuator.stroke_m={params.actuator.stroke_m!r})"
-            )
-        return
-    check_feasible(values, loop, params, fs)
 
 
 def _metadata(result, kind: str, settings: dict[str, Any]) -> dict[str, Any]:

@@ -17,18 +17,25 @@ from __future__ import annotations
 from ehss.compensation.apply import (
     OUTSIDE_BAND,
     OUTSIDE_SHARE_WARN,
+    Compensation,
     apply_inverse,
     as_reference,
     compensate,
+    compensation,
+    model_offsets,
+    outside_band_note,
     warn_if_outside_band,
 )
 from ehss.compensation.checks import (
     DEFAULT_MAX_GAIN,
+    DEFAULT_MIN_GAIN,
     REST_TOLERANCE,
     DriveCheck,
     DriveLimits,
     check_at_rest,
     check_drive,
+    check_rig,
+    checked_drive,
     fade_to_rest,
 )
 from ehss.compensation.inverse import (
@@ -46,6 +53,7 @@ from ehss.compensation.iteration import (
     DriveUpdate,
     IterationState,
     RunRecord,
+    corrected_drive,
     lag_samples,
     learning_gain,
     run_record,
@@ -54,6 +62,13 @@ from ehss.compensation.iteration import (
 
 __all__ = [
     "compensate",
+    "compensation",
+    "Compensation",
+    "model_offsets",
+    "outside_band_note",
+    "DEFAULT_MIN_GAIN",
+    "check_rig",
+    "checked_drive",
     "apply_inverse",
     "warn_if_outside_band",
     "OUTSIDE_SHARE_WARN",
@@ -75,6 +90,7 @@ __all__ = [
     "zmetc_phase",
     "zpetc_magnitude",
     "UPDATE_METHODS",
+    "corrected_drive",
     "DriveUpdate",
     "IterationState",
     "RunRecord",

@@ -4,20 +4,30 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ehss._checks import as_signal
-from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_at_rest, check_drive
+from ehss.compensation.checks import (
+    DEFAULT_MAX_GAIN,
+    DEFAULT_MIN_GAIN,
+    DriveCheck,
+    DriveLimits,
+    check_at_rest,
+    checked_drive,
+    fade_to_rest,
+)
 from ehss.compensation.inverse import InverseModel, design_inverse
 from ehss.compensation.inverse_model import _fft_band_limit
 from ehss.compensation.rates import RATE_RTOL, rate_factor, to_model_rate, to_record_rate
 from ehss.errors import EhssWarning, ParameterError
 from ehss.identification.model import ArmaxModel
 
-__all__ = ["compensate", "apply_inverse", "OUTSIDE_BAND", "OUTSIDE_SHARE_WARN", "as_reference",
-           "warn_if_outside_band"]
+__all__ = ["compensate", "compensation", "Compensation", "apply_inverse", "OUTSIDE_BAND",
+           "OUTSIDE_SHARE_WARN", "as_reference", "outside_band_note", "warn_if_outside_band",
+           "model_offsets"]
 
 #: What a drive holds outside the inverse's band limit (:func:`apply_inverse`).
 OUTSIDE_BAND = ("reference", "zero")
@@ -112,6 +122,176 @@ def apply_inverse(
     return drive
 
 
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Compensation:
+    """A checked drive and everything that made it (:func:`compensation`).
+
+    Attributes
+    ----------
+    drive : ndarray, shape (n_samples,)
+        The drive to play, with the operating point: ``u0 + F (r − y0)``.
+    reference : ndarray, shape (n_samples,)
+        The reference it was computed for, as compensated (faded when asked), with its
+        operating point.
+    fs : float
+        Sample rate of both (Hz).
+    inverse : InverseModel or None
+        The inverse ``F`` (band limit ``inverse.band_hz``); None for a drive made
+        otherwise (a drive-file iteration's update, checked alike).
+    check : DriveCheck or None
+        The drive's checks; None when a check failed and ``force`` kept the drive.
+    failed_check : str or None
+        The failed check's message when ``force`` kept the drive.
+    warnings : tuple of str
+        What the caller should be told (e.g. most of the reference outside the band).
+    offsets : (float, float)
+        The operating point ``(u0, y0)`` applied ((0, 0) for none).
+    decimation : int
+        Reference rate / model rate (1: the inverse ran at the reference's rate).
+    """
+
+    drive: np.ndarray = field(repr=False)
+    reference: np.ndarray = field(repr=False)
+    fs: float
+    inverse: InverseModel | None = field(repr=False)
+    check: DriveCheck | None
+    failed_check: str | None
+    warnings: tuple[str, ...]
+    offsets: tuple[float, float]
+    decimation: int
+
+
+def model_offsets(model: Any, offsets: Any = "model") -> tuple[float, float]:
+    """The operating point ``(u0, y0)`` a compensation applies.
+
+    ``"model"``: the model's own (``ArmaxModel.offsets``, written by ``ehss identify``;
+    (0, 0) when it carries none or is an :class:`InverseModel`); None: (0, 0); or a pair.
+    """
+    if isinstance(offsets, str) and offsets == "model":
+        own = getattr(model, "offsets", None)
+        return (0.0, 0.0) if own is None else (float(own[0]), float(own[1]))
+    if offsets is None:
+        return (0.0, 0.0)
+    try:
+        u0, y0 = (float(x) for x in offsets)
+    except (TypeError, ValueError):
+        raise ParameterError(f"offsets={offsets!r} must be 'model', None or a pair "
+                             "(u0, y0)") from None
+    if not (math.isfinite(u0) and math.isfinite(y0)):
+        raise ParameterError(f"offsets={offsets!r} must be finite")
+    return u0, y0
+
+
+def _inverse(model: Any, rate: float, *, method: str, band_hz: Any, known: Any
+             ) -> InverseModel:
+    """The inverse to apply: the one given, or designed in the model's validated band."""
+    if not isinstance(model, (InverseModel, ArmaxModel)):
+        raise TypeError(f"model must be an ArmaxModel or an InverseModel, not "
+                        f"{type(model).__name__}")
+    rate_factor(rate, model.dt)  # a rate the model can be applied at, or DataError now
+    if isinstance(model, InverseModel):
+        return model
+    if band_hz is None and model.band_hz is None:
+        raise ParameterError(
+            "the model carries no validated band (band_hz): give band_hz (e.g. the band "
+            "where its validation's coherence was high); without a band limit the "
+            "inverse amplifies everything the model never saw")
+    return design_inverse(model, method=method, band_hz=band_hz, known=known)
+
+
+def compensation(
+    model: ArmaxModel | InverseModel,
+    reference: Any,
+    *,
+    fs: float | None = None,
+    method: str = "stable",
+    band_hz: tuple[float, float] | None = None,
+    preview: int | None = None,
+    known: tuple[Any, Any] | None = None,
+    offsets: Any = "model",
+    fade_s: float | None = None,
+    max_gain: float | None = DEFAULT_MAX_GAIN,
+    min_gain: float | None = DEFAULT_MIN_GAIN,
+    limits: DriveLimits | None = None,
+    loop: str | None = None,
+    params: Any = None,
+    require_rest: bool = True,
+    outside_band: str = "reference",
+    force: bool = False,
+) -> Compensation:
+    """The checked drive that makes the identified closed loop follow ``reference``.
+
+    One sequence, the one ``ehss compensate`` runs: the inverse designed inside the
+    model's validated band, the reference taken about the model's operating point and
+    (optionally) faded to rest, the inverse applied at the model's rate, and the drive
+    checked (gain from above and below, explicit and rig limits) before it is returned:
+    ``drive = u0 + F (r − y0)``.
+
+    Parameters
+    ----------
+    model : ArmaxModel or InverseModel
+        The identified closed loop (reference → measured output), or an already designed
+        inverse.
+    reference : ehss.signals.Signal, or array_like of shape (n_samples,) with ``fs``
+        Desired output history (with the operating point, when the model carries one),
+        at the model's rate or an integer multiple of it (see
+        :mod:`ehss.compensation.rates`).
+    fs : float, optional
+        Sample rate of an array reference (Hz).
+    method : {"stable", "zpetc", "zmetc"}
+        Inverse design (:mod:`ehss.compensation.inverse`).
+    band_hz : (lo, hi), optional
+        Band limit of the inverse (Hz). Default the model's validated band.
+    preview : int, optional
+        Future samples usable (ZPETC, ZMETC), at the model's rate.
+    known : (num, den), optional
+        Known factor in series with the model.
+    offsets : "model", None or (u0, y0)
+        Operating point (:func:`model_offsets`): by default the model's own.
+    fade_s : float, optional
+        Fade the reference (about ``y0``) in and out over this many seconds.
+    max_gain, min_gain, limits, loop, params
+        Drive checks (:func:`~ehss.compensation.checks.check_drive`); None switches a
+        gain bound off.
+    require_rest : bool
+        Refuse a reference that does not start and end at rest (after the fade).
+    outside_band : {"reference", "zero"}
+        What the drive holds outside the band limit (:func:`apply_inverse`).
+    force : bool
+        Keep a drive that fails its checks (``failed_check`` says which); a drive that is
+        not finite is refused all the same.
+
+    Returns
+    -------
+    Compensation
+
+    Raises
+    ------
+    DataError
+        Bad samples, or a sample rate that is not an integer multiple of the model's.
+    ParameterError
+        No band, an unusable model, a reference not at rest, a drive that is not finite,
+        or (without ``force``) one that fails its checks (the message gives the numbers).
+    """
+    r, rate = as_reference(reference, fs)
+    inverse = _inverse(model, rate, method=method, band_hz=band_hz, known=known)
+    u0, y0 = model_offsets(model, offsets)
+    r_dev = r - y0
+    if fade_s is not None:
+        r_dev = fade_to_rest(r_dev, rate, fade_s)
+    if require_rest:
+        check_at_rest(r_dev)
+    drive_dev = apply_inverse(inverse, r_dev, rate, preview=preview, outside_band=outside_band)
+    note = outside_band_note(r_dev, rate, inverse, outside_band)
+    check, failure = checked_drive(drive_dev, r_dev, rate, force=force, max_gain=max_gain,
+                                   min_gain=min_gain, limits=limits, loop=loop,
+                                   params=params, drive_offset=u0)
+    return Compensation(drive=u0 + drive_dev, reference=r_dev + y0, fs=rate, inverse=inverse,
+                        check=check, failed_check=failure,
+                        warnings=() if note is None else (note,), offsets=(u0, y0),
+                        decimation=rate_factor(rate, inverse.dt))
+
+
 def compensate(
     model: ArmaxModel | InverseModel,
     reference: Any,
@@ -122,46 +302,26 @@ def compensate(
     preview: int | None = None,
     known: tuple[Any, Any] | None = None,
     max_gain: float | None = DEFAULT_MAX_GAIN,
+    min_gain: float | None = DEFAULT_MIN_GAIN,
     limits: DriveLimits | None = None,
     loop: str | None = None,
     params: Any = None,
     require_rest: bool = True,
     outside_band: str = "reference",
+    offsets: Any = "model",
 ) -> np.ndarray:
     """Drive that makes the identified closed loop follow ``reference``, checked.
 
+    :func:`compensation`'s drive, its warnings emitted as
+    :class:`~ehss.errors.EhssWarning`: ``drive = u0 + F (r − y0)`` with the model's
+    operating point ``(u0, y0)`` (none for a model that carries none).
+
     Parameters
     ----------
-    model : ArmaxModel or InverseModel
-        The identified closed loop (reference → measured output), or an already designed
-        inverse.
-    reference : ehss.signals.Signal, or array_like of shape (n_samples,) with ``fs``
-        Desired output history about the model's operating point, at the model's rate or
-        an integer multiple of it (a model from a decimated record: the inverse then runs
-        at the model's rate, see :mod:`ehss.compensation.rates`).
-    fs : float, optional
-        Sample rate of an array reference (Hz).
-    method : {"stable", "zpetc", "zmetc"}
-        Inverse design (see :mod:`ehss.compensation.inverse`); stable inversion, exact in
-        the band, is the default.
-    band_hz : (lo, hi), optional
-        Band limit of the inverse (Hz). Default: the band the model was validated over,
-        ``model.band_hz``; a model without one needs ``band_hz``.
-    preview : int, optional
-        Future samples usable (ZPETC, ZMETC), at the model's rate; ``None`` = the whole
-        file is known.
-    known : (num, den), optional
-        Known factor in series with the model (see
-        :func:`~ehss.compensation.inverse.design_inverse_tf`).
-    max_gain, limits, loop, params
-        Drive checks (:func:`~ehss.compensation.checks.check_drive`); ``max_gain=None``
-        switches the gain check off.
-    require_rest : bool
-        Refuse a reference that does not start and end at rest
-        (:func:`~ehss.compensation.checks.check_at_rest`; default).
-    outside_band : {"reference", "zero"}
-        What the drive holds outside the band limit (:func:`apply_inverse`): the
-        reference itself, uncompensated (default), or nothing.
+    model, reference, fs, method, band_hz, preview, known, offsets
+        As for :func:`compensation`.
+    max_gain, min_gain, limits, loop, params, require_rest, outside_band
+        As for :func:`compensation`.
 
     Returns
     -------
@@ -184,31 +344,13 @@ def compensate(
     >>> bool(np.allclose(m.simulate(u), r, rtol=0, atol=1e-9))
     True
     """
-    r, rate = as_reference(reference, fs)
-    if isinstance(model, InverseModel):
-        inverse = model
-        dt = model.dt
-    elif isinstance(model, ArmaxModel):
-        dt = model.dt
-    else:
-        raise TypeError(f"model must be an ArmaxModel or an InverseModel, not "
-                        f"{type(model).__name__}")
-    rate_factor(rate, dt)  # a rate the model can be applied at, or DataError now
-    if isinstance(model, ArmaxModel):
-        if band_hz is None and model.band_hz is None:
-            raise ParameterError(
-                "the model carries no validated band (band_hz): give band_hz (e.g. the band "
-                "where its validation's coherence was high); without a band limit the "
-                "inverse amplifies everything the model never saw")
-        inverse = design_inverse(model, method=method, band_hz=band_hz, known=known)
-    if require_rest:
-        check_at_rest(r)
-    drive = apply_inverse(inverse, r, rate, preview=preview, outside_band=outside_band)
-    warn_if_outside_band(r, rate, inverse, outside_band)
-    if not np.all(np.isfinite(drive)):
-        raise ParameterError("the compensated drive is not finite (badly conditioned model)")
-    check_drive(drive, r, rate, max_gain=max_gain, limits=limits, loop=loop, params=params)
-    return drive
+    result = compensation(model, reference, fs=fs, method=method, band_hz=band_hz,
+                          preview=preview, known=known, offsets=offsets, max_gain=max_gain,
+                          min_gain=min_gain, limits=limits, loop=loop, params=params,
+                          require_rest=require_rest, outside_band=outside_band)
+    for text in result.warnings:
+        warnings.warn(text, EhssWarning, stacklevel=2)
+    return result.drive
 
 
 #: Share of the reference's power outside the inverse's band above which
@@ -216,23 +358,31 @@ def compensate(
 OUTSIDE_SHARE_WARN = 0.1
 
 
-def warn_if_outside_band(r: np.ndarray, fs: float, inverse: InverseModel,
-                         outside_band: str = "reference") -> None:
-    """Warn (:class:`~ehss.errors.EhssWarning`) when more than
-    :data:`OUTSIDE_SHARE_WARN` of the power of the reference ``r`` (at ``fs``) lies
-    outside the band the inverse acts on: there the drive is the reference itself
-    (``outside_band="reference"``) or nothing, not compensated."""
+def outside_band_note(r: np.ndarray, fs: float, inverse: InverseModel,
+                      outside_band: str = "reference") -> str | None:
+    """What to tell when more than :data:`OUTSIDE_SHARE_WARN` of the power of the
+    reference ``r`` (at ``fs``, about the operating point) lies outside the band the
+    inverse acts on: there the drive is the reference itself
+    (``outside_band="reference"``) or nothing, not compensated. None otherwise."""
     total = float(np.sum(np.square(r - np.mean(r))))
     if not total > 0.0:
-        return
+        return None
     inside = _fft_band_limit(r - np.mean(r), 1.0 / fs, inverse.band_hz, inverse.cutoff_hz)
     share = 1.0 - float(np.sum(np.square(inside))) / total
-    if share > OUTSIDE_SHARE_WARN:
-        lo, hi = inverse.band_hz
-        there = ("the drive is the reference itself there, uncompensated"
-                 if outside_band == "reference" else "the drive holds nothing of it")
-        warnings.warn(
-            f"{100 * share:.0f} % of the reference's power lies outside the band "
+    if share <= OUTSIDE_SHARE_WARN:
+        return None
+    lo, hi = inverse.band_hz
+    there = ("the drive is the reference itself there, uncompensated"
+             if outside_band == "reference" else "the drive holds nothing of it")
+    return (f"{100 * share:.0f} % of the reference's power lies outside the band "
             f"{lo:g}-{hi:g} Hz the inverse acts on (the model's validated band unless "
             f"given); {there}. Identify the loop on a record whose validation covers the "
-            "reference's band, or give the band", EhssWarning, stacklevel=3)
+            "reference's band, or give the band")
+
+
+def warn_if_outside_band(r: np.ndarray, fs: float, inverse: InverseModel,
+                         outside_band: str = "reference") -> None:
+    """Warn (:class:`~ehss.errors.EhssWarning`) with :func:`outside_band_note`."""
+    note = outside_band_note(r, fs, inverse, outside_band)
+    if note is not None:
+        warnings.warn(note, EhssWarning, stacklevel=3)

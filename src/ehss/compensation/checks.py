@@ -12,9 +12,17 @@ such a drive with the numbers instead of letting it reach a rig:
   has most of its power below that edge. A drive 3× the reference's RMS (+9.5 dB across
   the reference's whole spectrum) therefore means the inverse amplifies where the model
   says the loop attenuates by 10 dB or more, i.e. outside what the model can be trusted
-  for: :data:`DEFAULT_MAX_GAIN` = 3, applied to both the RMS and the peak ratio.
+  for: :data:`DEFAULT_MAX_GAIN` = 3, applied to both the RMS and the peak ratio. The
+  same reasoning bounds it from below: a drive whose RMS is under 1/3 of the reference's
+  (−9.5 dB across the reference's whole spectrum) means the model says the loop
+  amplifies by 10 dB or more where it is used, which a closed servo loop does not do (unit
+  gain at DC; at its phase crossover a loop with the 6 dB gain margin ehss tunes for has
+  |T| ≤ 1/(1 − 1/2) = 2, +6 dB, and less elsewhere). Such a drive comes from a model whose
+  gain is wrong (a scale or unit error, huge B coefficients) and would leave the rig
+  nearly still: :data:`DEFAULT_MIN_GAIN` = 1/3 on the RMS ratio.
 * **Rig limits.** With a parameter set and the loop the drive is played into, the drive
-  must respect the same limits as any reference of that loop
+  must respect the same limits as any reference of that loop, :func:`check_rig`, the
+  one check ``ehss simulate`` applies to what it plays
   (:func:`ehss.signals.check_feasible`: stroke, velocity, the acceleration loop's
   acceleration and generated motion, force); a drive for the open loop (``"valve"``)
   must stay within the valve's full-scale command. Explicit :class:`DriveLimits` bound
@@ -37,16 +45,22 @@ from ehss.errors import ParameterError
 
 __all__ = [
     "DEFAULT_MAX_GAIN",
+    "DEFAULT_MIN_GAIN",
     "REST_TOLERANCE",
     "DriveLimits",
     "DriveCheck",
     "check_drive",
+    "check_rig",
+    "checked_drive",
     "check_at_rest",
     "fade_to_rest",
 ]
 
 #: Default bound on the drive-to-reference RMS and peak ratios (see the module notes).
 DEFAULT_MAX_GAIN = 3.0
+
+#: Default lower bound on the drive-to-reference RMS ratio (see the module notes).
+DEFAULT_MIN_GAIN = 1.0 / DEFAULT_MAX_GAIN
 
 #: A reference is at rest at an end when it is within this fraction of its peak of zero.
 REST_TOLERANCE = 0.01
@@ -99,6 +113,8 @@ class DriveCheck:
         ``rms(drive) / rms(reference)`` and ``max|drive| / max|reference|``.
     max_gain : float or None
         The bound they were held to (None: not checked).
+    min_gain : float or None
+        The lower bound ``rms_gain`` was held to (None: not checked).
     peak_abs, peak_rate, peak_rate2 : float
         Peak of ``|u0 + u|``, ``|du/dt|`` and ``|d²u/dt²|`` (finite differences).
     rig : dict
@@ -108,6 +124,7 @@ class DriveCheck:
     rms_gain: float
     peak_gain: float
     max_gain: float | None
+    min_gain: float | None = None
     peak_abs: float
     peak_rate: float
     peak_rate2: float
@@ -116,7 +133,7 @@ class DriveCheck:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready figures."""
         return {"rms_gain": self.rms_gain, "peak_gain": self.peak_gain,
-                "max_gain": self.max_gain, "peak_abs": self.peak_abs,
+                "max_gain": self.max_gain, "min_gain": self.min_gain, "peak_abs": self.peak_abs,
                 "peak_rate": self.peak_rate, "peak_rate2": self.peak_rate2,
                 "rig": dict(self.rig)}
 
@@ -131,6 +148,7 @@ def check_drive(
     fs: float,
     *,
     max_gain: float | None = DEFAULT_MAX_GAIN,
+    min_gain: float | None = DEFAULT_MIN_GAIN,
     limits: DriveLimits | None = None,
     loop: str | None = None,
     params: Any = None,
@@ -147,6 +165,9 @@ def check_drive(
     max_gain : float or None
         Bound on the RMS and peak ratios drive/reference (:data:`DEFAULT_MAX_GAIN`;
         None: not checked).
+    min_gain : float or None
+        Lower bound on the RMS ratio drive/reference (:data:`DEFAULT_MIN_GAIN`; None: not
+        checked).
     limits : DriveLimits, optional
         Explicit bounds.
     loop : {"position", "acceleration", "force", "valve"}, optional
@@ -177,6 +198,7 @@ def check_drive(
             and fs > 0):
         raise ParameterError(f"fs={fs!r} must be a finite number > 0")
     max_gain = _optional_positive("max_gain", max_gain)
+    min_gain = _optional_positive("min_gain", min_gain)
     if limits is not None and not isinstance(limits, DriveLimits):
         raise TypeError(f"limits must be a DriveLimits, not {type(limits).__name__}")
     if (loop is None) != (params is None):
@@ -202,31 +224,124 @@ def check_drive(
                     f"the drive's {what} is {value:.3g}× the reference's (bound {max_gain:g}×): "
                     "the inverse amplifies where the model is not to be trusted; narrow the "
                     "band or re-identify")
+    if min_gain is not None and rms_gain < min_gain:
+        raise ParameterError(
+            f"the drive's RMS is {rms_gain:.3g}× the reference's (bound {min_gain:.3g}×): the "
+            "model says the loop amplifies the reference by 10 dB or more, which a closed "
+            "servo loop does not; check the model's gain (units, scale) or re-identify")
     if limits is not None:
         for name, value, bound in (("peak", peak_abs, limits.max_abs),
                                    ("peak rate", peak_rate, limits.max_rate),
                                    ("peak second derivative", peak_rate2, limits.max_rate2)):
             if bound is not None and value > bound:
                 raise ParameterError(f"drive {name} {value:.4g} exceeds the limit {bound:.4g}")
-    rig = {} if params is None else _check_rig(absolute, float(fs), loop, params)
+    rig = {} if params is None else check_rig(absolute, loop, params, float(fs), what="drive")
     return DriveCheck(rms_gain=rms_gain, peak_gain=peak_gain, max_gain=max_gain,
-                      peak_abs=peak_abs, peak_rate=peak_rate, peak_rate2=peak_rate2, rig=rig)
+                      min_gain=min_gain, peak_abs=peak_abs, peak_rate=peak_rate,
+                      peak_rate2=peak_rate2, rig=rig)
 
 
-def _check_rig(u: np.ndarray, fs: float, loop: str, params: Any) -> dict[str, float]:
-    from ehss.signals import check_feasible
+def check_rig(values: Any, loop: str, params: Any, fs: float, *, step: bool = False,
+              what: str | None = None) -> dict[str, float]:
+    """Refuse what a loop of the rig would be asked to play beyond its limits.
 
+    The one check of a played signal: ``ehss simulate`` applies it to its reference (a
+    drive file included) and :func:`check_drive` to a drive, so a drive that passes here
+    is played.
+
+    Parameters
+    ----------
+    values : array_like, shape (n_samples,)
+        The signal played (SI units of the loop; V for ``"valve"``), with its operating
+        point.
+    loop : {"position", "acceleration", "force", "valve"}
+    params : RigParams
+    fs : float
+        Sample rate (Hz).
+    step : bool
+        A position step asks for an infinite reference velocity by design (the loop and
+        the valve limit the actual one), so for it only the stroke is checked.
+    what : str, optional
+        Named at the start of the message (e.g. ``"drive"``).
+
+    Returns
+    -------
+    dict
+        The peaks checked.
+
+    Raises
+    ------
+    ParameterError
+        A limit is exceeded: the message gives the figure and the limit.
+    """
+    from ehss.signals import STROKE_MARGIN, check_feasible
+
+    u = np.asarray(values, dtype=np.float64)
+    prefix = "" if what is None else f"{what}: "
     if loop == "valve":
         full = float(params.valve.command_full_scale_v)
         peak = float(np.max(np.abs(u)))
         if peak > full:
-            raise ParameterError(f"drive peak valve command {peak:.4g} V exceeds "
+            raise ParameterError(f"{prefix}peak valve command {peak:.4g} V exceeds "
                                  f"valve.command_full_scale_v={full:.4g} V")
         return {"peak_command_v": peak}
+    if step and loop == "position":
+        stroke = STROKE_MARGIN * params.actuator.stroke_m
+        peak = float(np.max(np.abs(u)))
+        if peak > stroke:
+            raise ParameterError(
+                f"{prefix}position step to {peak:.4g} m exceeds {STROKE_MARGIN:.0%} of the "
+                f"stroke ({stroke:.4g} m of actuator.stroke_m={params.actuator.stroke_m!r})")
+        return {"peak_displacement_m": peak}
     try:
         return check_feasible(u, loop, params, fs)
     except ParameterError as exc:
-        raise ParameterError(f"drive: {exc}") from None
+        raise ParameterError(f"{prefix}{exc}") from None
+
+
+def checked_drive(
+    drive: np.ndarray,
+    reference: np.ndarray,
+    fs: float,
+    *,
+    force: bool = False,
+    **checks: Any,
+) -> tuple[DriveCheck | None, str | None]:
+    """:func:`check_drive` as a compensation applies it before a drive is written.
+
+    Parameters
+    ----------
+    drive, reference : ndarray, shape (n_samples,)
+        About the operating point.
+    fs : float
+    force : bool
+        Keep a drive that fails its checks: the failure is returned instead of raised.
+    **checks
+        ``max_gain``, ``min_gain``, ``limits``, ``loop``, ``params``, ``drive_offset``
+        of :func:`check_drive`.
+
+    Returns
+    -------
+    check : DriveCheck or None
+        None when a check failed (with ``force``).
+    failure : str or None
+        The failed check's message (with ``force``).
+
+    Raises
+    ------
+    ParameterError
+        A drive that is not finite (a badly conditioned model: never written, even with
+        ``force``), or, without ``force``, one that fails a check.
+    """
+    if not np.all(np.isfinite(drive)):
+        raise ParameterError("the compensated drive is not finite (a badly conditioned "
+                             "model?)")
+    try:
+        return check_drive(drive, reference, fs, **checks), None
+    except ParameterError as exc:
+        if not force:
+            raise
+        return None, str(exc)
 
 
 def check_at_rest(reference: Any, *, tolerance: float = REST_TOLERANCE) -> None:

@@ -44,7 +44,8 @@ import scipy.fft
 import scipy.signal
 
 from ehss._checks import as_signal
-from ehss.compensation.apply import apply_inverse
+from ehss.compensation.apply import Compensation, apply_inverse, model_offsets
+from ehss.compensation.checks import check_at_rest, checked_drive, fade_to_rest
 from ehss.compensation.inverse import design_inverse
 from ehss.compensation.inverse_model import InverseModel, _fft_band_limit, band_taper
 from ehss.compensation.rates import rate_factor
@@ -52,6 +53,7 @@ from ehss.errors import ParameterError
 from ehss.preprocess import decimate
 
 __all__ = [
+    "corrected_drive",
     "UPDATE_METHODS",
     "MAX_CONTRACTION",
     "MAX_HALVINGS",
@@ -197,6 +199,30 @@ class IterationState:
     gain: float
     base_rms_error: float
     halvings: int = 0
+
+    def __post_init__(self) -> None:
+        # a state read back from a drive file's metadata may have been edited: refuse
+        # what no update could have left
+        gain, base, halvings = self.gain, self.base_rms_error, self.halvings
+        if not (_is_real(gain) and 0.0 < gain < 2.0):
+            raise ParameterError(f"gain={gain!r} must be a number in (0, 2)")
+        if not (_is_real(base) and base >= 0.0):
+            raise ParameterError(f"base_rms_error={base!r} must be a finite number >= 0")
+        if isinstance(halvings, bool) or not isinstance(halvings, (int, np.integer)) or not (
+                0 <= halvings <= MAX_HALVINGS):
+            raise ParameterError(f"halvings={halvings!r} must be an integer in "
+                                 f"[0, {MAX_HALVINGS}]")
+        b = as_signal(self.base_drive, "base_drive")
+        c = as_signal(self.correction, "correction")
+        if b.size != c.size:
+            raise ParameterError(f"base_drive and correction differ in length ({b.size} != "
+                                 f"{c.size})")
+
+
+def _is_real(x: Any) -> bool:
+    """A finite real number (bools refused)."""
+    return (not isinstance(x, bool) and isinstance(x, (int, float, np.integer, np.floating))
+            and math.isfinite(x))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -465,3 +491,76 @@ def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, fs: float,
         return new, design_inverse(new, method=method, band_hz=band, known=known)
     except ParameterError:
         return model, inverse  # an unusable re-identification (e.g. unstable)
+
+
+# ------------------------------------------------------------------- checked iteration
+def corrected_drive(
+    model: Any,
+    reference: Any,
+    played: Any,
+    measured: Any,
+    *,
+    fs: float,
+    offsets: Any = "model",
+    fade_s: float | None = None,
+    force: bool = False,
+    checks: dict[str, Any] | None = None,
+    **update: Any,
+) -> tuple[Compensation, DriveUpdate]:
+    """One drive-file iteration run as :func:`~ehss.compensation.apply.compensation` runs
+    a one-shot drive: about the model's operating point, the reference faded and at rest,
+    the next drive checked before it is returned.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+        The closed-loop model (its ``offsets`` are the operating point by default).
+    reference, played, measured : array_like, shape (n_samples,)
+        Desired output, the drive that was played and the measured output, with their
+        operating points, at ``fs``.
+    fs : float
+    offsets : "model", None or (u0, y0)
+        As for :func:`~ehss.compensation.apply.compensation`.
+    fade_s : float, optional
+        Fade of the reference (about ``y0``), s.
+    force : bool
+        Keep a drive that fails its checks (``failed_check`` says which).
+    checks : dict, optional
+        ``max_gain``, ``min_gain``, ``limits``, ``loop``, ``params`` of
+        :func:`~ehss.compensation.checks.check_drive`. When the iteration stopped and
+        hands back the best drive (already played), the gain bounds are not applied again.
+    **update
+        :func:`update_drive`'s keywords (``method``, ``inverse_method``, ``band_hz``,
+        ``gain``, ``state``, ``reidentify``, ...).
+
+    Returns
+    -------
+    compensation : Compensation
+        The next drive (``inverse`` is the update's model inverse, or None for
+        ``method="frf"``).
+    update : DriveUpdate
+        The update's record, decision and state, about the operating point.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`update_drive`, a reference not at rest, a drive that is not finite,
+        or (without ``force``) one that fails its checks.
+    """
+    u0, y0 = model_offsets(model, offsets)
+    r_dev = as_signal(reference, "reference") - y0
+    if fade_s is not None:
+        r_dev = fade_to_rest(r_dev, fs, fade_s)
+    check_at_rest(r_dev)
+    u = as_signal(played, "drive")
+    y = as_signal(measured, "output")
+    step = update_drive(r_dev, u - u0, y - y0, fs=fs, model=model, **update)
+    checks = dict(checks or {})
+    if step.stopped:
+        checks.update(max_gain=None, min_gain=None)
+    check, failure = checked_drive(step.drive, r_dev, fs, force=force, drive_offset=u0,
+                                   **checks)
+    result = Compensation(drive=u0 + step.drive, reference=r_dev + y0, fs=float(fs),
+                          inverse=step.inverse, check=check, failed_check=failure,
+                          warnings=(), offsets=(u0, y0), decimation=rate_factor(fs, model.dt))
+    return result, step

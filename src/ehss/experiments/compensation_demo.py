@@ -9,6 +9,11 @@ learning iterations on the rig (:mod:`ehss.experiments.refinement`, default gain
 from the run, updates refused when the error grows), then track a band-limited random
 reference and an earthquake-like history (Kanai–Tajimi acceleration; for the position
 loop its doubly integrated, high-passed displacement) without and with compensation.
+The model is then validated as ``ehss identify --validate`` validates one, on the random
+test run without compensation (a separate record excited over the working band from near
+DC), and carries the band that validation confirms: :attr:`CompensationDemo.
+compensation_model` is the model a user compensates such references with (the report
+writes it as ``compensation_models.json``).
 
 The acceleration loop is identified behind its known factors
 (:mod:`ehss.identification.known`): the controller's acceleration generator, eq (10),
@@ -35,6 +40,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
+from ehss._checks import check_int
 from ehss.compensation import InverseModel, design_inverse
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine, rms
@@ -145,6 +151,16 @@ class CompensationDemo:
     h1_without, h1_with : ndarray of complex
     max_abs_db_without, max_abs_db_with, max_abs_deg_without, max_abs_deg_with : float
         Worst deviation from unity in ``judge_hz``.
+    validation : ValidationReport
+        ``model`` validated on the random test run without compensation (reference →
+        output), as :func:`ehss.workflow.assess` validates on a separate record.
+    verdict : Verdict
+        The acceptance's judgement of ``validation``
+        (:data:`ehss.experiments.loop_identification.ACCEPTANCE`).
+    compensation_model : ArmaxModel
+        ``model`` carrying the band that validation confirms
+        (:func:`ehss.workflow.validated_band`): what ``ehss compensate`` takes for
+        references of the loop's working band.
     """
 
     loop: str
@@ -171,6 +187,9 @@ class CompensationDemo:
     max_abs_db_with: float
     max_abs_deg_without: float
     max_abs_deg_with: float
+    validation: Any = field(repr=False)
+    verdict: Any
+    compensation_model: Any = field(repr=False)
 
     def summary(self) -> str:
         """A few lines for a terminal or a report."""
@@ -189,6 +208,11 @@ class CompensationDemo:
                 f"({self.improvement[name]:.1f}× better; one-shot inverse "
                 f"{self.one_shot_rms_error[name]:.4g})"
             )
+        band = self.compensation_model.band_hz
+        lines.append(
+            f"  model validated on the uncompensated random run: "
+            f"{'meets' if self.verdict.accepted else 'does not meet'} the acceptance, band "
+            + ("none" if band is None else f"{band[0]:g}-{band[1]:g} Hz"))
         return "\n".join(lines)
 
     def figures(self) -> dict[str, Any]:
@@ -205,6 +229,9 @@ class CompensationDemo:
             "max_abs_deg_without": self.max_abs_deg_without,
             "max_abs_deg_with": self.max_abs_deg_with, "unit": self.unit,
             "model": self.model.to_dict() if hasattr(self.model, "to_dict") else None,
+            "compensation_model": self.compensation_model.to_dict(),
+            "validation": self.validation.summary(),
+            "verdict": self.verdict.summary(),
         }
 
 
@@ -266,6 +293,7 @@ def demonstrate(
 
     if loop not in LOOP_SETTINGS:
         raise ParameterError(f"loop={loop!r} must be one of {sorted(LOOP_SETTINGS)}")
+    check_int(seed, "seed", lo=0)
     if not (math.isfinite(duration_s) and duration_s >= 4.0):
         raise ParameterError(f"duration_s={duration_s!r} must be at least 4 s")
     cfg = LOOP_SETTINGS[loop]
@@ -325,6 +353,9 @@ def demonstrate(
     _, h1 = _h1(references["random"], outputs_with["random"], fs, nperseg)
     db0, deg0 = _worst(freq, h0, judge)
     db1, deg1 = _worst(freq, h1, judge)
+    validation, verdict, compensation_model = _validate(
+        final_model, (u_id, y_id), (references["random"], outputs_without["random"]),
+        fs, band)
     return CompensationDemo(
         loop=loop, method=method, band_hz=band, judge_hz=judge, model=final_model,
         inverse=final_inverse, fs=fs, unit=cfg["unit"], references=references,
@@ -335,7 +366,25 @@ def demonstrate(
         freq_hz=freq, h1_without=h0, h1_with=h1,
         max_abs_db_without=db0, max_abs_db_with=db1,
         max_abs_deg_without=deg0, max_abs_deg_with=deg1,
+        validation=validation, verdict=verdict, compensation_model=compensation_model,
     )
+
+
+def _validate(model: Any, identification: tuple[np.ndarray, np.ndarray],
+              validation: tuple[np.ndarray, np.ndarray], fs: float,
+              band: tuple[float, float]) -> tuple[Any, Any, Any]:
+    """Validate ``model`` on a separate record as ``ehss identify --validate`` does (each
+    record about its own mean, no decimation, compared over ``band``) and give it the
+    band that validation confirms. Its operating point stays the model's: the records
+    start at rest at 0 and the model was fitted on them as they are."""
+    from ehss.experiments.loop_identification import ACCEPTANCE
+    from ehss.workflow import assess, prepare, validated_band
+
+    prepared = prepare(*identification, fs=fs, validation=validation, band_hz=band,
+                       detrend="mean", decimate=None)
+    report, verdict = assess(model, prepared, acceptance=ACCEPTANCE)
+    checked = dataclasses.replace(model, band_hz=validated_band(report, fs))
+    return report, verdict, checked
 
 
 # --------------------------------------------------------------------------- output

@@ -12,7 +12,7 @@ of this module searches orders with them and replays the online estimator.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.signal import lfilter
@@ -22,7 +22,7 @@ from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import ArmaxModel, RelsEstimator, rels
 from ehss.identification.known import compose
 from ehss.validation import FrfError, ValidationReport
-from ehss.workflow import Acceptance, Prepared, Verdict, assess, prepare
+from ehss.workflow import Acceptance, Prepared, Verdict, assess, prepare, validated_band
 
 __all__ = [
     "ACCEPTANCE",
@@ -89,7 +89,9 @@ class ModelCheck:
     label : str
         How it was obtained, e.g. ``"RELS (4,3,2,1)"``.
     model : ArmaxModel
-        The complete closed-loop model, reference → measured output.
+        The complete closed-loop model, reference → measured output, with the operating
+        point of its estimation data (``offsets``) and the band its validation confirmed
+        (``band_hz``), as ``ehss identify`` writes them: ``ehss compensate`` reads both.
     report : ValidationReport
         :func:`ehss.workflow.assess` on the held-out end.
     verdict : Verdict
@@ -237,8 +239,13 @@ def check_model(rec: Record, model: ArmaxModel, *, label: str) -> ModelCheck:
     Returns
     -------
     ModelCheck
+        Its model carries the estimation data's operating point and the validated band
+        (:func:`ehss.workflow.validated_band`; None when the validation compared fewer
+        than two frequencies), as ``ehss identify`` writes them.
     """
     report, verdict = assess(model, rec.prepared, acceptance=ACCEPTANCE)
+    model = replace(model, offsets=rec.prepared.offsets,
+                    band_hz=validated_band(report, rec.fs))
     with np.errstate(over="ignore", invalid="ignore"):
         yhat = model.simulate(rec.u)
     yhat = np.where(np.isfinite(yhat), yhat, np.nan)  # a diverging simulation: not drawn

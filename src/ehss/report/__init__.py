@@ -7,7 +7,7 @@ The experiments themselves run in :mod:`ehss.experiments`; this package only ren
 from __future__ import annotations
 
 from ehss.report.paper_models import PRINTED_MODELS, PrintedModel, printed_model_findings
-from ehss.report.render import summary_dict, write_report
+from ehss.report.render import compensation_file, summary_dict, write_report
 
 __all__ = [
     "PRINTED_MODELS",
@@ -15,4 +15,5 @@ __all__ = [
     "printed_model_findings",
     "summary_dict",
     "write_report",
+    "compensation_file",
 ]
