@@ -26,10 +26,7 @@ from ehss.io._columns import Raw, column_number, unknown_column
 __all__ = ["read_text"]
 
 _BOM = b"\xef\xbb\xbf"
-# Whitespace-separated rows: blanks at either end of a line go, a run of blanks between
-# two fields is one separator.
-_EDGE_BLANKS = re.compile(rb"^[ \t]+|[ \t]+(?=\r?$)", re.MULTILINE)
-_BLANK_RUN = re.compile(rb"[ \t]+")
+_SPACE_RUN = re.compile(rb"  +")
 
 
 @dataclass(frozen=True)
@@ -261,15 +258,19 @@ def _parse(path: Path, body: bytes, layout: _Layout, idx: list[int]) -> list[np.
 
 
 def _tidy(body: bytes, separator: str | None) -> bytes:
-    """The rows as polars reads them: blanks around fields dropped, runs of blanks in a
-    whitespace-separated file made into commas (polars takes one character as one
-    separator)."""
+    """The rows as polars reads them: a whitespace-separated row's fields joined by
+    commas (polars takes one character as one separator); in other files the spaces
+    around fields dropped.
+    """
     if separator is None:
-        return _BLANK_RUN.sub(b",", _EDGE_BLANKS.sub(b"", body))
+        return b"\n".join(b",".join(line.split()) for line in body.split(b"\n"))
     if b" " not in body:
         return body
-    sep = re.escape(separator.encode())
-    return re.sub(rb"(?m)^ +| +(?=\r?$)| *(" + sep + rb") *", rb"\1", body)
+    # a run of spaces becomes one, then a space next to a separator or line end goes
+    body = _SPACE_RUN.sub(b" ", body)
+    for mark in (separator.encode(), b"\n", b"\r"):
+        body = body.replace(b" " + mark, mark).replace(mark + b" ", mark)
+    return body.strip(b" ")
 
 
 def _diagnose(path: Path, body: bytes, layout: _Layout, idx: list[int]) -> None:
