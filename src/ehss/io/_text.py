@@ -253,7 +253,7 @@ def _parse(path: Path, body: bytes, layout: _Layout, idx: list[int]) -> list[np.
     if frame is None or any(frame[name].null_count() for name in names):
         _diagnose(path, body, layout, idx)
     if frame is None or any(frame[names[j]].null_count() for j in idx):
-        raise DataError(f"{str(path)!r}: cannot parse the data rows ({refused or 'holes'})")
+        raise DataError(f"{str(path)!r}: cannot parse the data rows ({refused or 'a cell is missing'})")
     return [frame[names[j]].to_numpy() for j in idx]
 
 
