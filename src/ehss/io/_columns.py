@@ -12,7 +12,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from ehss.errors import DataError
 
 __all__ = [
     "Raw",
+    "Reader",
     "RATE_NAMES_HZ",
     "PERIOD_NAMES_S",
     "STORED_RATE_NAMES",
@@ -63,6 +64,36 @@ class Raw:
     columns: dict[str, np.ndarray]
     labels: dict[str, str] = field(default_factory=dict)
     stored_rate: tuple[float, str] | None = None
+
+
+class Reader(Protocol):
+    """A format's reader: the columns of one file and its stored rate, from one opening.
+
+    Parameters
+    ----------
+    path : Path
+        The file (it exists and is a regular file).
+    wanted : list of str or None
+        The columns to read, each once: names (``"run1/u"`` in HDF5 and MATLAB
+        structs), ``NAME:K`` for column K of a stored matrix, or in text files numbers
+        counted from 1. None reads every numeric column.
+    optional : str or None
+        A column read as well when the file has it (the time column).
+
+    Returns
+    -------
+    Raw
+        The columns keyed by the requests as given, with their labels and the stored
+        sample rate.
+
+    Raises
+    ------
+    DataError
+        If the file is not of the format, or a column is unknown or not numeric.
+    """
+
+    def __call__(self, path: Path, wanted: list[str] | None,
+                 optional: str | None) -> Raw: ...
 
 
 def stored_rate(found: Mapping[str, Any]) -> tuple[float, str] | None:

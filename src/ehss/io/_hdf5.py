@@ -36,25 +36,11 @@ def is_hdf5(head: bytes) -> bool:
 
 def read_hdf5(path: Path, wanted: list[str] | None, optional: str | None, *,
               matlab: bool = False) -> Raw:
-    """Datasets of an HDF5 file by path (``"run1/u"``), from one opening of the file.
+    """Datasets of an HDF5 file by path (``"run1/u"``) and a rate stored as a scalar
+    dataset or a root attribute: a :class:`~ehss.io._columns.Reader`.
 
-    Parameters
-    ----------
-    path : Path
-        The file.
-    wanted : list of str or None
-        Dataset paths, or ``NAME:K`` for column K of a matrix; None reads every numeric
-        vector.
-    optional : str or None
-        A column read as well when the file has it (the time column).
-    matlab : bool, default False
-        The file is a MATLAB v7.3 ``.mat``: arrays are stored column-major (transposed
-        back here) and only numeric MATLAB classes are columns.
-
-    Returns
-    -------
-    Raw
-        The columns, and a rate stored as a scalar dataset or a root attribute.
+    With ``matlab=True`` the file is a MATLAB v7.3 ``.mat``: arrays are stored
+    column-major (transposed back here) and only numeric MATLAB classes are columns.
 
     Raises
     ------

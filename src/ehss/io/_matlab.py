@@ -16,22 +16,10 @@ __all__ = ["read_mat"]
 
 
 def read_mat(path: Path, wanted: list[str] | None, optional: str | None) -> Raw:
-    """Variables of a MATLAB file; struct fields by path (``"run1/u"``).
-
-    Parameters
-    ----------
-    path : Path
-        The file: MATLAB v5 (read with :func:`scipy.io.loadmat`) or v7.3 (HDF5).
-    wanted : list of str or None
-        Variables, or ``NAME:K`` for column K of a matrix; None reads every numeric
-        vector.
-    optional : str or None
-        A column read as well when the file has it (the time column).
-
-    Returns
-    -------
-    Raw
-        The columns, and a rate stored as a scalar variable (``Ts``, ``fs``, ...).
+    """Variables of a MATLAB file, struct fields by path (``"run1/u"``), and a rate
+    stored as a scalar variable (``Ts``, ``fs``, ...): a
+    :class:`~ehss.io._columns.Reader`. MATLAB v5 is read with :func:`scipy.io.loadmat`,
+    v7.3 as HDF5.
 
     Raises
     ------

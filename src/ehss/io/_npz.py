@@ -16,22 +16,8 @@ _UNREADABLE = (OSError, ValueError, zipfile.BadZipFile, EOFError)
 
 
 def read_npz(path: Path, wanted: list[str] | None, optional: str | None) -> Raw:
-    """Arrays of an ``.npz`` archive (no pickles), from one opening of the file.
-
-    Parameters
-    ----------
-    path : Path
-        The archive.
-    wanted : list of str or None
-        Entry names, or ``NAME:K`` for column K of a matrix; None reads every numeric
-        vector.
-    optional : str or None
-        A column read as well when the archive has it (the time column).
-
-    Returns
-    -------
-    Raw
-        The columns, and a rate stored as a one-element entry (``fs``, ``Ts``, ...).
+    """Arrays of an ``.npz`` archive (no pickles) and a rate stored as a one-element
+    entry (``fs``, ``Ts``, ...): a :class:`~ehss.io._columns.Reader`.
 
     Raises
     ------

@@ -11,21 +11,8 @@ __all__ = ["read_parquet"]
 
 
 def read_parquet(path: Path, wanted: list[str] | None, optional: str | None) -> Raw:
-    """Numeric columns of a Parquet file (``wanted`` ones, with ``optional`` if present).
-
-    Parameters
-    ----------
-    path : Path
-        The file.
-    wanted : list of str or None
-        Column names; None reads every numeric column.
-    optional : str or None
-        A column read as well when the file has it (the time column).
-
-    Returns
-    -------
-    Raw
-        The columns (Parquet stores no sample rate ehss looks for).
+    """Numeric columns of a Parquet file: a :class:`~ehss.io._columns.Reader` (Parquet
+    stores no sample rate ehss looks for).
 
     Raises
     ------

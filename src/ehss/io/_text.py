@@ -62,22 +62,8 @@ class _Layout:
 
 
 def read_text(path: Path, wanted: list[str] | None, optional: str | None) -> Raw:
-    """Columns of a text file, by header name or by number counted from 1.
-
-    Parameters
-    ----------
-    path : Path
-        The file.
-    wanted : list of str or None
-        Names or numbers (``"2"``: the second column); None reads every column, named
-        ``"1"``, ``"2"``, ... in a headerless file.
-    optional : str or None
-        A column read as well when the file has it (the time column).
-
-    Returns
-    -------
-    Raw
-        The columns keyed by the request as given, labelled for messages.
+    """Columns of a text file by header name or by number counted from 1 (a headerless
+    file's are named ``"1"``, ``"2"``, ...): a :class:`~ehss.io._columns.Reader`.
 
     Raises
     ------
@@ -253,7 +239,8 @@ def _parse(path: Path, body: bytes, layout: _Layout, idx: list[int]) -> list[np.
     if frame is None or any(frame[name].null_count() for name in names):
         _diagnose(path, body, layout, idx)
     if frame is None or any(frame[names[j]].null_count() for j in idx):
-        raise DataError(f"{str(path)!r}: cannot parse the data rows ({refused or 'a cell is missing'})")
+        why = refused or "a cell is missing"
+        raise DataError(f"{str(path)!r}: cannot parse the data rows ({why})")
     return [frame[names[j]].to_numpy() for j in idx]
 
 

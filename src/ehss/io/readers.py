@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,7 +24,7 @@ import numpy as np
 
 from ehss._checks import SAMPLE_RATE_RANGE_HZ
 from ehss.errors import DataError
-from ehss.io._columns import PERIOD_NAMES_S, RATE_NAMES_HZ, Raw, unknown_column
+from ehss.io._columns import PERIOD_NAMES_S, RATE_NAMES_HZ, Raw, Reader, unknown_column
 from ehss.io._hdf5 import read_hdf5
 from ehss.io._matlab import read_mat
 from ehss.io._npz import read_npz
@@ -72,8 +72,8 @@ def time_unit(name: str) -> tuple[str, float]:
                                     or m.group(1).lower() in TIME_UNITS_S) else "s"
     return unit, TIME_UNITS_S.get(unit, TIME_UNITS_S.get(unit.lower(), 1.0))
 
-#: The reader of each file name ending: ``reader(path, wanted, optional) -> Raw``.
-_READERS: dict[str, Callable[[Path, list[str] | None, str | None], Raw]] = {
+#: The reader of each file name ending.
+_READERS: dict[str, Reader] = {
     ".csv": read_text, ".txt": read_text, ".dat": read_text, ".tsv": read_text,
     ".mat": read_mat, ".h5": read_hdf5, ".hdf5": read_hdf5, ".npz": read_npz,
     ".parquet": read_parquet,
