@@ -72,6 +72,7 @@ def time_unit(name: str) -> tuple[str, float]:
                                     or m.group(1).lower() in TIME_UNITS_S) else "s"
     return unit, TIME_UNITS_S.get(unit, TIME_UNITS_S.get(unit.lower(), 1.0))
 
+
 #: The reader of each file name ending.
 _READERS: dict[str, Reader] = {
     ".csv": read_text, ".txt": read_text, ".dat": read_text, ".tsv": read_text,
@@ -160,7 +161,8 @@ def read_columns(
     *,
     time_column: str | None = "t",
 ) -> Table:
-    """Read named numeric columns from a CSV, MATLAB, HDF5 or NumPy ``.npz`` file.
+    """Read named numeric columns, and a sample rate stored beside them, from a text,
+    MATLAB, HDF5, NumPy ``.npz`` or Parquet file.
 
     Parameters
     ----------
@@ -173,7 +175,7 @@ def read_columns(
         come; semicolon-separated numbers with decimal commas and no points are read
         with decimal commas), ``.mat`` (MATLAB v5 through :func:`scipy.io.loadmat`,
         v7.3 through h5py), ``.h5``/``.hdf5`` (datasets by name; nested paths such as
-        ``"run1/u"`` allowed) and ``.npz``.
+        ``"run1/u"`` allowed), ``.npz`` and ``.parquet``. The file is opened once.
     columns : sequence of str, optional
         The columns to read, by name or, in text files, by number counted from 1 as
         MATLAB, awk and spreadsheets count (``"1"`` is the first column): a name found in
@@ -189,7 +191,8 @@ def read_columns(
     Returns
     -------
     Table
-        The columns as float64 arrays of equal length.
+        The columns as float64 arrays of equal length, and :attr:`Table.stored_rate`
+        when the file has no time column.
 
     Raises
     ------
