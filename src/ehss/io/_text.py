@@ -76,9 +76,8 @@ def read_text(path: Path, wanted: list[str] | None, optional: str | None) -> Raw
     start, end = _first_row(data)
     if start == end:
         raise DataError(f"{str(path)!r}: empty file (no header row)")
-    after = _rows(data, end + 1)
-    layout = _layout(path, _decode(data[start:end]).rstrip("\r"), after)
-    body = _rows(data, start) if layout.headerless else after
+    layout = _layout(path, _decode(data[start:end]).rstrip("\r"), data, end + 1)
+    body = _rows(data, start if layout.headerless else end + 1)
     idx, keys, labels = _resolve(path, layout, wanted, optional)
     if not body:
         raise DataError(f"{str(path)!r}: no data rows after the header")
@@ -122,22 +121,25 @@ def _first_row(data: bytes) -> tuple[int, int]:
 
 def _rows(data: bytes, start: int) -> bytes:
     """The rows from offset ``start`` on, without the blank lines at the end of the file
-    (the last row keeps its own trailing blanks)."""
-    body = data[start:]
-    kept = len(body.rstrip())
-    if kept == 0:
+    (the last row keeps its own trailing blanks); one copy of the bytes."""
+    stop = len(data)
+    while stop > start and data[stop - 1] in b" \t\r\n":
+        stop -= 1
+    if stop <= start:
         return b""
-    end = body.find(b"\n", kept)
-    return body[:end] if end >= 0 else body
+    end = data.find(b"\n", stop)
+    return data[start:end if end >= 0 else len(data)]
 
 
-def _layout(path: Path, first: str, rest: bytes) -> _Layout:
-    """The layout read from the first row and the rows after it."""
+def _layout(path: Path, first: str, data: bytes, rest: int) -> _Layout:
+    """The layout read from the first row and the rows after it (from offset ``rest``
+    of ``data``)."""
     separator = next((s for s in (";", ",", "\t") if s in first), None)
     probe = _Layout([], False, separator, False)
     fields = [f.strip().strip('"').strip("'").strip() for f in probe.split(first)]
     # spreadsheets in much of Europe: semicolons between numbers with decimal commas
-    decimal_comma = separator == ";" and b"," in rest and b"." not in rest
+    decimal_comma = (separator == ";" and data.find(b",", rest) >= 0
+                     and data.find(b".", rest) < 0)
     if _all_numbers([f.replace(",", ".") for f in fields] if decimal_comma else fields):
         return _Layout([str(k) for k in range(1, len(fields) + 1)], True, separator,
                        decimal_comma)
