@@ -304,28 +304,10 @@ def sample_rate(
     else:
         name = "t"
         t = np.asarray(data, dtype=np.float64)
-    lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
-    if fs is not None:
-        try:
-            fs = float(fs)
-        except (TypeError, ValueError):
-            raise DataError(f"sample rate {fs=} must be a number in Hz") from None
-        if not (math.isfinite(fs) and lo_fs <= fs <= hi_fs):
-            raise DataError(f"sample rate {fs=} Hz must be in [{lo_fs:g}, {hi_fs:g}] Hz")
+    fs = _given_rate(fs)
     stored = data.stored_rate if isinstance(data, Table) else None
     if t is None and stored is not None:
-        rate, what = stored
-        if fs is not None and abs(rate - fs) > rtol * fs:
-            raise DataError(f"{where}the file stores {what}, a sample rate of {rate:.6g} Hz, "
-                            f"but --fs is {fs:.6g} Hz; drop --fs or make them agree")
-        if fs is None:
-            if not math.isfinite(rate):
-                raise DataError(f"{where}the file stores {what}, which is no sample time or "
-                                "rate; pass --fs HZ (or --time-column COL)")
-            if not lo_fs <= rate <= hi_fs:
-                raise DataError(f"{where}the file stores {what}: a sample rate of {rate:.6g} "
-                                f"Hz, outside [{lo_fs:g}, {hi_fs:g}] Hz; pass --fs HZ")
-            return rate
+        return _stored_or_given(where, stored, fs, rtol)
     if t is None:
         if fs is None:
             raise DataError(f"{where}no time column to get the sample rate from; name it "
@@ -341,6 +323,39 @@ def sample_rate(
             )
         return fs
     return fs_t
+
+
+def _given_rate(fs: object) -> float | None:
+    """``fs`` as a float in the accepted range, or None if not given."""
+    if fs is None:
+        return None
+    lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
+    try:
+        fs = float(fs)
+    except (TypeError, ValueError):
+        raise DataError(f"sample rate {fs=} must be a number in Hz") from None
+    if not (math.isfinite(fs) and lo_fs <= fs <= hi_fs):
+        raise DataError(f"sample rate {fs=} Hz must be in [{lo_fs:g}, {hi_fs:g}] Hz")
+    return fs
+
+
+def _stored_or_given(where: str, stored: tuple[float, str], fs: float | None,
+                     rtol: float) -> float:
+    """The rate a file stores, checked against ``fs`` when that is given (then ``fs``)."""
+    rate, what = stored
+    if fs is not None:
+        if abs(rate - fs) > rtol * fs:
+            raise DataError(f"{where}the file stores {what}, a sample rate of {rate:.6g} Hz, "
+                            f"but --fs is {fs:.6g} Hz; drop --fs or make them agree")
+        return fs
+    lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
+    if not math.isfinite(rate):
+        raise DataError(f"{where}the file stores {what}, which is no sample time or "
+                        "rate; pass --fs HZ (or --time-column COL)")
+    if not lo_fs <= rate <= hi_fs:
+        raise DataError(f"{where}the file stores {what}: a sample rate of {rate:.6g} "
+                        f"Hz, outside [{lo_fs:g}, {hi_fs:g}] Hz; pass --fs HZ")
+    return rate
 
 
 def _time_column_hint(data: object) -> str:
