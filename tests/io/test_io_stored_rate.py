@@ -56,3 +56,27 @@ def test_without_any_rate_the_message_is_unchanged(tmp_path):
     _mat(path)
     with pytest.raises(DataError, match="no time column to get the sample rate from"):
         sample_rate(read_columns(path, ["u", "y"]))
+
+
+@pytest.mark.parametrize(("write", "name", "opener"), [
+    (lambda p: _h5(p, attrs={"fs": 5000.0}), "r.h5", (h5py, "File")),
+    (lambda p: _mat(p, Ts=0.002), "r.mat", (scipy.io, "loadmat")),
+    (lambda p: np.savez(p, u=U, y=U, fs=np.array(200.0)), "r.npz", (np, "load")),
+])
+def test_columns_and_stored_rate_come_from_one_opening(tmp_path, monkeypatch, write, name,
+                                                       opener):
+    path = tmp_path / name
+    write(path)
+    module, attr = opener
+    real, calls = getattr(module, attr), []
+
+    def counted(*args, **kwargs):
+        calls.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, attr, counted)
+    if module is scipy.io:  # a second look at a MATLAB file would list its variables
+        monkeypatch.setattr(scipy.io, "whosmat", counted)
+    table = read_columns(path, ["u", "y"])
+    assert table.stored_rate is not None
+    assert len(calls) == 1

@@ -46,7 +46,6 @@ __all__ = [
     "write_hdf5",
     "write_npz",
     "write_mat",
-    "read_parquet",
     "read_metadata",
 ]
 
@@ -204,41 +203,6 @@ def write_mat(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str) 
     content[METADATA_KEY] = metadata_json
     with open(path, "wb") as fh:
         scipy.io.savemat(fh, content, oned_as="column", do_compression=False)
-
-
-def read_parquet(path: Path, wanted: list[str] | None, optional: str | None
-                 ) -> dict[str, np.ndarray]:
-    """Columns of a Parquet file (``wanted`` ones, with ``optional`` when present).
-
-    Raises
-    ------
-    DataError
-        If the file is not readable Parquet, a wanted column is missing (the message
-        lists the available ones) or holds something other than numbers.
-    """
-    import polars as pl
-
-    try:
-        schema = pl.read_parquet_schema(path)
-        available = [n for n, dtype in schema.items() if dtype.is_numeric()]
-        if wanted is None:
-            names = available
-        else:
-            for name in wanted:
-                if name in schema and name not in available:
-                    raise DataError(f"{str(path)!r}: column {name!r} holds {schema[name]}, "
-                                    "not numbers")
-                if name not in available:
-                    shown = ", ".join(repr(a) for a in available[:30]) or "(none)"
-                    raise DataError(f"{str(path)!r}: no column {name!r}; available: {shown}")
-            names = list(wanted)
-            if optional is not None and optional in available:
-                names.insert(0, optional)
-        frame = pl.read_parquet(path, columns=names)
-    except (OSError, pl.exceptions.PolarsError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DataError(f"{str(path)!r}: not a readable Parquet file ({first})") from None
-    return {name: frame[name].to_numpy() for name in names}
 
 
 def read_metadata(path: str | Path) -> dict[str, Any] | None:
