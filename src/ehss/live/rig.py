@@ -6,11 +6,10 @@ it to the wall clock (:class:`~ehss.live.source.PacedSource`) or sends it over U
 (``ehss stream``). Each channel is one actuator loop with its own reference and sensor
 noise (seeds ``seed + k``). An event changes a parameter of one channel, or of all, from
 its time on: the record is simulated in pieces between events, each piece with the new
-:class:`~ehss.params.RigParams` (``dataclasses.replace``) and starting from the plant
-state at the end of the previous piece (``initial_state``: spool, pistons, pressures,
-table). :func:`ehss.simulate` takes no controller state, so the controller's integrator
-and its one-sample delay line restart at an event: a transient of a few control periods
-that a real payload change would also cause, in its own way.
+:class:`~ehss.params.RigParams` (``dataclasses.replace``) and continuing from the full
+state at the end of the previous piece (:class:`ehss.simulation.SimulationState`: plant,
+controller, delay line and sensor noise), so that the controller runs on through an
+event as it would on a real rig.
 """
 
 from __future__ import annotations
@@ -37,10 +36,6 @@ RIG_SIGNAL = {
 }
 #: Fade in and out of the rig's reference at each end (s): it starts and ends at rest.
 RIG_FADE_S = 0.2
-
-# plant states that the simulation result reports, to carry over an event
-_CARRIED = ("spool", "piston_displacement_m", "p1_pa", "p2_pa", "displacement_m",
-            "velocity_m_s")
 
 _EVENT = re.compile(
     r"^\s*(?P<t>[0-9.eE+-]+)\s*:\s*(?P<name>[A-Za-z_][A-Za-z0-9_.]*)\s*=\s*"
@@ -153,7 +148,7 @@ def rig_record(
         Parameter changes; each applies from its time on (to its channel, or all).
     seed : int
         Channel k uses seed ``seed + k`` for its reference and ``seed + 1000 + k`` for
-        its sensor noise (and later pieces ``+ 1`` each).
+        its sensor noise.
     rms, band_hz : optional
         Reference RMS and band (default :data:`RIG_SIGNAL`).
 
@@ -198,14 +193,15 @@ def rig_record(
         y = np.empty(n)
         state = None
         bounds = [0, *cuts, n]
-        for piece, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             for e in mine:
                 if a > 0 and int(round(e.time_s * fs)) == a:
                     p = _apply(p, e)
             run = ehss.simulate(loop, ref[a:b], params=p, fs=fs,
-                                seed=seed + 1000 + k + piece, initial_state=state)
+                                seed=seed + 1000 + k if state is None else None,
+                                initial_state=state)
             y[a:b] = run.output
-            state = {name: float(run.signals[name][-1]) for name in _CARRIED}
+            state = run.final_state
         out[:, layout.ref_index[k - 1]] = ref
         out[:, layout.fb_index[k - 1]] = y
     return layout, out, fs
