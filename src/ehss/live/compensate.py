@@ -1,0 +1,352 @@
+"""Adaptive compensation while the rig runs: the online model's inverse, sent to the target.
+
+Each channel has its own recursive estimator of the loop from the drive it receives to
+its feedback (:class:`ehss.RelsEstimator`, eqs (19)–(22) of the paper), the sliding
+windows of drive, feedback and desired reference, and an
+:class:`~ehss.compensation.adaptive.AdaptiveCompensator`. Every ``update_s`` of stream
+time the current model is judged (:class:`~ehss.compensation.adaptive.UpdateGuard`);
+a compensator that passes is sent to the target (:meth:`Target.load`), which runs it in
+shadow until its start-up has died out and cross-fades it in; one that fails is not
+sent, the last good one keeps running, and the refusal is logged (an alarm when a
+channel that had a good compensator starts refusing, a clear when it accepts again).
+
+The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
+``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels`` and ``preview``:
+:class:`ehss.live.rig.SteppingRig` in process, or a remote target whose compensator
+datagrams a sender carries (:mod:`ehss.target.datagram`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+import ehss
+from ehss.compensation.adaptive import MODES, AdaptiveCompensator, Decision, UpdateGuard
+from ehss.errors import EhssError, ParameterError
+from ehss.live.channel import reference_band
+
+__all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
+           "Target"]
+
+
+class Target(Protocol):
+    """What :class:`AdaptiveLoop` drives."""
+
+    fs: float
+    channels: tuple[str, ...]
+    preview: int
+    index: int
+
+    def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        """Hand over a compensator (False if the target refuses it)."""
+
+    def step(self, n: int) -> Any:
+        """Run the next ``n`` samples; a block with ``first_index``, ``desired``,
+        ``drive`` and ``feedback`` (each shape (n_channels, n))."""
+
+    @property
+    def finished(self) -> bool:
+        """True when the test is over."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompensationSettings:
+    """Settings of adaptive compensation.
+
+    Attributes
+    ----------
+    mode : {"preview", "causal"}
+    band_hz : (lo, hi), optional
+        Band of the compensation and of the model's validation; default the band of the
+        desired reference (within 20 dB of its peak, :func:`ehss.live.reference_band`).
+    na, nb, nc, delay, method
+        Structure of each channel's estimator.
+    memory_s : float
+        Memory of its forgetting, λ = 1 − 1/(memory_s fs): how fast the model follows
+        the rig, against how much it scatters.
+    h1_window_s : float
+        Length of the sliding H1 estimate that must confirm a model (and of the recent
+        reference the drive checks run on). A change of the rig shows in full in it
+        after this long.
+    update_s : float
+        Period of the judgements (stream time).
+    start_s : float
+        First judgement (the estimator and the window need data first).
+    adapt_until_s : float
+        No update after this time (inf: always adapt); to compare with an inverse that
+        is not adapted.
+    n_taps, max_sections : int
+        The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
+    guard : UpdateGuard
+    """
+
+    mode: str = "preview"
+    band_hz: tuple[float, float] | None = None
+    na: int = 6
+    nb: int = 5
+    nc: int = 6
+    delay: int = 1
+    method: str = "rml"
+    memory_s: float = 0.5
+    h1_window_s: float = 1.5
+    update_s: float = 0.25
+    start_s: float = 2.0
+    adapt_until_s: float = math.inf
+    n_taps: int = 256
+    max_sections: int = 16
+    guard: UpdateGuard = field(default_factory=UpdateGuard)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ParameterError(f"mode={self.mode!r} must be one of {MODES}")
+        for name in ("memory_s", "h1_window_s", "update_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ParameterError(f"{name}={v!r} must be a number > 0 (s)")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
+                "h1_window_s": self.h1_window_s, "update_s": self.update_s,
+                "start_s": self.start_s, "adapt_until_s": self.adapt_until_s,
+                "n_taps": self.n_taps, "estimator": [self.na, self.nb, self.nc, self.delay,
+                                                     self.method],
+                "min_interval_s": self.guard.min_interval_s,
+                "crossfade_s": self.guard.crossfade_s, "max_gain": self.guard.max_gain}
+
+
+class _Ring:
+    """The latest ``size`` samples of a few signals."""
+
+    def __init__(self, n_rows: int, size: int) -> None:
+        self.buf = np.zeros((n_rows, size))
+        self.fill = 0
+        self.pos = 0
+
+    def push(self, x: np.ndarray) -> None:
+        size = self.buf.shape[1]
+        n = x.shape[1]
+        if n >= size:
+            self.buf[:] = x[:, -size:]
+            self.pos, self.fill = 0, size
+            return
+        idx = (self.pos + np.arange(n)) % size
+        self.buf[:, idx] = x
+        self.pos = (self.pos + n) % size
+        self.fill = min(size, self.fill + n)
+
+    def latest(self) -> np.ndarray:
+        if self.fill < self.buf.shape[1]:
+            return self.buf[:, :self.fill].copy()
+        return np.roll(self.buf, -self.pos, axis=1)
+
+
+class ChannelAdapter:
+    """Estimator, sliding windows and adaptive compensator of one channel.
+
+    Parameters
+    ----------
+    name : str
+    fs : float
+    band_hz : (lo, hi)
+    scale : float
+        RMS of the channel's reference (the estimator's scale of u and y).
+    settings : CompensationSettings
+    loop : str, optional
+    params : RigParams, optional
+        With ``loop``: the rig whose limits the drive must respect.
+    preview : int
+        The target filter's preview (the compensators' preview in preview mode).
+    """
+
+    def __init__(self, name: str, fs: float, band_hz: tuple[float, float], scale: float,
+                 settings: CompensationSettings, *, loop: str | None = None,
+                 params: Any = None, preview: int = 0) -> None:
+        s = settings
+        self.name = name
+        self.fs = float(fs)
+        self.settings = s
+        self._scale = scale
+        self.estimator = self._new_estimator(None)
+
+        self.window = _Ring(3, max(64, int(round(s.h1_window_s * self.fs))))
+        self.compensator = AdaptiveCompensator(
+            self.fs, band_hz, mode=s.mode, preview=preview if s.mode == "preview" else None,
+            n_taps=s.n_taps, max_sections=s.max_sections, guard=s.guard, loop=loop,
+            params=params)
+        self.alarm = False
+        self.busy_until = 0
+
+    def _new_estimator(self, theta0: np.ndarray | None) -> ehss.RelsEstimator:
+        s = self.settings
+        return ehss.RelsEstimator(
+            na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, method=s.method, theta0=theta0,
+            forgetting=1.0 - 1.0 / (s.memory_s * self.fs), dt=1.0 / self.fs,
+            u_scale=self._scale, y_scale=self._scale)
+
+    def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> None:
+        """Consecutive samples of the drive (model input), feedback and desired reference."""
+        self.estimator.update_many(drive, feedback)
+        self.window.push(np.vstack([drive, feedback, desired]))
+
+    def judge(self, t_s: float) -> Decision:
+        """The decision on the current model at stream time ``t_s``."""
+        u, y, r = self.window.latest()
+        try:
+            model = self.estimator.model
+            # segments of a third of the window (a power of two): 4 averages with half
+            # overlap, and as long as the loop's memory asks (short ones leak and lose
+            # their coherence)
+            nper = int(2 ** round(math.log2(max(16, u.size / 3))))
+            h1 = ehss.h1_estimate(u, y, fs=self.fs, nperseg=min(nper, u.size))
+        except EhssError as exc:
+            decision = Decision(t_s, False, f"no model or H1 estimate: {exc}")
+            self.compensator.log.append(decision)
+            return decision
+        return self.compensator.propose(t_s, model, h1, r)
+
+
+@dataclass(frozen=True)
+class CompensationRecord:
+    """What an :class:`AdaptiveLoop` run did.
+
+    Attributes
+    ----------
+    fs : float
+    channels : tuple of str
+    desired, drive, feedback : ndarray, shape (n_channels, n)
+    decisions : dict of str to list of dict
+        Every judgement per channel (:meth:`Decision.to_dict`).
+    loads : list of dict
+        Compensators sent to the target: ``t_s``, ``channel``, ``apply_index``,
+        ``crossfade``, ``accepted`` (by the target).
+    events : list of dict
+        Alarms and clears.
+    settings : dict
+    """
+
+    fs: float
+    channels: tuple[str, ...]
+    desired: np.ndarray = field(repr=False)
+    drive: np.ndarray = field(repr=False)
+    feedback: np.ndarray = field(repr=False)
+    decisions: dict = field(repr=False)
+    loads: list = field(repr=False)
+    events: list = field(repr=False)
+    settings: dict = field(repr=False)
+
+    def tracking_rms(self, t0_s: float, t1_s: float) -> np.ndarray:
+        """RMS of desired − feedback of each channel over ``[t0_s, t1_s)``."""
+        a, b = int(round(t0_s * self.fs)), int(round(t1_s * self.fs))
+        e = self.desired[:, a:b] - self.feedback[:, a:b]
+        return np.sqrt(np.mean(e * e, axis=1))
+
+
+class AdaptiveLoop:
+    """Run a target block by block, adapting each channel's compensator.
+
+    Parameters
+    ----------
+    target : Target
+    settings : CompensationSettings
+    loop : str, optional
+    params : RigParams, optional
+        The rig whose limits the drives must respect (with ``loop``).
+    log : callable, optional
+        Receives each event dict (loads, refusals that change, alarms, clears).
+    """
+
+    def __init__(self, target: Target, settings: CompensationSettings, *,
+                 loop: str | None = None, params: Any = None,
+                 log: Callable[[dict], None] | None = None) -> None:
+        self.target = target
+        self.settings = settings
+        self.fs = float(target.fs)
+        desired = np.atleast_2d(target.desired)
+        band = settings.band_hz
+        if band is None:
+            band = reference_band(desired[0], self.fs)
+            band = (max(band[0], 2.0 * self.fs / desired.shape[1]), band[1])
+        self.band_hz = (float(band[0]), float(band[1]))
+        scales = np.sqrt(np.mean(desired**2, axis=1))
+        self.adapters = [
+            ChannelAdapter(name, self.fs, self.band_hz, float(scales[k]) or 1.0, settings,
+                           loop=loop, params=params, preview=target.preview)
+            for k, name in enumerate(target.channels)]
+        self._log = log
+        self.events: list[dict] = []
+        self.loads: list[dict] = []
+        self._last_reason = [""] * len(self.adapters)
+
+    def _event(self, record: dict) -> None:
+        self.events.append(record)
+        if self._log is not None:
+            self._log(record)
+
+    def _update(self, t_s: float) -> None:
+        from ehss.target.filter import Compensator
+
+        s = self.settings
+        for k, ad in enumerate(self.adapters):
+            # one compensator at a time: the last one sent must be in before the next
+            if not ad.compensator.due(t_s) or self.target.index < ad.busy_until:
+                continue
+            d = ad.judge(t_s)
+            name = ad.name
+            if not d.accepted:
+                if d.reason != self._last_reason[k]:
+                    self._event({"kind": "compensator_refused", "channel": name,
+                                 "t_s": t_s, "reason": d.reason})
+                if ad.compensator.current is not None and not ad.alarm:
+                    ad.alarm = True
+                    self._event({"kind": "alarm", "channel": name, "t_s": t_s,
+                                 "text": f"compensator kept: {d.reason}"})
+                self._last_reason[k] = d.reason
+                continue
+            self._last_reason[k] = ""
+            if ad.alarm:
+                ad.alarm = False
+                self._event({"kind": "clear", "channel": name, "t_s": t_s})
+            design = d.design
+            comp = Compensator(sos=design.sos, taps=design.taps, preview=design.preview,
+                               fs_hz=design.fs_hz)
+            apply_index = self.target.index + design.settle_samples
+            crossfade = max(1, int(round(s.guard.crossfade_s * self.fs)))
+            ok = self.target.load(k, comp, apply_index, crossfade)
+            ad.busy_until = apply_index + crossfade
+            load = {"kind": "compensator", "channel": name, "t_s": t_s,
+                    "apply_index": int(apply_index), "crossfade": crossfade,
+                    "accepted": bool(ok), **d.figures, **design.errors()}
+            self.loads.append(load)
+            self._event(load)
+
+    def run(self, *, block_s: float = 0.05, duration_s: float | None = None
+            ) -> CompensationRecord:
+        """Run until the target finishes (or ``duration_s``)."""
+        s = self.settings
+        n_block = max(1, int(round(block_s * self.fs)))
+        limit = math.inf if duration_s is None else int(round(duration_s * self.fs))
+        next_update = max(s.start_s, s.update_s)
+        parts: list[Any] = []
+        while not self.target.finished and self.target.index < limit:
+            block = self.target.step(int(min(n_block, limit - self.target.index)))
+            parts.append(block)
+            for k, ad in enumerate(self.adapters):
+                ad.feed(block.drive[k], block.feedback[k], block.desired[k])
+            t_s = self.target.index / self.fs
+            if t_s + 1e-12 >= next_update:
+                if t_s <= s.adapt_until_s:
+                    self._update(t_s)
+                next_update += s.update_s
+        cat = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
+               for name in ("desired", "drive", "feedback")}
+        return CompensationRecord(
+            fs=self.fs, channels=tuple(self.target.channels), **cat,
+            decisions={ad.name: [d.to_dict() for d in ad.compensator.log]
+                       for ad in self.adapters},
+            loads=list(self.loads), events=list(self.events),
+            settings={**s.to_dict(), "band_hz": list(self.band_hz)})
