@@ -18,6 +18,7 @@ datagrams a sender carries (:mod:`ehss.target.datagram`).
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -65,10 +66,18 @@ class CompensationSettings:
         Band of the compensation and of the model's validation; default the band of the
         desired reference (within 20 dB of its peak, :func:`ehss.live.reference_band`).
     na, nb, nc, delay, method
-        Structure of each channel's estimator.
+        Structure of each channel's estimator: RELS of the paper (eqs (19)–(22)), sixth
+        order. The drive is a known, broadband signal and the feedback nearly
+        noise-free, where RELS follows a change of the rig faster than RML (about 2 s
+        against 3 s on the simulated rig's +40 % payload) and a sixth-order model fits
+        the heavier loop's resonance within the band.
     memory_s : float
         Memory of its forgetting, λ = 1 − 1/(memory_s fs): how fast the model follows
         the rig, against how much it scatters.
+    p0 : float
+        α of P(0) = α I, which also bounds tr P: large, so that the bound does not hold
+        the tracking speed below what the forgetting asks for (as
+        :class:`ehss.live.EstimatorSettings`).
     h1_window_s : float
         Length of the sliding H1 estimate that must confirm a model (and of the recent
         reference the drive checks run on). A change of the rig shows in full in it
@@ -91,8 +100,10 @@ class CompensationSettings:
     nb: int = 5
     nc: int = 6
     delay: int = 1
-    method: str = "rml"
-    memory_s: float = 0.5
+    method: str = "rels"
+    memory_s: float = 0.3
+    p0: float = 1e6
+    average_s: float = 0.3
     h1_window_s: float = 1.5
     update_s: float = 0.25
     start_s: float = 2.0
@@ -180,11 +191,14 @@ class ChannelAdapter:
             params=params)
         self.alarm = False
         self.busy_until = 0
+        self._n = 0
+        self._n_average = int(round(s.average_s * self.fs))
+        self._thetas: collections.deque = collections.deque()
 
     def _new_estimator(self, theta0: np.ndarray | None) -> ehss.RelsEstimator:
         s = self.settings
         return ehss.RelsEstimator(
-            na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, method=s.method, theta0=theta0,
+            na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, method=s.method, theta0=theta0, p0=s.p0,
             forgetting=1.0 - 1.0 / (s.memory_s * self.fs), dt=1.0 / self.fs,
             u_scale=self._scale, y_scale=self._scale)
 
@@ -192,12 +206,25 @@ class ChannelAdapter:
         """Consecutive samples of the drive (model input), feedback and desired reference."""
         self.estimator.update_many(drive, feedback)
         self.window.push(np.vstack([drive, feedback, desired]))
+        self._n += drive.size
+        self._thetas.append((self._n, self.estimator.theta))
+        while self._thetas and self._thetas[0][0] < self._n - self._n_average:
+            self._thetas.popleft()
+
+    def model(self) -> ehss.ArmaxModel:
+        """The model judged: θ̂ averaged over the last ``average_s`` (one estimate per
+        block fed), which halves its scatter at the cost of that much more lag."""
+        s = self.settings
+        th = np.mean([t for _, t in self._thetas], axis=0)
+        return ehss.ArmaxModel(a=np.r_[1.0, th[:s.na]], b=th[s.na:s.na + s.nb + 1],
+                               c=np.r_[1.0, th[s.na + s.nb + 1:]], delay=s.delay,
+                               dt=1.0 / self.fs)
 
     def judge(self, t_s: float) -> Decision:
         """The decision on the current model at stream time ``t_s``."""
         u, y, r = self.window.latest()
         try:
-            model = self.estimator.model
+            model = self.model()
             # segments of a third of the window (a power of two): 4 averages with half
             # overlap, and as long as the loop's memory asks (short ones leak and lose
             # their coherence)
