@@ -33,7 +33,9 @@ Two reference modes:
 (a closed loop that tracks does), agree with the sliding H1 estimate over the band as
 :class:`ehss.workflow.Acceptance` asks (errors beyond the estimate's own standard error
 within 1 dB and 5°), and give, for the recent reference, a drive that the gain checks and
-the rig's limits of ``ehss compensate`` accept (:func:`ehss.compensation.check_drive`).
+the rig's limits of ``ehss compensate`` accept (:func:`ehss.compensation.check_drive`),
+and fit the newest quarter-second of feedback (fresh data, the free-run fit that
+:class:`~ehss.workflow.Acceptance` asks of a validated model).
 Otherwise the last good compensator stays and the reason is logged. Updates are at most
 one per ``min_interval_s``.
 
@@ -368,6 +370,8 @@ class UpdateGuard:
         Fewest seconds between two updates of a channel.
     crossfade_s : float
         Length of the cross-fade from the old compensator to the new, s.
+    fit_s : float
+        Length of the newest stretch of feedback the model must fit (fresh data), s.
     """
 
     acceptance: Acceptance = field(default_factory=Acceptance)
@@ -375,9 +379,10 @@ class UpdateGuard:
     limits: DriveLimits | None = None
     min_interval_s: float = 0.5
     crossfade_s: float = 0.1
+    fit_s: float = 0.25
 
     def __post_init__(self) -> None:
-        for name in ("min_interval_s", "crossfade_s"):
+        for name in ("min_interval_s", "crossfade_s", "fit_s"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ParameterError(f"{name}={v!r} must be a number >= 0 (s)")
@@ -475,8 +480,8 @@ class AdaptiveCompensator:
         """Whether the rate limit lets an update through at ``t_s``."""
         return t_s - self._last_t >= self.guard.min_interval_s
 
-    def propose(self, t_s: float, model: ArmaxModel, h1: Any, reference: np.ndarray
-                ) -> Decision:
+    def propose(self, t_s: float, model: ArmaxModel, h1: Any, reference: np.ndarray,
+                window: tuple[np.ndarray, np.ndarray] | None = None) -> Decision:
         """Judge the compensator of ``model`` at stream time ``t_s``.
 
         Parameters
@@ -488,6 +493,10 @@ class AdaptiveCompensator:
             Sliding H1 estimate of the same loop (drive → feedback).
         reference : ndarray
             Recent reference (the desired output), to check the drive it would give.
+        window : (u, y), optional
+            The drive and feedback the H1 estimate was made from: the model simulated
+            on ``u`` must fit the latest ``guard.fit_s`` of ``y`` (fresh data) as
+            ``acceptance.min_fit_pct`` asks.
 
         Returns
         -------
@@ -495,12 +504,39 @@ class AdaptiveCompensator:
             Also appended to :attr:`log`; when accepted, :attr:`current` is its design.
         """
         decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float))
+        if decision.accepted and window is not None:
+            decision = self._judge_fit(decision, model, *window)
         self.log.append(decision)
         if decision.accepted:
             self.current = decision.design
             self.current_model = model
             self._last_t = t_s
         return decision
+
+    def _judge_fit(self, decision: Decision, model: ArmaxModel, u: np.ndarray,
+                   y: np.ndarray) -> Decision:
+        """The model's free-run simulation over the window must fit its latest part.
+
+        The H1 estimate weighs the whole window; a sensor that fails (sticks, flips,
+        bursts) shows first in the newest samples, which the model's simulation on the
+        drive no longer fits.
+        """
+        acc = self.guard.acceptance
+        n_fit = max(1, min(int(round(self.guard.fit_s * self.fs_hz)), u.size // 2))
+        b = np.concatenate([np.zeros(model.delay), model.b])
+        y_hat = scipy.signal.lfilter(b, model.a, u)[-n_fit:]
+        y_new = y[-n_fit:]
+        spread = float(np.linalg.norm(y_new - np.mean(y_new)))
+        # fit = 100 (1 - |y - ŷ| / |y - mean y|), as ehss.validation computes it
+        fit = 100.0 * (1.0 - float(np.linalg.norm(y_new - y_hat)) / spread) \
+            if spread > 0 else -math.inf
+        figures = {**decision.figures, "fresh_fit_pct": fit}
+        if fit < acc.min_fit_pct:
+            return Decision(decision.t_s, False, f"the model fits the latest "
+                            f"{n_fit / self.fs_hz:g} s of feedback by {fit:.1f} % (needs "
+                            f"{acc.min_fit_pct:g} %): the sensor or the loop misbehaves",
+                            figures=figures)
+        return Decision(decision.t_s, True, "", decision.design, figures)
 
     def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray) -> Decision:
         g = self.guard

@@ -234,7 +234,7 @@ class ChannelAdapter:
             decision = Decision(t_s, False, f"no model or H1 estimate: {exc}")
             self.compensator.log.append(decision)
             return decision
-        return self.compensator.propose(t_s, model, h1, r)
+        return self.compensator.propose(t_s, model, h1, r, window=(u, y))
 
 
 @dataclass(frozen=True)

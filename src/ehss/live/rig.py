@@ -320,6 +320,11 @@ class SteppingRig:
         self.preview = int(preview)
         self.filters = [CompensatorFilter(Compensator.delay(self.preview, fs_hz=self.fs))
                         for _ in range(self.n_channels)]
+        # the reference known ahead is known from the start: the filters read its first
+        # `preview` samples before the first drive sample, whose index is then `preview`
+        # in the filter's count (what load() translates)
+        for ch, f in enumerate(self.filters):
+            f.process(desired[ch, :min(self.preview, self.n_samples)])
         self._seeds = [seed + 1000 + k for k in range(1, self.n_channels + 1)]
         self._states: list = [None] * self.n_channels
         self._stuck = [0.0] * self.n_channels
@@ -332,9 +337,9 @@ class SteppingRig:
         return self.index >= self.n_samples
 
     def load(self, channel: int, compensator, apply_index: int, crossfade: int) -> bool:
-        """Hand a compensator to channel ``channel``'s filter (see
-        :meth:`ehss.target.filter.CompensatorFilter.load`)."""
-        return self.filters[channel].load(compensator, apply_index, crossfade)
+        """Hand a compensator to channel ``channel``'s filter, to apply from the drive
+        sample ``apply_index`` (see :meth:`ehss.target.filter.CompensatorFilter.load`)."""
+        return self.filters[channel].load(compensator, apply_index + self.preview, crossfade)
 
     def _events_at(self, k: int) -> None:
         for e in self.events:
