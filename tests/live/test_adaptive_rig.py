@@ -84,3 +84,24 @@ def test_a_fault_keeps_the_last_good_inverse(kind, value):
                     params=ehss.preset("default"))
     assert any(d["accepted"] and fault.start_s < d["t_s"] <= fault.end_s
                for d in rec.decisions["2"])
+
+
+def test_causal_compensation_cuts_the_phase_lag():
+    # the reference made online (no preview): the compensator is the least-squares causal
+    # prediction of the inverse; its phase lag at 10 Hz against the loop's own
+    desired = _desired(14.0)[:1]
+    rig = SteppingRig("position", desired, fs=FS, preview=0, seed=0)
+    rec = AdaptiveLoop(rig, CompensationSettings(band_hz=BAND, mode="causal"),
+                       loop="position", params=ehss.preset("default")).run()
+    plain = SteppingRig("position", desired, fs=FS, preview=0, seed=0).step(desired.shape[1])
+    lag = {}
+    for name, y in (("with", rec.feedback[0]), ("without", plain.feedback[0])):
+        # the last 8 s, 0.5 Hz bins: 15 averages at a coherence above 0.99 put the phase
+        # within a fraction of a degree (Bendat & Piersol 9.92)
+        h = ehss.h1_estimate(desired[0, 6000:], y[6000:], fs=FS, nperseg=2000)
+        lag[name] = abs(np.degrees(np.angle(h.response[np.argmin(abs(h.freq_hz - 10.0))])))
+    assert lag["without"] > 45.0
+    assert lag["with"] <= lag["without"] / 10.0
+    for k in range(1):
+        check_drive(rec.drive[k], desired[k], FS, loop="position",
+                    params=ehss.preset("default"))

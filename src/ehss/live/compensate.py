@@ -89,6 +89,10 @@ class CompensationSettings:
     adapt_until_s : float
         No update after this time (inf: always adapt); to compare with an inverse that
         is not adapted.
+    alarm_after : int
+        Consecutive refusals (of a channel that has a good compensator) that raise an
+        alarm: one refusal is the guard doing its work on a scattered estimate; three
+        (0.75 s at the default period) are a fault.
     n_taps, max_sections : int
         The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
     guard : UpdateGuard
@@ -108,6 +112,7 @@ class CompensationSettings:
     update_s: float = 0.25
     start_s: float = 2.0
     adapt_until_s: float = math.inf
+    alarm_after: int = 3
     n_taps: int = 256
     max_sections: int = 16
     guard: UpdateGuard = field(default_factory=UpdateGuard)
@@ -190,6 +195,7 @@ class ChannelAdapter:
             n_taps=s.n_taps, max_sections=s.max_sections, guard=s.guard, loop=loop,
             params=params)
         self.alarm = False
+        self.refusals = 0
         self.busy_until = 0
         self._n = 0
         self._n_average = int(round(s.average_s * self.fs))
@@ -328,13 +334,16 @@ class AdaptiveLoop:
                 if d.reason != self._last_reason[k]:
                     self._event({"kind": "compensator_refused", "channel": name,
                                  "t_s": t_s, "reason": d.reason})
-                if ad.compensator.current is not None and not ad.alarm:
+                ad.refusals += 1
+                if ad.compensator.current is not None and not ad.alarm \
+                        and ad.refusals >= s.alarm_after:
                     ad.alarm = True
                     self._event({"kind": "alarm", "channel": name, "t_s": t_s,
                                  "text": f"compensator kept: {d.reason}"})
                 self._last_reason[k] = d.reason
                 continue
             self._last_reason[k] = ""
+            ad.refusals = 0
             if ad.alarm:
                 ad.alarm = False
                 self._event({"kind": "clear", "channel": name, "t_s": t_s})
