@@ -63,6 +63,8 @@ _COMMANDS = (
      "changes, record, dashboard"),
     ("stream", "stream", "send the simulated rig or a file as UDP datagrams (for ehss live "
      "--udp)"),
+    ("target-code", "target", "write the C99 compensator filter and datagram decoder for a "
+     "real-time target, with an integration note"),
 )
 
 

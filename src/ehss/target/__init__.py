@@ -3,10 +3,19 @@ that carries a compensator to it, and the same filter and decoder in portable C9
 (``c/ehss_compensator.h``, ``c/ehss_compensator.c``; ``ehss target-code`` writes them out).
 """
 
+from ehss.target.datagram import (
+    FAULTS,
+    RESULTS,
+    CompensatorUpdate,
+    Inbox,
+    decode,
+    encode,
+)
 from ehss.target.filter import (
     MAX_PREVIEW,
     MAX_SECTIONS,
     MAX_TAPS,
+    SAMPLE_RATE_TOLERANCE,
     Compensator,
     CompensatorFilter,
     coefficient_fault,
@@ -16,7 +25,14 @@ __all__ = [
     "MAX_SECTIONS",
     "MAX_TAPS",
     "MAX_PREVIEW",
+    "SAMPLE_RATE_TOLERANCE",
     "Compensator",
     "CompensatorFilter",
     "coefficient_fault",
+    "CompensatorUpdate",
+    "FAULTS",
+    "encode",
+    "decode",
+    "RESULTS",
+    "Inbox",
 ]

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["filter_block"]
+__all__ = ["filter_block", "crossfade_block"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -51,3 +51,13 @@ def filter_block(sos: np.ndarray, n_sections: int, z: np.ndarray, taps: np.ndarr
                 j_pos = size - 1
         y[i] = acc
     return pos
+
+
+@njit(cache=True, error_model="numpy")
+def crossfade_block(y_old: np.ndarray, y_new: np.ndarray, j0: int, n: int) -> None:
+    """Blend ``y_new`` into ``y_old`` in place: sample ``i`` is the ``(j0 + i)``-th of a
+    cross-fade of ``n`` samples (``1 <= j0 + i <= n``)."""
+    for i in range(y_old.shape[0]):
+        # w = (k - k0 + 1) / N ;  u = (1 - w) u_old + w u_new
+        w = float(j0 + i) / float(n)
+        y_old[i] = (1.0 - w) * y_old[i] + w * y_new[i]

@@ -23,8 +23,10 @@ at most :data:`MAX_SECTIONS` sections and :data:`MAX_TAPS` taps, and a preview o
 **Swapping.** :meth:`CompensatorFilter.load` hands over a new compensator, the sample
 index ``k0`` from which it applies and a cross-fade length ``N``. The new filter is taken
 up at the next sample boundary where no cross-fade is under way (a load that arrives
-during a cross-fade waits, and a newer load replaces one that waits: only the newest
-counts). From then on it runs *in shadow*, beside the running one, on the same input;
+during a cross-fade waits for its end; while one waits, a further load is refused as
+``busy``, as the C target's one-slot mailbox refuses it, and the host sends it again).
+It replaces a filter still in shadow (counted ``superseded``). From then on it runs
+*in shadow*, beside the running one, on the same input;
 from sample ``k0`` the drive is
 
 .. math:: u[k] = (1 - w_k)\\, u_{old}[k] + w_k\\, u_{new}[k], \\qquad
@@ -46,7 +48,10 @@ up, the cross-fade starts at once (counted as ``late``) and the start-up transie
 weighted down by the rising ``w``.
 
 A compensator with a different preview than the running one is refused and counted:
-the drive would jump by the difference of the previews.
+the drive would jump by the difference of the previews. So is one designed for a sample
+rate more than :data:`SAMPLE_RATE_TOLERANCE` (0.1 %) away from the filter's: its time
+constants and delays would be misplaced by as much (a model identified on a decimated
+record, say, has a rate several times lower).
 
 Examples
 --------
@@ -65,14 +70,15 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import SAMPLE_RATE_RANGE_HZ, check_int, check_real
+from ehss._checks import SAMPLE_RATE_RANGE_HZ, as_signal, check_int, check_real
 from ehss.errors import ParameterError
-from ehss.target._kernels import filter_block
+from ehss.target._kernels import crossfade_block, filter_block
 
 __all__ = [
     "MAX_SECTIONS",
     "MAX_TAPS",
     "MAX_PREVIEW",
+    "SAMPLE_RATE_TOLERANCE",
     "Compensator",
     "CompensatorFilter",
     "coefficient_fault",
@@ -84,6 +90,9 @@ MAX_SECTIONS = 16
 MAX_TAPS = 256
 #: Longest preview, samples: a pure delay of it fits the FIR part.
 MAX_PREVIEW = MAX_TAPS - 1
+#: Largest relative difference between a loaded compensator's sample rate and the
+#: filter's (the C code's ``EHSS_COMP_SAMPLE_RATE_TOLERANCE``).
+SAMPLE_RATE_TOLERANCE = 1e-3
 
 
 def coefficient_fault(sos: np.ndarray, taps: np.ndarray) -> str | None:
@@ -240,7 +249,23 @@ class _Load:
     crossfade: int
 
 
-COUNTERS = ("loads", "swaps", "refused_preview", "superseded", "late")
+COUNTERS = ("loads", "swaps", "refused_preview", "refused_sample_rate", "busy", "superseded",
+            "late")
+# why a load is refused -> its counter
+_REFUSED = {"other_preview": "refused_preview", "other_sample_rate": "refused_sample_rate"}
+
+
+def _as_block(block: Any) -> np.ndarray:
+    """``block`` as a finite float64 1-D array: the common case checked in a few
+    microseconds, the rest by :func:`~ehss._checks.as_signal` (which names the bad
+    sample)."""
+    try:
+        x = np.ascontiguousarray(block, dtype=np.float64)
+    except (TypeError, ValueError):
+        x = None
+    if x is None or x.ndim != 1 or not np.isfinite(x).all():
+        x = as_signal(block, "block", allow_empty=True)
+    return x
 
 
 class CompensatorFilter:
@@ -249,8 +274,8 @@ class CompensatorFilter:
     Parameters
     ----------
     initial : Compensator
-        The compensator that runs from the start; its preview is the filter's for good
-        (:meth:`Compensator.delay` runs the reference unchanged).
+        The compensator that runs from the start; its preview and sample rate are the
+        filter's for good (:meth:`Compensator.delay` runs the reference unchanged).
     start_index : int, default 0
         Sample index of the first sample :meth:`step` or :meth:`process` computes.
 
@@ -258,14 +283,17 @@ class CompensatorFilter:
     ----------
     counters : dict of str to int
         ``loads`` (taken up), ``swaps`` (cross-fades completed), ``refused_preview``,
-        ``superseded`` (replaced by a newer load before their cross-fade began),
-        ``late`` (taken up after their apply index: the cross-fade started late).
+        ``refused_sample_rate``, ``busy`` (refused while another load waited),
+        ``superseded`` (replaced by a newer load while still in shadow), ``late`` (taken
+        up after their apply index: the cross-fade started late).
     """
 
     def __init__(self, initial: Compensator, *, start_index: int = 0) -> None:
         if not isinstance(initial, Compensator):
             raise TypeError(f"initial must be a Compensator, not {type(initial).__name__}")
         self._run = _Slot(initial)
+        self._preview = initial.preview
+        self._fs_hz = initial.fs_hz
         self._next: _Slot | None = None
         self._start = 0          # k0 of the next filter
         self._crossfade = 0      # N of the next filter
@@ -276,7 +304,22 @@ class CompensatorFilter:
     @property
     def preview(self) -> int:
         """Samples of reference the input runs ahead of the drive."""
-        return self._run.compensator.preview
+        return self._preview
+
+    @property
+    def fs_hz(self) -> float:
+        """Sample rate the filter runs at, Hz (the initial compensator's)."""
+        return self._fs_hz
+
+    def accepts(self, compensator: Compensator) -> str | None:
+        """Why :meth:`load` would refuse ``compensator`` (``"other_preview"``,
+        ``"other_sample_rate"``), or None."""
+        if compensator.preview != self._preview:
+            return "other_preview"
+        # |fs - fs_0| > tol fs_0, as the C code computes it
+        if abs(compensator.fs_hz - self._fs_hz) > SAMPLE_RATE_TOLERANCE * self._fs_hz:
+            return "other_sample_rate"
+        return None
 
     @property
     def index(self) -> int:
@@ -293,23 +336,38 @@ class CompensatorFilter:
         """The compensator running in shadow or fading in, if any."""
         return None if self._next is None else self._next.compensator
 
+    @property
+    def waiting(self) -> bool:
+        """True while a load waits to be taken up (during a cross-fade)."""
+        return self._pending is not None
+
     def load(self, compensator: Compensator, apply_index: int, crossfade: int) -> bool:
         """Hand over ``compensator``, to apply from sample ``apply_index`` with a
-        cross-fade of ``crossfade`` samples; False (and counted) if its preview differs.
+        cross-fade of ``crossfade`` samples.
 
         It is taken up at the next sample boundary where no cross-fade is under way,
-        replacing a load that has not yet been taken up or a filter still in shadow.
+        replacing a filter still in shadow.
+
+        Returns
+        -------
+        bool
+            False, and counted, if it is refused: its preview differs from the filter's
+            (``refused_preview``), its sample rate is more than
+            :data:`SAMPLE_RATE_TOLERANCE` away from the filter's (``refused_sample_rate``)
+            or another load still waits (``busy``).
         """
         if not isinstance(compensator, Compensator):
             raise TypeError(f"compensator must be a Compensator, not "
                             f"{type(compensator).__name__}")
         k0 = check_int(apply_index, "apply_index", lo=0)
         n = check_int(crossfade, "crossfade", lo=0)
-        if compensator.preview != self.preview:
-            self.counters["refused_preview"] += 1
+        refused = self.accepts(compensator)
+        if refused is not None:
+            self.counters[_REFUSED[refused]] += 1
             return False
         if self._pending is not None:
-            self.counters["superseded"] += 1
+            self.counters["busy"] += 1
+            return False
         self._pending = _Load(compensator, k0, n)
         return True
 
@@ -340,21 +398,20 @@ class CompensatorFilter:
 
     def _advance(self, x: np.ndarray) -> np.ndarray:
         """Run the samples ``x`` of one segment (no event inside it)."""
-        fading = self._fading()
         y = self._run.run(x)
-        if self._next is not None:
-            y_new = self._next.run(x)
-            if fading:
-                n = max(self._crossfade, 1)
-                # w_k = (k - k0 + 1) / N ;  u = (1 - w) u_old + w u_new
-                j = np.arange(self._index - self._start + 1,
-                              self._index - self._start + 1 + x.size)
-                w = j / float(n)
-                y = (1.0 - w) * y + w * y_new
+        new = self._next
+        if new is None:
+            self._index += x.size
+            return y
+        y_new = new.run(x)
+        if self._index >= self._start:   # fading in
+            n = max(self._crossfade, 1)
+            # w_k = (k - k0 + 1) / N ;  u = (1 - w) u_old + w u_new
+            crossfade_block(y, y_new, self._index - self._start + 1, n)
+            if self._index + x.size >= self._start + n:   # w reached 1: drop the old one
+                self._run, self._next = new, None
+                self.counters["swaps"] += 1
         self._index += x.size
-        if fading and self._index >= self._start + max(self._crossfade, 1):
-            self._run, self._next = self._next, None   # w reached 1: drop the old one
-            self.counters["swaps"] += 1
         return y
 
     def process(self, block: Any) -> np.ndarray:
@@ -364,14 +421,19 @@ class CompensatorFilter:
         Parameters
         ----------
         block : array_like, shape (n,)
+            Finite samples.
 
         Returns
         -------
         ndarray, shape (n,)
+
+        Raises
+        ------
+        DataError
+            If ``block`` is not 1-D or holds a NaN or infinite sample (it would stay in
+            the filter's state for good); the filter is left as it was.
         """
-        x = np.ascontiguousarray(block, dtype=np.float64)
-        if x.ndim != 1:
-            raise ParameterError(f"block has shape {x.shape}, must be 1-D")
+        x = _as_block(block)
         out = np.empty_like(x)
         i = 0
         while i < x.size:
