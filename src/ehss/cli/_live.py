@@ -196,6 +196,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "estimators' cost is mostly per call; default: %(default)s s)")
     d.add_argument("--update", type=float, default=0.1, metavar="S",
                    help="evaluation period, s of stream time (default: %(default)s)")
+    c = p.add_argument_group("compensation")
+    c.add_argument("--compensate", choices=("preview", "causal"),
+                   help="--rig: adapt each channel's inverse-model compensator while the rig "
+                        "runs (preview: the reference known ahead, a drive file streamed; "
+                        "causal: made online); guarded updates, cross-faded in by the "
+                        "target's filter; the log and figures go to stderr and --report")
     o = p.add_argument_group("output")
     o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
                    help="record samples, estimates and events (HDF5, readable while "
@@ -260,6 +266,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.record is not None and Path(args.record).exists():
         raise DataError(f"{args.record!r} exists: a recording is never overwritten")
+    if args.compensate is not None:
+        from ehss.cli._live_compensate import run_compensated
+
+        _check_positive("--speed", args.speed, allow_inf=True)
+        duration = RIG_DURATION_S if args.duration is None else args.duration
+        _check_positive("--duration", duration)
+        return run_compensated(args, duration)
     est = EstimatorSettings(na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
                             method=args.method, memory_s=args.memory,
                             forgetting=args.forgetting, p0=args.p0, u_scale=args.u_scale,

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import collections
 import math
+import re
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -331,7 +333,9 @@ class AdaptiveLoop:
             d = ad.judge(t_s)
             name = ad.name
             if not d.accepted:
-                if d.reason != self._last_reason[k]:
+                # the same refusal with other figures is logged once
+                key = re.sub(r"[-+0-9.]+", "#", d.reason)
+                if key != self._last_reason[k]:
                     self._event({"kind": "compensator_refused", "channel": name,
                                  "t_s": t_s, "reason": d.reason})
                 ad.refusals += 1
@@ -340,7 +344,7 @@ class AdaptiveLoop:
                     ad.alarm = True
                     self._event({"kind": "alarm", "channel": name, "t_s": t_s,
                                  "text": f"compensator kept: {d.reason}"})
-                self._last_reason[k] = d.reason
+                self._last_reason[k] = key
                 continue
             self._last_reason[k] = ""
             ad.refusals = 0
@@ -360,15 +364,23 @@ class AdaptiveLoop:
             self.loads.append(load)
             self._event(load)
 
-    def run(self, *, block_s: float = 0.05, duration_s: float | None = None
-            ) -> CompensationRecord:
-        """Run until the target finishes (or ``duration_s``)."""
+    def run(self, *, block_s: float = 0.05, duration_s: float | None = None,
+            speed: float = math.inf, stop: Any = None) -> CompensationRecord:
+        """Run until the target finishes, ``duration_s`` of stream time passes or
+        ``stop`` (a :class:`threading.Event`) is set; ``speed`` × real time (inf: as
+        fast as it computes)."""
         s = self.settings
+        wall0 = time.monotonic()
         n_block = max(1, int(round(block_s * self.fs)))
         limit = math.inf if duration_s is None else int(round(duration_s * self.fs))
         next_update = max(s.start_s, s.update_s)
         parts: list[Any] = []
         while not self.target.finished and self.target.index < limit:
+            if stop is not None and stop.is_set():
+                break
+            ahead = self.target.index / self.fs / speed - (time.monotonic() - wall0)
+            if ahead > 0:
+                time.sleep(ahead)
             block = self.target.step(int(min(n_block, limit - self.target.index)))
             parts.append(block)
             for k, ad in enumerate(self.adapters):

@@ -29,7 +29,8 @@ import ehss
 from ehss.errors import ParameterError
 from ehss.live.layout import RecordLayout
 
-__all__ = ["RigEvent", "parse_event", "rig_record", "rig_layout", "RIG_SIGNAL", "FAULT_KINDS",
+__all__ = ["RigEvent", "parse_event", "rig_record", "rig_reference", "rig_layout", "RIG_SIGNAL",
+           "FAULT_KINDS",
            "RigFault", "RigBlock", "SteppingRig"]
 
 #: Reference of each loop on the live rig: (RMS in SI units, band in Hz). The band
@@ -132,6 +133,14 @@ def _apply(params: ehss.RigParams, event: RigEvent) -> ehss.RigParams:
         raise ParameterError(f"event {event.path}={event.value!r}: {exc}") from None
 
 
+def rig_reference(n: int, fs: float, *, band_hz: tuple[float, float], rms: float,
+                  seed: int) -> np.ndarray:
+    """One channel's reference on the live rig: band-limited random noise of ``n``
+    samples, faded in and out over :data:`RIG_FADE_S`."""
+    return ehss.signals.band_limited_random(band_hz=band_hz, rms=rms, duration_s=n / fs,
+                                            fs=fs, seed=seed, fade_s=RIG_FADE_S).values[:n]
+
+
 def rig_record(
     loop: str, *, n_channels: int, duration_s: float, fs: float | None = None,
     params: ehss.RigParams | None = None, events: tuple[RigEvent, ...] = (),
@@ -186,9 +195,7 @@ def rig_record(
     out = np.empty((n, layout.n_fields))
     out[:, 0] = np.arange(n) / fs
     for k, ch in enumerate(layout.channels, start=1):
-        ref = ehss.signals.band_limited_random(band_hz=band_hz, rms=rms, duration_s=n / fs,
-                                               fs=fs, seed=seed + k,
-                                               fade_s=RIG_FADE_S).values[:n]
+        ref = rig_reference(n, fs, band_hz=band_hz, rms=rms, seed=seed + k)
         mine = sorted((e for e in events if e.channel in (None, ch)), key=lambda e: e.time_s)
         cuts = sorted({min(n, int(round(e.time_s * fs))) for e in mine} - {0, n})
         p = params

@@ -1,0 +1,111 @@
+"""``ehss live --compensate``: adapt each channel's inverse-model compensator while the
+simulated rig runs, and report what it did."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import threading
+
+import numpy as np
+
+import ehss
+from ehss._provenance import versions
+from ehss.errors import ParameterError
+
+__all__ = ["run_compensated"]
+
+#: Samples of reference the target's filter reads ahead in preview mode: half of its
+#: FIR (the other half holds the causal tail of the inverse).
+PREVIEW_SAMPLES = 128
+
+
+def _rig_target(args: argparse.Namespace, duration_s: float):
+    from ehss.cli._params import warn_if_unstable
+    from ehss.live.rig import RIG_SIGNAL, SteppingRig, parse_event, rig_reference
+
+    params = ehss.load_params(args.params) if args.params else ehss.preset(args.preset)
+    warn_if_unstable("live", params, args.rig,
+                     f"--params {args.params}" if args.params else f"--preset {args.preset}")
+    fs = params.timing.control_rate_hz if args.fs is None else float(args.fs)
+    rms, band = RIG_SIGNAL[args.rig]
+    band = band if args.band is None else tuple(args.band)
+    n = int(round(duration_s * fs))
+    desired = np.vstack([rig_reference(n, fs, band_hz=band, rms=rms, seed=args.seed + k)
+                         for k in range(1, args.channels + 1)])
+    events = tuple(parse_event(e) for e in args.event)
+    preview = PREVIEW_SAMPLES if args.compensate == "preview" else 0
+    target = SteppingRig(args.rig, desired, fs=fs, params=params, events=events,
+                         preview=preview, seed=args.seed)
+    return target, params, band
+
+
+def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
+    """The ``--compensate`` run of ``ehss live`` (``--rig`` only); exit status."""
+    from ehss.live.compensate import AdaptiveLoop, CompensationSettings
+    from ehss.live.rig import SteppingRig
+
+    if args.rig is None:
+        raise ParameterError("--compensate runs with --rig: the simulated rig is the "
+                             "target whose filters take the compensators (a UDP target "
+                             "takes them as ehss.target.datagram datagrams)")
+    for flag, value in (("--record", args.record), ("--dashboard", args.dashboard),
+                        ("--baseline", args.baseline or None)):
+        if value is not None:
+            raise ParameterError(f"{flag} does not apply with --compensate: its log, "
+                                 "loads and figures go to --report")
+    target, params, band = _rig_target(args, duration_s)
+    settings = CompensationSettings(mode=args.compensate, band_hz=band)
+
+    def log(event: dict) -> None:
+        if event["kind"] in ("alarm", "clear", "compensator_refused", "compensator"):
+            keep = ("kind", "channel", "t_s", "reason", "text", "accepted",
+                    "max_amplitude_error_db", "max_phase_error_deg")
+            print("ehss live: " + json.dumps({k: event[k] for k in keep if k in event}),
+                  file=sys.stderr, flush=True)
+
+    loop = AdaptiveLoop(target, settings, loop=args.rig, params=params,
+                        log=None if args.quiet else log)
+    print(f"ehss live: compensating ({args.compensate}), band {band[0]:g}-{band[1]:g} Hz",
+          file=sys.stderr, flush=True)
+    stop = threading.Event()
+    previous = signal.getsignal(signal.SIGTERM)
+    main = threading.current_thread() is threading.main_thread()
+    if main:
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        rec = loop.run(speed=args.speed, stop=stop, duration_s=args.stop_after)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        if main:
+            signal.signal(signal.SIGTERM, previous)
+    # the same rig without compensation, for the comparison
+    n = rec.desired.shape[1]
+    plain = SteppingRig(args.rig, target.desired[:, :n], fs=target.fs, params=params,
+                        events=target.events, seed=args.seed).step(n)
+    half = slice(n // 2, n)
+    err = plain.desired[:, half] - plain.feedback[:, half]
+    without = np.sqrt(np.mean(err * err, axis=1))
+    with_ = rec.tracking_rms(n / 2 / rec.fs, n / rec.fs)
+    channels = {}
+    for k, name in enumerate(rec.channels):
+        channels[name] = {
+            "tracking_rms": float(with_[k]), "tracking_rms_without": float(without[k]),
+            "loads": sum(1 for ld in rec.loads if ld["channel"] == name),
+            "refusals": sum(1 for d in rec.decisions[name] if not d["accepted"]),
+        }
+        print(f"ehss live: channel {name}: tracking RMS over the second half "
+              f"{with_[k]:.4g} (without compensation {without[k]:.4g}, "
+              f"{without[k] / with_[k] if with_[k] > 0 else math.inf:.1f}x), "
+              f"{channels[name]['loads']} compensators loaded, "
+              f"{channels[name]['refusals']} refused", file=sys.stderr)
+    if args.report:
+        ehss.write_json(args.report, {
+            "compensation": rec.settings, "channels": channels, "loads": rec.loads,
+            "decisions": rec.decisions, "events": rec.events,
+            "settings": {"argv": sys.argv[1:]}, "versions": versions()})
+    return 0
