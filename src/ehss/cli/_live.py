@@ -202,6 +202,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "runs (preview: the reference known ahead, a drive file streamed; "
                         "causal: made online); guarded updates, cross-faded in by the "
                         "target's filter; the log and figures go to stderr and --report")
+    c.add_argument("--rms", type=float, metavar="X",
+                   help="--compensate: RMS of the rig's reference in the loop's unit (default "
+                        "the rig's, e.g. 0.001 m; a compensated drive must stay within the "
+                        "rig's limits, which 0.0005 m over 0.5-20 Hz does)")
     o = p.add_argument_group("output")
     o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
                    help="record samples, estimates and events (HDF5, readable while "
@@ -266,6 +270,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.record is not None and Path(args.record).exists():
         raise DataError(f"{args.record!r} exists: a recording is never overwritten")
+    if args.rms is not None and args.compensate is None:
+        raise ParameterError("--rms applies to --compensate (the rig's reference of "
+                             "change detection is fixed)")
     if args.compensate is not None:
         from ehss.cli._live_compensate import run_compensated
 

@@ -13,6 +13,7 @@ import threading
 import numpy as np
 
 import ehss
+from ehss._checks import check_real
 from ehss._provenance import versions
 from ehss.errors import ParameterError
 
@@ -33,6 +34,8 @@ def _rig_target(args: argparse.Namespace, duration_s: float):
     fs = params.timing.control_rate_hz if args.fs is None else float(args.fs)
     rms, band = RIG_SIGNAL[args.rig]
     band = band if args.band is None else tuple(args.band)
+    if args.rms is not None:
+        rms = check_real(args.rms, "--rms", lo=0.0, lo_open=True)
     n = int(round(duration_s * fs))
     desired = np.vstack([rig_reference(n, fs, band_hz=band, rms=rms, seed=args.seed + k)
                          for k in range(1, args.channels + 1)])
