@@ -34,7 +34,7 @@ from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
 
 __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
-           "Target"]
+           "Target", "DatagramSender", "UdpTarget"]
 
 
 class Target(Protocol):
@@ -301,13 +301,21 @@ class AdaptiveLoop:
         self.target = target
         self.settings = settings
         self.fs = float(target.fs)
-        desired = np.atleast_2d(target.desired)
         band = settings.band_hz
+        desired = getattr(target, "desired", None)
+        if desired is not None:
+            desired = np.atleast_2d(desired)
+            scales = np.sqrt(np.mean(desired**2, axis=1))
+        else:
+            # a remote target: its reference is not here ahead of time
+            scales = np.asarray(target.reference_rms, dtype=float)
+            if band is None:
+                raise ParameterError("a remote target needs the band of its reference "
+                                     "(band_hz / --band)")
         if band is None:
             band = reference_band(desired[0], self.fs)
             band = (max(band[0], 2.0 * self.fs / desired.shape[1]), band[1])
         self.band_hz = (float(band[0]), float(band[1]))
-        scales = np.sqrt(np.mean(desired**2, axis=1))
         self.adapters = [
             ChannelAdapter(name, self.fs, self.band_hz, float(scales[k]) or 1.0, settings,
                            loop=loop, params=params, preview=target.preview)
@@ -315,7 +323,18 @@ class AdaptiveLoop:
         self._log = log
         self.events: list[dict] = []
         self.loads: list[dict] = []
+        self._warm_up(loop, params)
         self._last_reason = [""] * len(self.adapters)
+
+    def _warm_up(self, loop: str | None, params: Any) -> None:
+        """One judgement on a throwaway channel, so that the estimator's compiled
+        kernels are loaded before the first block: a target's stream does not wait."""
+        n = int(self.settings.h1_window_s * self.fs)
+        u = np.random.default_rng(0).standard_normal(n)
+        warm = ChannelAdapter("warm-up", self.fs, self.band_hz, 1.0, self.settings,
+                              loop=loop, params=params, preview=self.target.preview)
+        warm.feed(u, 0.5 * u, u)
+        warm.judge(0.0)
 
     def _event(self, record: dict) -> None:
         self.events.append(record)
@@ -382,6 +401,8 @@ class AdaptiveLoop:
             if ahead > 0:
                 time.sleep(ahead)
             block = self.target.step(int(min(n_block, limit - self.target.index)))
+            if not block.drive.shape[1]:
+                continue
             parts.append(block)
             for k, ad in enumerate(self.adapters):
                 ad.feed(block.drive[k], block.feedback[k], block.desired[k])
@@ -398,3 +419,120 @@ class AdaptiveLoop:
                        for ad in self.adapters},
             loads=list(self.loads), events=list(self.events),
             settings={**s.to_dict(), "band_hz": list(self.band_hz)})
+
+
+# ----------------------------------------------------------------------------- over UDP
+class DatagramSender:
+    """Sends compensators to a remote target, one :mod:`ehss.target.datagram` each.
+
+    Parameters
+    ----------
+    address : (host, port)
+        The target's compensator port.
+    first_sequence : int, optional
+        Sequence number of the first datagram (default: the Unix time in ms, so that a
+        restarted host keeps numbering upwards).
+    """
+
+    def __init__(self, address: tuple[str, int], *, first_sequence: int | None = None) -> None:
+        import socket
+
+        self.address = (str(address[0]), int(address[1]))
+        self.sequence = int(time.time() * 1000) if first_sequence is None \
+            else int(first_sequence)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sent = 0
+
+    def send(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        """Encode and send one update; True once sent (the target may still refuse it)."""
+        from ehss.target.datagram import CompensatorUpdate, encode
+
+        update = CompensatorUpdate(channel=channel, sequence=self.sequence,
+                                   apply_index=int(apply_index), crossfade=int(crossfade),
+                                   compensator=compensator)
+        self._sock.sendto(encode(update), self.address)
+        self.sequence += 1
+        self.sent += 1
+        return True
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+@dataclass(frozen=True)
+class _UdpBlock:
+    first_index: int
+    desired: np.ndarray
+    drive: np.ndarray
+    feedback: np.ndarray
+
+
+class UdpTarget:
+    """A remote target as :class:`AdaptiveLoop` drives it.
+
+    The target streams, in the ``ehss live`` wire format, each channel's drive
+    (``ref<k>``, the model's input), feedback (``fb<k>``) and desired reference
+    (``des<k>``), and takes compensators back as :mod:`ehss.target.datagram` datagrams;
+    its filters read the reference ``preview`` samples ahead, and sample indices are the
+    stream's.
+
+    Parameters
+    ----------
+    source : UdpSource
+        Receives the stream (its layout must have ``des<k>`` for every channel).
+    sender : DatagramSender
+    fs : float
+    preview : int
+    reference_rms : sequence of float
+        RMS of each channel's desired reference (the estimators' scale).
+    idle_stop_s : float
+        The run ends when no data came for this long after the first.
+    """
+
+    def __init__(self, source: Any, sender: DatagramSender, *, fs: float, preview: int,
+                 reference_rms: Any, idle_stop_s: float = 1.0) -> None:
+        layout = source.layout
+        self.channels = tuple(layout.channels)
+        missing = [f"des{c}" for c in self.channels if f"des{c}" not in layout.fields]
+        if missing:
+            raise ParameterError(f"the stream has no field {missing[0]!r}: a target that "
+                                 "takes compensators sends each channel's desired reference")
+        self.source, self.sender = source, sender
+        self.fs, self.preview = float(fs), int(preview)
+        self.reference_rms = np.asarray(reference_rms, dtype=float)
+        self._ri, self._fi = layout.ref_index, layout.fb_index
+        self._di = [layout.fields.index(f"des{c}") for c in self.channels]
+        self._idle = float(idle_stop_s)
+        self._last = None
+        self._done = False
+        self.index = 0
+
+    @property
+    def finished(self) -> bool:
+        return self._done or self.source.finished
+
+    def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        return self.sender.send(channel, compensator, apply_index, crossfade)
+
+    def step(self, n: int) -> _UdpBlock:
+        """The samples that arrived (at least one unless the stream went idle)."""
+        got: list[np.ndarray] = []
+        have = 0
+        while have < n:
+            blocks = self.source.poll(0.05)
+            for b in blocks:
+                got.append(b.samples)
+                have += b.samples.shape[0]
+            now = time.monotonic()
+            if blocks:
+                self._last = now
+            elif self._last is not None and now - self._last >= self._idle:
+                self._done = True
+                break
+            elif have:
+                break
+        x = np.concatenate(got) if got else np.empty((0, len(self.source.layout.fields)))
+        first = self.index
+        self.index += x.shape[0]
+        return _UdpBlock(first, x[:, self._di].T.copy(), x[:, list(self._ri)].T.copy(),
+                         x[:, list(self._fi)].T.copy())
