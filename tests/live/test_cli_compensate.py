@@ -31,7 +31,11 @@ def test_compensated_rig_run_reports_its_figures(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, word", [
     (["live", "--udp", "127.0.0.1:0", "--fields", "t,ref1,fb1", "--compensate", "causal"],
-     "--rig"),
+     "--target"),
+    (["live", "--udp", "127.0.0.1:0", "--fields", "t,ref1,fb1", "--fs", "1000", "--band",
+      "0.5", "20", "--rms", "0.001", "--target", "127.0.0.1:9", "--compensate",
+      "preview"], "des1"),
+    (["live", "--rig", "position", "--rms", "0.001"], "--compensate only"),
     (["live", "--rig", "position", "--compensate", "preview", "--dashboard", "0"],
      "--dashboard"),
 ])

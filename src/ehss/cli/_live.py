@@ -205,7 +205,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--rms", type=float, metavar="X",
                    help="--compensate: RMS of the rig's reference in the loop's unit (default "
                         "the rig's, e.g. 0.001 m; a compensated drive must stay within the "
-                        "rig's limits, which 0.0005 m over 0.5-20 Hz does)")
+                        "rig's limits, which 0.0005 m over 0.5-20 Hz does); with --udp "
+                        "the RMS of the target's reference")
+    c.add_argument("--target", metavar="HOST:PORT",
+                   help="--compensate with --udp: where the compensator datagrams go "
+                        "(ehss.target.datagram); the stream must carry des<k>, each "
+                        "channel's desired reference, beside ref<k> (drive) and fb<k>")
     o = p.add_argument_group("output")
     o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
                    help="record samples, estimates and events (HDF5, readable while "
@@ -270,9 +275,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.record is not None and Path(args.record).exists():
         raise DataError(f"{args.record!r} exists: a recording is never overwritten")
-    if args.rms is not None and args.compensate is None:
-        raise ParameterError("--rms applies to --compensate (the rig's reference of "
-                             "change detection is fixed)")
+    if args.compensate is None:
+        for flag, value in (("--rms", args.rms), ("--target", args.target)):
+            if value is not None:
+                raise ParameterError(f"{flag} applies to --compensate only")
     if args.compensate is not None:
         from ehss.cli._live_compensate import run_compensated
 

@@ -46,21 +46,65 @@ def _rig_target(args: argparse.Namespace, duration_s: float):
     return target, params, band
 
 
-def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
-    """The ``--compensate`` run of ``ehss live`` (``--rig`` only); exit status."""
-    from ehss.live.compensate import AdaptiveLoop, CompensationSettings
-    from ehss.live.rig import SteppingRig
+def _udp_target(args: argparse.Namespace):
+    """A remote target: its stream on --udp (t, ref<k>, fb<k>, des<k>), its compensator
+    port --target."""
+    from ehss.live.compensate import DatagramSender, UdpTarget
+    from ehss.live.layout import RecordLayout, parse_fields
+    from ehss.live.udp import UdpSource, parse_address
 
-    if args.rig is None:
-        raise ParameterError("--compensate runs with --rig: the simulated rig is the "
-                             "target whose filters take the compensators (a UDP target "
-                             "takes them as ehss.target.datagram datagrams)")
+    missing = [flag for flag, v in (("--fields", args.fields), ("--fs", args.fs),
+                                    ("--band", args.band), ("--rms", args.rms),
+                                    ("--target", args.target)) if v is None]
+    if missing:
+        raise ParameterError(f"--compensate with --udp needs {', '.join(missing)}: the "
+                             "stream's fields (t,ref1,fb1,des1,...), its rate, the band "
+                             "and RMS of its reference, and where the compensators go")
+    fs = check_real(args.fs, "--fs", lo=0.0, lo_open=True, unit="Hz")
+    rms = check_real(args.rms, "--rms", lo=0.0, lo_open=True)
+    layout = RecordLayout(parse_fields(args.fields))
+    sender = DatagramSender(parse_address(args.target))
+    source = UdpSource(layout, parse_address(args.udp), fs=fs)
+    preview = PREVIEW_SAMPLES if args.compensate == "preview" else 0
+    try:
+        target = UdpTarget(source, sender, fs=fs, preview=preview,
+                           reference_rms=[rms] * len(layout.channels),
+                           idle_stop_s=2.0 if args.idle_stop is None else args.idle_stop)
+    except ParameterError:
+        source.close()
+        sender.close()
+        raise
+    return target, tuple(args.band)
+
+
+def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
+    """The ``--compensate`` run of ``ehss live`` (``--rig`` or ``--udp``); exit status."""
+
+    if args.rig is None and args.udp is None:
+        raise ParameterError("--compensate runs with --rig (the simulated rig's filters "
+                             "take the compensators) or --udp with --target (a remote "
+                             "target takes them as ehss.target datagrams)")
     for flag, value in (("--record", args.record), ("--dashboard", args.dashboard),
                         ("--baseline", args.baseline or None)):
         if value is not None:
             raise ParameterError(f"{flag} does not apply with --compensate: its log, "
                                  "loads and figures go to --report")
+    if args.udp is not None:
+        target, band = _udp_target(args)
+        params = None
+        try:
+            return _run(args, target, None, band)
+        finally:
+            target.source.close()
+            target.sender.close()
     target, params, band = _rig_target(args, duration_s)
+    return _run(args, target, params, band)
+
+
+def _run(args: argparse.Namespace, target, params, band) -> int:
+    from ehss.live.compensate import AdaptiveLoop, CompensationSettings
+    from ehss.live.rig import SteppingRig
+
     settings = CompensationSettings(mode=args.compensate, band_hz=band)
 
     def log(event: dict) -> None:
@@ -70,8 +114,8 @@ def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
             print("ehss live: " + json.dumps({k: event[k] for k in keep if k in event}),
                   file=sys.stderr, flush=True)
 
-    loop = AdaptiveLoop(target, settings, loop=args.rig, params=params,
-                        log=None if args.quiet else log)
+    loop = AdaptiveLoop(target, settings, loop=args.rig if params is not None else None,
+                        params=params, log=None if args.quiet else log)
     print(f"ehss live: compensating ({args.compensate}), band {band[0]:g}-{band[1]:g} Hz",
           file=sys.stderr, flush=True)
     stop = threading.Event()
@@ -86,12 +130,16 @@ def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
     finally:
         if main:
             signal.signal(signal.SIGTERM, previous)
-    # the same rig without compensation, for the comparison
     n = rec.desired.shape[1]
-    plain = SteppingRig(args.rig, target.desired[:, :n], fs=target.fs, params=params,
-                        events=target.events, seed=args.seed).step(n)
-    half = slice(n // 2, n)
-    err = plain.desired[:, half] - plain.feedback[:, half]
+    if params is not None:
+        # the same rig without compensation, for the comparison
+        plain = SteppingRig(args.rig, target.desired[:, :n], fs=target.fs, params=params,
+                            events=target.events, seed=args.seed).step(n)
+        err = plain.desired[:, n // 2:] - plain.feedback[:, n // 2:]
+    else:
+        # a remote target: its first second, before any compensator
+        m = min(n, int(target.fs))
+        err = rec.desired[:, :m] - rec.feedback[:, :m]
     without = np.sqrt(np.mean(err * err, axis=1))
     with_ = rec.tracking_rms(n / 2 / rec.fs, n / rec.fs)
     channels = {}
