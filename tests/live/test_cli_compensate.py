@@ -9,6 +9,7 @@ import pytest
 from ehss.cli import main
 
 
+@pytest.mark.slow
 def test_compensated_rig_run_reports_its_figures(tmp_path, capsys):
     report = tmp_path / "run.json"
     argv = ["live", "--rig", "position", "--channels", "2", "--duration", "8",
