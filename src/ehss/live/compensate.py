@@ -11,9 +11,11 @@ sent, the last good one keeps running, and the refusal is logged (an alarm when 
 channel that had a good compensator starts refusing, a clear when it accepts again).
 
 The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
-``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels`` and ``preview``:
-:class:`ehss.live.rig.SteppingRig` in process, or a remote target whose compensator
-datagrams a sender carries (:mod:`ehss.target.datagram`).
+``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
+either the whole ``desired`` reference or its ``reference_rms``:
+:class:`ehss.live.rig.SteppingRig` in process, or :class:`UdpTarget`, a remote target
+whose compensators :class:`DatagramSender` sends as :mod:`ehss.target.datagram`
+datagrams. ``apply_index`` counts drive samples from the start of the stream.
 """
 
 from __future__ import annotations
