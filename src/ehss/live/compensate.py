@@ -373,8 +373,14 @@ class AdaptiveLoop:
                 ad.alarm = False
                 self._event({"kind": "clear", "channel": name, "t_s": t_s})
             design = d.design
-            comp = Compensator(sos=design.sos, taps=design.taps, preview=design.preview,
-                               fs_hz=design.fs_hz)
+            try:
+                # the target's own checks (sizes, finite, every section stable)
+                comp = Compensator(sos=design.sos, taps=design.taps, preview=design.preview,
+                                   fs_hz=design.fs_hz)
+            except EhssError as exc:
+                self._event({"kind": "compensator_refused", "channel": name, "t_s": t_s,
+                             "reason": f"the target cannot run it: {exc}"})
+                continue
             apply_index = self.target.index + design.settle_samples
             crossfade = max(1, int(round(s.guard.crossfade_s * self.fs)))
             ok = self.target.load(k, comp, apply_index, crossfade)
