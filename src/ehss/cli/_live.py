@@ -196,6 +196,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "estimators' cost is mostly per call; default: %(default)s s)")
     d.add_argument("--update", type=float, default=0.1, metavar="S",
                    help="evaluation period, s of stream time (default: %(default)s)")
+    c = p.add_argument_group("compensation")
+    c.add_argument("--compensate", choices=("preview", "causal"),
+                   help="--rig: adapt each channel's inverse-model compensator while the rig "
+                        "runs (preview: the reference known ahead, a drive file streamed; "
+                        "causal: made online); guarded updates, cross-faded in by the "
+                        "target's filter; the log and figures go to stderr and --report")
+    c.add_argument("--rms", type=float, metavar="X",
+                   help="--compensate: RMS of the rig's reference in the loop's unit (default "
+                        "the rig's, e.g. 0.001 m; a compensated drive must stay within the "
+                        "rig's limits, which 0.0005 m over 0.5-20 Hz does); with --udp "
+                        "the RMS of the target's reference")
+    c.add_argument("--target", metavar="HOST:PORT",
+                   help="--compensate with --udp: where the compensator datagrams go "
+                        "(ehss.target.datagram); the stream must carry des<k>, each "
+                        "channel's desired reference, beside ref<k> (drive) and fb<k>")
     o = p.add_argument_group("output")
     o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
                    help="record samples, estimates and events (HDF5, readable while "
@@ -262,6 +277,17 @@ def run(args: argparse.Namespace) -> int:
 
     if args.record is not None and Path(args.record).exists():
         raise DataError(f"{args.record!r} exists: a recording is never overwritten")
+    if args.compensate is None:
+        for flag, value in (("--rms", args.rms), ("--target", args.target)):
+            if value is not None:
+                raise ParameterError(f"{flag} applies to --compensate only")
+    if args.compensate is not None:
+        from ehss.cli._live_compensate import run_compensated
+
+        _check_positive("--speed", args.speed, allow_inf=True)
+        duration = RIG_DURATION_S if args.duration is None else args.duration
+        _check_positive("--duration", duration)
+        return run_compensated(args, duration)
     est = EstimatorSettings(na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
                             method=args.method, memory_s=args.memory,
                             forgetting=args.forgetting, p0=args.p0, u_scale=args.u_scale,
