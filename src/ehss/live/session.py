@@ -174,7 +174,6 @@ class LiveSession:
 
     def _setup(self) -> None:
         fs = self.fs
-        self.det = self.det.for_memory(self.est.memory(fs))  # the hold it records
         self._eval_n = max(1, int(round(self._update_s * fs)))
         self._next_eval = self._eval_n
         self.channels = [
