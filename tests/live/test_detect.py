@@ -166,7 +166,7 @@ def test_too_few_blocks_are_refused():
         calibrate(np.ones(50), arl_blocks=100.0)
 
 
-def test_alarm_clears_once_the_test_stays_below_for_clear_s():
+def test_alarm_clears_once_the_test_stays_below_half_for_clear_s():
     det = Detector(DetectionSettings(clear_s=0.3))
     det.start(Calibration(mean=0.0, sd=1.0, mean_hat=0.0, sd_hat=1.0, n_blocks=100,
                           n_effective=100.0, threshold=5.0, arl_blocks=1e3))
@@ -176,10 +176,12 @@ def test_alarm_clears_once_the_test_stays_below_for_clear_s():
         return det.step(t, np.append(fig, det.statistic(x)))
 
     assert step(0.1, 0.0) is None
-    assert step(0.2, 20.0) == "alarm"          # S = 19.5 ≥ 5
-    assert step(0.3, 20.0) is None             # re-crosses: stays on
-    assert [step(t, 0.0) for t in (0.4, 0.5, 0.6)] == [None, None, None]
-    assert step(0.7, 0.0) == "clear"
+    assert step(0.2, 20.0) == "alarm"          # S = 19.5 ≥ 5, held at 5
+    assert step(0.3, 20.0) is None             # stays on
+    # back to normal: S falls by κ = 0.5 a block, 4.5, 4.0, …, below h/2 = 2.5 at
+    # t = 0.9 (S = 2.0), and clears 0.3 s later
+    kinds = [step(round(0.4 + 0.1 * k, 1), 0.0) for k in range(9)]
+    assert kinds == [None] * 8 + ["clear"]
 
 
 def test_a_figure_gate_holds_back_an_alarm_of_the_test():
@@ -192,8 +194,9 @@ def test_a_figure_gate_holds_back_an_alarm_of_the_test():
 
 
 def test_recent_mode_flags_a_step_and_forgets_it():
-    # two-sided on x_k − x_{k−R}: a step of 20 σ at block 10 is flagged there, and once
-    # R = 5 blocks have passed the difference is 0 again
+    # two-sided on x_k − x_{k−R}: a step of 20 σ at block 10 is flagged there (S held
+    # at h = 5); once R = 5 blocks have passed the difference is 0 again and S falls by
+    # κ = 0.5 a block, below h/2 at block 20, and clears 0.2 s later
     det = Detector(DetectionSettings(compare="recent", clear_s=0.2))
     det.start(Calibration(mean=0.0, sd=1.0, mean_hat=0.0, sd_hat=1.0, n_blocks=100,
                           n_effective=100.0, threshold=5.0, arl_blocks=1e3), lag_blocks=5)
@@ -202,7 +205,7 @@ def test_recent_mode_flags_a_step_and_forgets_it():
         x = 0.0 if k < 10 else 20.0
         kinds.append(det.step(0.1 * k, np.array([0, 0, 0, det.statistic(x)])))
     assert kinds.index("alarm") == 10
-    assert kinds.index("clear") == 17         # past block 14, then 0.2 s below
+    assert kinds.index("clear") == 22
     assert kinds.count("alarm") == 1
 
 

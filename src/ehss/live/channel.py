@@ -347,9 +347,9 @@ class ChannelProcessor:
         lag = int(round(self.det.recent_s / block_s)) if self.det.compare == "recent" else 0
         self.detector.start(cal, lag_blocks=max(lag, 1) if lag else 0)
         self.messages.append(
-            f"detection started: threshold {cal.threshold:.2f} σ for one false alarm per "
-            f"{self.det.false_alarm_hours:g} h, from {cal.n_blocks} blocks of learning "
-            f"worth {cal.n_effective:.0f} independent ones")
+            f"detection started: CUSUM threshold {cal.threshold:.2f} for one false alarm per "
+            f"{self.det.false_alarm_hours:g} h, calibrated on {cal.n_blocks} blocks of learning "
+            f"(worth {cal.n_effective:.0f} independent ones)")
 
     def capture(self) -> np.ndarray | None:
         """θ̂ now (a copy; None before the estimator starts), and the tracking and

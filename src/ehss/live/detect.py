@@ -58,7 +58,8 @@ reference model, over the analysis band [f_lo, f_hi]:
 * ``gain_db``: 20 log10 |H(f_lo) / H_ref(f_lo)| (the DC gain when the band starts at 0);
 * ``pole_shift``: |s − s_ref| / |s_ref| for the dominant pole (the pole closest to the
   unit circle, s = ln(z) / dt) among the poles whose natural frequency is in the band;
-* ``test``: the CUSUM over its threshold, S/h (an alarm at 1).
+* ``test``: the CUSUM over its threshold, S/h (an alarm at 1; S is held at h at most,
+  and an alarm clears once S/h stays below 1/2 for ``clear_s``).
 
 The figures are recorded and shown; they raise no alarm unless a threshold is given
 (``frf_db``, ``gain_db``, ``pole_shift``: then an alarm also needs one of them beyond
@@ -82,7 +83,7 @@ from scipy.signal import lfilter
 
 from ehss.errors import ParameterError
 
-__all__ = ["FIGURES", "GATES", "DRIFT", "MIN_EFFECTIVE_BLOCKS", "MAX_COEFFICIENT",
+__all__ = ["FIGURES", "GATES", "DRIFT", "CLEAR_LEVEL", "MIN_EFFECTIVE_BLOCKS", "MAX_COEFFICIENT",
            "DetectionSettings", "Calibration", "block_statistic", "calibrate",
            "cusum_threshold", "Detector", "BaselineResidual", "check_baseline",
            "dominant_pole", "figures"]
@@ -93,6 +94,11 @@ FIGURES = ("frf_db", "gain_db", "pole_shift", "test")
 GATES = ("frf_db", "gain_db", "pole_shift")
 #: κ, the CUSUM's drift in σ: quickest for a rise of 2κ = 1 σ.
 DRIFT = 0.5
+#: An alarm clears when the test stays below this fraction of its threshold for
+#: ``clear_s``: a change that persists holds the CUSUM near h, and the loop back to
+#: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
+#: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
+CLEAR_LEVEL = 0.5
 #: Fewest independent blocks of learning the test is calibrated from.
 MIN_EFFECTIVE_BLOCKS = 5
 #: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
@@ -123,7 +129,8 @@ class DetectionSettings:
         leaves a figure out of the decision. With any given, an alarm needs the test and
         one of them beyond its threshold.
     clear_s : float
-        How long the test must stay below its threshold before an alarm clears (s).
+        How long the test must stay below half its threshold before an alarm clears
+        (s).
     learn_s : float
         Stream time before detection starts: the baseline is learned over it when none
         is given, and the test is calibrated over its last three quarters.
@@ -329,33 +336,32 @@ class Detector:
         if self.calibration is None:
             return math.nan
         inc = self._increment(x)
-        if inc is not None:
-            # S_k = max(0, S_{k−1} + z_k − κ), both sides
-            self._up = max(0.0, self._up + inc[0] - DRIFT)
-            self._down = max(0.0, self._down + inc[1] - DRIFT)
         h = self.calibration.threshold
+        if inc is not None:
+            # S_k = max(0, S_{k−1} + z_k − κ), both sides; held at h at most, so that it
+            # falls below h soon after the loop is back (the alarm then clears)
+            self._up = min(h, max(0.0, self._up + inc[0] - DRIFT))
+            self._down = min(h, max(0.0, self._down + inc[1] - DRIFT))
         s = max(self._up, self._down)
-        return s / h if h > 0 else (math.inf if s > 0 else 0.0)
+        return s / h if h > 0 else (1.0 if s > 0 else 0.0)
 
     def step(self, t_s: float, values: np.ndarray) -> str | None:
         """Decide on the figures ``values`` (the last is ``test``, S/h) at ``t_s``."""
         if self.calibration is None:
             return None
-        crossed = values[-1] >= 1.0
-        if crossed:
-            self._up = self._down = 0.0          # restart: a change that stays re-crosses
         if not self.active:
-            if crossed and (not self._gated or self.exceeded(values)[:-1]):
+            if values[-1] >= 1.0 and (not self._gated or self.exceeded(values)[:-1]):
                 self.active, self._since = True, None
                 return "alarm"
             return None
-        if crossed:
+        if values[-1] >= CLEAR_LEVEL:
             self._since = None
             return None
         if self._since is None:
             self._since = t_s
         if t_s - self._since + 1e-9 >= self.settings.clear_s:
             self.active, self._since = False, None
+            self._up = self._down = 0.0
             return "clear"
         return None
 
