@@ -79,9 +79,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy import optimize, stats
-from scipy.signal import lfilter
 
 from ehss.errors import ParameterError
+from ehss.live._kernels import prediction_errors
 
 __all__ = ["FIGURES", "GATES", "DRIFT", "CLEAR_LEVEL", "MIN_EFFECTIVE_BLOCKS", "MAX_COEFFICIENT",
            "DetectionSettings", "Calibration", "block_statistic", "calibrate",
@@ -392,25 +392,22 @@ class BaselineResidual:
     """
 
     def __init__(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, delay: int) -> None:
-        self._c = _reflect_inside(np.asarray(c, dtype=np.float64))
-        self._a = np.asarray(a, dtype=np.float64)
-        self._b = np.concatenate((np.zeros(delay), np.asarray(b, dtype=np.float64)))
-        n = max(self._a.size, self._b.size, self._c.size) - 1
-        self._zy = np.zeros(n)
-        self._zu = np.zeros(n)
-        m = n + 1
-        self._ay = np.pad(self._a, (0, m - self._a.size))
-        self._bu = np.pad(self._b, (0, m - self._b.size))
-        self._cc = np.pad(self._c, (0, m - self._c.size))
+        c = _reflect_inside(np.asarray(c, dtype=np.float64))
+        bd = np.concatenate((np.zeros(delay), np.asarray(b, dtype=np.float64)))
+        a = np.asarray(a, dtype=np.float64)
+        m = max(a.size, bd.size, c.size)
+        self._a, self._bd, self._c = (np.ascontiguousarray(np.pad(v, (0, m - v.size)))
+                                      for v in (a, bd, c))
+        # the last m − 1 values of y, u and ε, newest first (the filters' state)
+        self._hy, self._hu, self._he = np.zeros(m - 1), np.zeros(m - 1), np.zeros(m - 1)
 
     def __call__(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         """ε over the next samples ``u``, ``y``."""
-        if not self._zy.size:
-            return self._ay[0] * y - self._bu[0] * u
-        # ε = (A/C) y − (q^{-d} B / C) u
-        ey, self._zy = lfilter(self._ay, self._cc, y, zi=self._zy)
-        eu, self._zu = lfilter(self._bu, self._cc, u, zi=self._zu)
-        return ey - eu
+        out = np.empty(u.size)
+        prediction_errors(self._a, self._bd, self._c, np.ascontiguousarray(u, np.float64),
+                          np.ascontiguousarray(y, np.float64), self._hy, self._hu,
+                          self._he, out)
+        return out
 
 
 def check_baseline(model, name: str = "the baseline") -> None:
