@@ -200,6 +200,10 @@ class ChannelProcessor:
         self.block_stat = math.nan
         self._marks: list[int] = []
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+        # the sample the learning time began at (later than 0 after a re-learning), and
+        # the stream time of the last alarm
+        self._learn_from = 0
+        self._alarm_t = math.nan
         self.dominant = complex("nan")
         self.track_sq = 0.0
         self.pred_sq = 0.0
@@ -224,14 +228,15 @@ class ChannelProcessor:
         k0 = self.n_samples
         n = u.size
         n_learn = self._learn[0].size
-        if k0 < n_learn:
-            m = min(n, n_learn - k0)
-            self._learn[0][k0:k0 + m] = u[:m]
-            self._learn[1][k0:k0 + m] = y[:m]
+        r0 = k0 - self._learn_from            # place in the learning time
+        if r0 < n_learn:
+            m = min(n, n_learn - r0)
+            self._learn[0][r0:r0 + m] = u[:m]
+            self._learn[1][r0:r0 + m] = y[:m]
         if self.residual is not None:
             self._res_block.append(self.residual(u, y))
-        elif k0 + n > n_learn:
-            m = max(0, n_learn - k0)
+        elif r0 + n > n_learn:
+            m = max(0, n_learn - r0)
             self._pending.append((u[m:].copy(), y[m:].copy()))
         self._push_ring(u, y)
         self.n_samples += n
@@ -359,9 +364,9 @@ class ChannelProcessor:
             self.prediction_rms = math.sqrt(self.pred_sq / self._acc_n)
             self.track_sq = self.pred_sq = 0.0
             self._acc_n = 0
-        self._captured_learning = self.n_samples < self._learn[0].size
+        self._captured_learning = self.n_samples - self._learn_from < self._learn[0].size
         if self._captured_learning or self.residual is None:
-            self._marks.append(self.n_samples)
+            self._marks.append(self.n_samples - self._learn_from)
         # x = ln(median ε²) of the block since the last capture (a whole block only)
         self.block_stat = math.nan
         if self._res_whole and self._res_block:
@@ -384,7 +389,8 @@ class ChannelProcessor:
         if theta is None:
             return None
         if self._captured_learning:
-            if self.baseline is None and self.n_samples >= self._learn[0].size / 2:
+            if self.baseline is None and \
+                    self.n_samples - self._learn_from >= self._learn[0].size / 2:
                 self._theta_sum = theta if self._theta_sum is None else self._theta_sum + theta
                 self._theta_count += 1
             return None
@@ -402,7 +408,30 @@ class ChannelProcessor:
         finite = np.where(np.isfinite(self.figures), np.abs(self.figures), 0.0)
         if not self.detector.active:
             self.peak_figures = np.maximum(self.peak_figures, finite)
-        return self.detector.step(t_s, self.figures)
+        change = self.detector.step(t_s, self.figures)
+        if change == "alarm":
+            self._alarm_t = t_s
+        if self.det.compare == "recent" and self.detector.active and \
+                t_s - self._alarm_t >= self.det.recent_s - 1e-9:
+            self.messages.append(
+                f"the loop has differed from its past for {self.det.recent_s:g} s: "
+                f"learning it anew over {self.det.learn_s:g} s (the alarm clears when the "
+                "test starts again)")
+            self._relearn()
+        return change
+
+    def _relearn(self) -> None:
+        """Learn the baseline and calibrate the test anew, from the loop as it is now
+        (``compare="recent"``, once a change has lasted ``recent_s``: the test's
+        statistics of the learning time no longer describe the loop). The band stays."""
+        self._learn_from = self.n_samples
+        self._captured_learning = True
+        self.baseline, self._theta_sum, self._theta_count = None, None, 0
+        self.grid_hz, self._h_ref, self._s_ref = None, None, complex("nan")
+        self.residual, self._res_block, self._res_whole = None, [], False
+        self._marks, self._pending = [], []
+        self._alarm_t = math.nan
+        self.detector.restart()
 
     def _reference(self, t_s: float, h: np.ndarray, s: complex
                    ) -> tuple[np.ndarray, np.ndarray, complex, complex] | None:

@@ -47,7 +47,10 @@ increments (Siegmund 1985; Basseville & Nikiforov 1993):
 
 solved for h. With ``compare="recent"`` the test is two-sided on x_k − x_{k−R}, the
 statistic now against its value ``recent_s`` ago (standard deviation √2 σ, mean 0): a
-change is flagged when it comes, and clears once the past has caught up.
+change is flagged when it comes, a slow drift is not. A change that lasts ``recent_s``
+leaves the learning time's statistics behind (a changed loop's errors spread
+differently), so the channel then learns the loop anew and the alarm clears when the
+new test starts (:class:`~ehss.live.channel.ChannelProcessor`).
 
 The figures
 -----------
@@ -119,7 +122,7 @@ class DetectionSettings:
     compare : {"baseline", "recent"}
         Test the loop against the baseline (given, or learned over ``learn_s``), or
         against itself ``recent_s`` ago (the figures then compare with the model of
-        ``recent_s`` ago).
+        ``recent_s`` ago; a change that lasts ``recent_s`` is learned anew).
     false_alarm_hours : float
         Mean running time between false alarms, per channel, h (default 24: one false
         alarm per channel per day of running, while the loop is the one it was while
@@ -298,6 +301,16 @@ class Detector:
         self._since: float | None = None
         self._past: list[float] = []
         self._lag = 0
+        self._clear_on_start = False
+
+    def restart(self) -> None:
+        """Stop testing until :meth:`start` with a new calibration; an alarm that is on
+        clears at the first step after it."""
+        self.calibration = None
+        self._up = self._down = 0.0
+        self._since = None
+        self._past = []
+        self._clear_on_start = self.active
 
     def start(self, calibration: Calibration, *, lag_blocks: int = 0) -> None:
         """Start testing with ``calibration``; ``lag_blocks`` > 0: two-sided on the
@@ -349,6 +362,10 @@ class Detector:
         """Decide on the figures ``values`` (the last is ``test``, S/h) at ``t_s``."""
         if self.calibration is None:
             return None
+        if self._clear_on_start:
+            self._clear_on_start = False
+            self.active = False
+            return "clear"
         if not self.active:
             if values[-1] >= 1.0 and (not self._gated or self.exceeded(values)[:-1]):
                 self.active, self._since = True, None
