@@ -19,16 +19,17 @@ model misses by far (a valve's flow nonlinearity at the reference's peaks) give 
 square a heavy upper tail (skewness 1.8, kurtosis 7 on the simulated rig's position
 loop), which a test calibrated on a Gaussian would take for a change; the median of the
 same blocks has none (skewness 0.0, kurtosis 0.2), and a change of the loop raises every
-sample's error, so the median too. Its mean μ and spread are
-measured over the learning time (the last three quarters of ``learn_s``; the first
-quarter is left to the start of the run), with the blocks' autocorrelation: the
-long-run variance σ² = s² (1 + ρ)/(1 − ρ) (ρ the lag-1 autocorrelation, counted when
-positive: the AR(1) form) is the variance a sum of correlated blocks grows with, and
-n_eff = n s²/σ² the number of independent blocks the learning time held. The
-prediction errors of a fixed model are correlated over the loop's and the reference's
-memory (tens of ms), so blocks of 0.1 s are nearly independent (|ρ| < 0.05 on the
-loops of the tests), unlike the recursive estimates, correlated over the estimator's
-memory. Both are taken at their one-sided 97.5 %
+sample's error, so the median too.
+
+Its mean μ and spread are measured over the learning time (the last three quarters of
+``learn_s``; the first quarter is left to the start of the run), with the blocks'
+autocorrelation: the long-run variance σ² = s² (1 + ρ)/(1 − ρ) (ρ the lag-1
+autocorrelation, counted when positive: the AR(1) form) is the variance a sum of
+correlated blocks grows with, and n_eff = n s²/σ² the number of independent blocks the
+learning time held. The prediction errors of a fixed model are correlated over the
+loop's and the reference's memory (tens of ms), so blocks of 0.1 s are nearly
+independent (|ρ| < 0.05 on the loops of the tests), unlike the recursive estimates,
+correlated over the estimator's memory. Both are taken at their one-sided 97.5 %
 confidence bounds over that many blocks (μ + t·σ/√n_eff; σ·√((n_eff − 1)/χ²_0.025)), so
 that the stated rate is not broken by what a short learning time cannot know.
 
