@@ -180,13 +180,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also require the relative shift of the dominant pole in the band "
                    "beyond FRACTION (default: off)")
     d.add_argument("--clear", type=float, default=2.0, metavar="S",
-                   help="the test below its threshold this long clears an alarm "
+                   help="the test below half its threshold this long clears an alarm "
                    "(default: %(default)s s)")
     d.add_argument("--learn", type=float, default=10.0, metavar="S",
                    help="stream time before detection; the baseline is identified over it "
                    "when none is given, and the test calibrated (default: %(default)s s)")
     d.add_argument("--recent", type=float, default=5.0, metavar="S",
-                   help="look-back of --compare recent (default: %(default)s s)")
+                   help="look-back of --compare recent; a change that lasts this long is "
+                   "learned anew (default: %(default)s s)")
     d.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="analysis band, Hz (default: the baseline's, else where the "
                    "reference's spectrum is within 20 dB of its peak)")
