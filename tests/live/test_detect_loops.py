@@ -62,14 +62,16 @@ def test_a_forty_percent_change_is_flagged_within_one_and_a_half_seconds(loop, s
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("loop", "seed"), [("servo", 1), ("servo", 2), ("specimen", 1),
-                                            ("rig", 1), ("rig", 2)])
+@pytest.mark.parametrize(("loop", "seed"), [("servo", 1), ("servo", 3), ("specimen", 1),
+                                            ("rig", 1), ("rig", 3)])
 def test_ten_stationary_minutes_raise_no_false_alarm(loop, seed):
     # set for one false alarm per channel per 24 h: two channels for 10 minutes raise
     # one with probability 1 − e^{−2·10/1440} = 1.4 % if the calibration is right, and
-    # far more often if it is wrong (the fixed 0.5 dB limit alarmed within 4 s on the
-    # servo; a test calibrated as if blocks were Gaussian in their mean square crossed
-    # 0.96 of its threshold within 10 minutes on the rig)
+    # far more often if it is wrong (the former fixed limits, 0.5 dB and 1 dB held
+    # 0.45 s, raised 1 false alarm in 40 channel-minutes on this servo and 15 on this
+    # specimen; a test on the blocks' mean square instead of their median, whose upper
+    # tail is heavy, crossed 0.96 of its threshold within 10 minutes on the rig).
+    # Channel k of seed s is seeded s + k: seeds 1 and 3 share no channel record
     session, alarms = _run(LOOPS[loop](600.0, seed))
     assert all(p.detector.started for p in session.channels)
     assert alarms == []
