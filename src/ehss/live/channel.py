@@ -365,7 +365,7 @@ class ChannelProcessor:
             self.track_sq = self.pred_sq = 0.0
             self._acc_n = 0
         self._captured_learning = self.n_samples - self._learn_from < self._learn[0].size
-        if self._captured_learning or self.residual is None:
+        if self.grid_hz is None:            # block boundaries until the set-up
             self._marks.append(self.n_samples - self._learn_from)
         # x = ln(median ε²) of the block since the last capture (a whole block only)
         self.block_stat = math.nan
