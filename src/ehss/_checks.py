@@ -1,13 +1,27 @@
 """Checks of user-supplied values, shared by every public entry point.
 
-Two families:
+One error type per kind of mistake, everywhere in ehss:
+
+- a value of the wrong Python type (a string where a number is expected, a bool where
+  a count is, a float where an integer is) raises :class:`TypeError`;
+- a value of the right type that is out of range, not finite, not among the choices or
+  inconsistent (a band whose lower edge is not below its upper edge) raises
+  :class:`~ehss.errors.ParameterError`, a :class:`ValueError`;
+- bad samples (a signal that is not a finite 1-D array) raise
+  :class:`~ehss.errors.DataError`, also a :class:`ValueError`.
+
+Every message names the value and what is accepted, e.g.
+``damping=-1.0 must be in (0, 100]``. Public functions check their arguments with these
+functions rather than with their own ``isinstance`` tests, so that the same mistake is
+reported the same way wherever it is made (``tests/test_layering.py`` keeps it so).
 
 Scalars — :func:`check_real`, :func:`check_int`, :func:`check_bool`, :func:`check_choice`.
     Each takes the value and the name to show (``"valve.damping"``, ``"--fs"``) and
-    returns the value converted to a plain Python type. A value of the wrong Python type
-    raises :class:`TypeError`; a value of the right type that is out of range, not finite
-    or not among the choices raises :class:`~ehss.errors.ParameterError`. The message names
-    the value and what is accepted, e.g. ``damping=-1.0 must be in (0, 100]``.
+    returns the value converted to a plain Python type.
+
+Rates and bands — :func:`check_fs`, :func:`check_band`.
+    A sample rate in ``SAMPLE_RATE_RANGE_HZ``; a frequency band ``(lo, hi)`` in Hz with
+    ``0 <= lo < hi``, and ``hi <= fs/2`` when the sample rate is known.
 
 Sample arrays — :func:`as_signal`, :func:`as_record`.
     A signal must be a 1-D array of finite real numbers; the error names the argument,
@@ -31,7 +45,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Collection
+from collections.abc import Collection, Iterable
 from typing import Any
 
 import numpy as np
@@ -43,6 +57,8 @@ __all__ = [
     "check_int",
     "check_bool",
     "check_choice",
+    "check_fs",
+    "check_band",
     "format_range",
     "SAMPLE_RATE_RANGE_HZ",
     "SCALE_RANGE",
@@ -226,6 +242,82 @@ def check_choice(value: Any, name: str, choices: Collection[Any]) -> Any:
     if value not in choices:
         raise ParameterError(f"{name}={show(value)} must be one of {_listing(choices)}")
     return value
+
+
+def check_fs(fs: Any, name: str = "fs") -> float:
+    """``fs`` as a sample rate in Hz, inside ``SAMPLE_RATE_RANGE_HZ``.
+
+    Raises
+    ------
+    TypeError
+        If ``fs`` is not a real number (the string ``"100"``, None, a bool...).
+    ParameterError
+        If it is not finite or outside ``SAMPLE_RATE_RANGE_HZ`` (zero or negative included).
+    """
+    lo, hi = SAMPLE_RATE_RANGE_HZ
+    return check_real(fs, name, lo=lo, hi=hi, unit="Hz")
+
+
+def check_band(
+    band: Any, name: str = "band_hz", *, fs: float | None = None, below_nyquist: bool = False,
+) -> tuple[float, float]:
+    """``band`` as ``(lo, hi)`` in Hz with ``0 <= lo < hi`` (and ``hi <= fs/2``).
+
+    Parameters
+    ----------
+    band : pair of real numbers
+        The band's edges in Hz.
+    name : str, default "band_hz"
+        How the band is named in messages. A command-line option (a name starting with
+        ``-``, such as ``"--band"``) is shown as it was typed: ``--band 5 1``.
+    fs : float, optional
+        Sample rate in Hz; when given, ``hi`` must not exceed the Nyquist frequency ``fs/2``.
+    below_nyquist : bool, default False
+        Require ``hi < fs/2`` strictly (e.g. when a taper must fit between ``hi`` and fs/2).
+
+    Returns
+    -------
+    (float, float)
+
+    Raises
+    ------
+    TypeError
+        If ``band`` is not a pair, or an edge is not a real number.
+    ParameterError
+        If it does not have two edges, an edge is not finite, ``lo < 0``, ``lo >= hi``,
+        or ``hi`` is above fs/2 (at fs/2 too with ``below_nyquist``).
+
+    Examples
+    --------
+    >>> check_band((1, 20.5), fs=100.0)
+    (1.0, 20.5)
+    >>> check_band((5.0, 1.0), "--band")
+    Traceback (most recent call last):
+    ...
+    ehss.errors.ParameterError: --band 5 1 must satisfy 0 <= LO < HI
+    """
+    if isinstance(band, (str, bytes)) or not isinstance(band, Iterable):
+        raise TypeError(f"{name}={show(band)} must be a pair (lo, hi) of numbers in Hz, "
+                        f"not {type(band).__name__}")
+    edges = list(band)
+    if len(edges) != 2:
+        raise ParameterError(f"{name}={show(band)} must be a pair (lo, hi) in Hz, "
+                             f"not {len(edges)} values")
+    lo, hi = (check_real(v, f"{name}[{i}]") for i, v in enumerate(edges))
+    option = name.startswith("-")
+    shown = f"{name} {lo:g} {hi:g}" if option else f"{name}=({lo:g}, {hi:g})"
+    lo_name, hi_name = ("LO", "HI") if option else ("lo", "hi")
+    if not 0.0 <= lo < hi:
+        raise ParameterError(f"{shown} must satisfy 0 <= {lo_name} < {hi_name}")
+    if fs is not None:
+        nyquist = 0.5 * check_fs(fs)
+        if hi > nyquist or (below_nyquist and hi == nyquist):
+            where = "above" if hi > nyquist else "at"
+            below = "<" if below_nyquist else "<="
+            raise ParameterError(
+                f"{name} upper edge {hi:g} Hz is {where} fs/2 = {nyquist:g} Hz; {shown} "
+                f"must satisfy 0 <= {lo_name} < {hi_name} {below} fs/2")
+    return lo, hi
 
 
 def _listing(choices: Collection[Any]) -> str:
