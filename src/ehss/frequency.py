@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from ehss._checks import as_record
+from ehss._checks import as_record, check_band, check_fs
 from ehss.errors import DataError, ParameterError
 
 __all__ = [
@@ -36,8 +36,6 @@ __all__ = [
     "frf_estimate",
     "default_nperseg",
     "n_segments",
-    "check_fs",
-    "check_band",
 ]
 
 #: Accepted ``method`` of :func:`frf_estimate`.
@@ -129,10 +127,12 @@ class FrequencyResponse:
 
         Raises
         ------
+        TypeError
+            If an edge is not a real number.
         ParameterError
-            If ``lo_hz > hi_hz`` or either is negative/non-finite.
+            If ``lo_hz >= hi_hz`` or either is negative/non-finite.
         """
-        lo_hz, hi_hz = check_band((lo_hz, hi_hz))
+        lo_hz, hi_hz = check_band((lo_hz, hi_hz), "band")
         mask = (self.freq_hz >= lo_hz) & (self.freq_hz <= hi_hz)
         return FrequencyResponse(
             freq_hz=self.freq_hz[mask],
@@ -567,25 +567,3 @@ def _check_window(window: Any, nperseg: int) -> np.ndarray:
     if not np.all(np.isfinite(w)) or not np.any(w > 0):
         raise ParameterError(f"window={window!r} gives no positive finite weights")
     return w
-
-
-def check_fs(fs) -> float:
-    """``fs`` as a positive finite sample rate in Hz, or a ParameterError."""
-    try:
-        fs = float(fs)
-    except (TypeError, ValueError):
-        raise ParameterError(f"fs={fs!r} must be a number (Hz)") from None
-    if not math.isfinite(fs) or fs <= 0:
-        raise ParameterError(f"{fs=} must be a positive finite sample rate in Hz")
-    return fs
-
-
-def check_band(band) -> tuple[float, float]:
-    """``band`` as ``(lo, hi)`` in Hz with 0 <= lo <= hi, or a ParameterError."""
-    try:
-        lo, hi = (float(v) for v in band)
-    except (TypeError, ValueError):
-        raise ParameterError(f"band={band!r} must be two numbers (lo_hz, hi_hz)") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0 or lo > hi:
-        raise ParameterError(f"band ({lo}, {hi}) Hz must satisfy 0 <= lo <= hi")
-    return lo, hi
