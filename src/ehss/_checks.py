@@ -55,6 +55,7 @@ from ehss.errors import DataError, ParameterError
 __all__ = [
     "check_real",
     "check_int",
+    "check_int_list",
     "check_bool",
     "check_choice",
     "check_fs",
@@ -178,18 +179,23 @@ def check_real(
     ParameterError
         If it is NaN, infinite, too large for a float or outside the range.
     """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name}={show(value)} must be a real number, not {type(value).__name__}")
-    try:
-        x = float(value)
-    except OverflowError:
-        raise ParameterError(f"{name}={show(value)} is too large for a float") from None
+    x = _real(value, name)
     accepted = format_range(lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
     if not math.isfinite(x):
         raise ParameterError(f"{name}={show(value)} must be finite, in {accepted}")
     if not _in_range(x, lo, hi, lo_open, hi_open):
         raise ParameterError(f"{name}={show(value)} must be in {accepted}")
     return x
+
+
+def _real(value: Any, name: str) -> float:
+    """``value`` as a float (maybe NaN or infinite); TypeError if it is not a real number."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name}={show(value)} must be a real number, not {type(value).__name__}")
+    try:
+        return float(value)
+    except OverflowError:
+        raise ParameterError(f"{name}={show(value)} is too large for a float") from None
 
 
 def check_int(value: Any, name: str, *, lo: int | None = None, hi: int | None = None) -> int:
@@ -209,6 +215,31 @@ def check_int(value: Any, name: str, *, lo: int | None = None, hi: int | None = 
         raise ParameterError(f"{name}={show(value)} must be an integer in "
                              f"{format_range(lo, hi)}")
     return k
+
+
+def check_int_list(value: Any, name: str, *, lo: int) -> list[int]:
+    """``value`` (one integer or a collection of them) as a non-empty list of ints >= ``lo``.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` or one of its items is not an integer (a float, a string, a bool).
+    ParameterError
+        If it is empty or an item is below ``lo``.
+    """
+    if isinstance(value, (str, bytes)) or not isinstance(value, (numbers.Integral, Iterable)):
+        raise TypeError(f"{name}={show(value)} must hold integers >= {lo}, "
+                        f"not {type(value).__name__}")
+    values = [value] if isinstance(value, numbers.Integral) else list(value)
+    for v in values:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral):
+            raise TypeError(f"{name}={show(value)} must hold integers >= {lo}, "
+                            f"not {type(v).__name__}")
+        if v < lo:
+            raise ParameterError(f"{name}={show(value)} must hold integers >= {lo}")
+    if not values:
+        raise ParameterError(f"{name}={show(value)} must list at least one {name}")
+    return [int(v) for v in values]
 
 
 def check_bool(value: Any, name: str) -> bool:
@@ -284,7 +315,7 @@ def check_band(
     TypeError
         If ``band`` is not a pair, or an edge is not a real number.
     ParameterError
-        If it does not have two edges, an edge is not finite, ``lo < 0``, ``lo >= hi``,
+        If it does not have two edges, an edge is NaN or infinite, ``lo < 0``, ``lo >= hi``,
         or ``hi`` is above fs/2 (at fs/2 too with ``below_nyquist``).
 
     Examples
@@ -303,12 +334,13 @@ def check_band(
     if len(edges) != 2:
         raise ParameterError(f"{name}={show(band)} must be a pair (lo, hi) in Hz, "
                              f"not {len(edges)} values")
-    lo, hi = (check_real(v, f"{name}[{i}]") for i, v in enumerate(edges))
+    lo, hi = (_real(v, f"{name}[{i}]") for i, v in enumerate(edges))
     option = name.startswith("-")
     shown = f"{name} {lo:g} {hi:g}" if option else f"{name}=({lo:g}, {hi:g})"
     lo_name, hi_name = ("LO", "HI") if option else ("lo", "hi")
-    if not 0.0 <= lo < hi:
-        raise ParameterError(f"{shown} must satisfy 0 <= {lo_name} < {hi_name}")
+    if not (0.0 <= lo < hi and math.isfinite(hi)):
+        finite = "" if math.isfinite(lo) and math.isfinite(hi) else ", both finite"
+        raise ParameterError(f"{shown} must satisfy 0 <= {lo_name} < {hi_name}{finite}")
     if fs is not None:
         nyquist = 0.5 * check_fs(fs)
         if hi > nyquist or (below_nyquist and hi == nyquist):
