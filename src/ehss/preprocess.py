@@ -17,13 +17,12 @@ estimator expects:
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
 
-from ehss._checks import as_record, as_signal, check_fs
+from ehss._checks import as_record, as_signal, check_fs, check_int
 from ehss.errors import DataError, ParameterError
 
 __all__ = [
@@ -142,7 +141,9 @@ def decimate(u, y, factor: int) -> tuple[np.ndarray, np.ndarray]:
     free of filter transients for a record that is not at rest there.
     """
     u, y = as_record(u, y)
-    factor = _factor(factor)
+    factor = check_int(factor, "factor")
+    if factor < 1:
+        raise ParameterError(f"decimation factor {factor} must be >= 1")
     if factor == 1:
         return u.copy(), y.copy()
     if -(-u.size // factor) < _MIN_DECIMATED:
@@ -290,19 +291,6 @@ def auto_decimation(
     q = int(fs // (float(target) * f_hi))
     q = min(q, u.size // _MIN_DECIMATED)
     return max(1, q)
-
-
-# ------------------------------------------------------------------------------- checks
-
-
-def _factor(factor) -> int:
-    try:
-        q = operator.index(factor)
-    except TypeError:
-        raise ParameterError(f"decimation factor {factor!r} must be an integer") from None
-    if q < 1:
-        raise ParameterError(f"decimation factor {q} must be >= 1")
-    return q
 
 
 #: Share of a measured output at one of its extreme values above which
