@@ -327,10 +327,13 @@ def check_band(
     ...
     ehss.errors.ParameterError: --band 5 1 must satisfy 0 <= LO < HI
     """
-    if isinstance(band, (str, bytes)) or not isinstance(band, Iterable):
+    try:
+        if isinstance(band, (str, bytes)):
+            raise TypeError
+        edges = list(band)  # a 0-d array is Iterable yet cannot be iterated
+    except TypeError:
         raise TypeError(f"{name}={show(band)} must be a pair (lo, hi) of numbers in Hz, "
-                        f"not {type(band).__name__}")
-    edges = list(band)
+                        f"not {type(band).__name__}") from None
     if len(edges) != 2:
         raise ParameterError(f"{name}={show(band)} must be a pair (lo, hi) in Hz, "
                              f"not {len(edges)} values")
