@@ -323,8 +323,10 @@ def prepare(
 
     Raises
     ------
+    TypeError
+        For a sample rate, band or decimation of the wrong type (the string ``"100"``).
     ParameterError
-        For a bad fraction, band, detrend or decimation.
+        For a bad fraction, band (``lo >= hi``, above fs/2), detrend or decimation.
     DataError
         For records too short to split or decimate.
     """
@@ -526,6 +528,8 @@ def identify(
 
     Raises
     ------
+    TypeError
+        For orders or settings of the wrong type (``na=1.5``).
     ParameterError
         For bad orders, method or settings.
     DataError
@@ -811,6 +815,8 @@ def select_orders(
     ------
     IdentificationError
         If no candidate is stable.
+    TypeError
+        For orders or settings of the wrong type (``na=[1.5]``).
     ParameterError, DataError
         For bad settings or records, as :func:`prepare`; DataError also for a grid whose
         largest candidate has more parameters than the estimation data support.
