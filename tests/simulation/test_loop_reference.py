@@ -121,9 +121,10 @@ def slow_loop(loop: str, ref: np.ndarray, p: RigParams, seed: int) -> dict[str, 
     dt, h = 1 / tm.control_rate_hz, 1 / tm.internal_rate_hz
     k_n_m = p.load.specimen_stiffness_n_m if loop == "force" else p.load.stiffness_n_m
     n = ref.size
-    # the simulator's noise convention: one standard-normal (3, n) draw, scaled per sensor
+    # the simulator's noise convention: one standard-normal (n, 3) draw, period by period
+    # (so that a test continued in blocks draws the same), scaled per sensor
     sigma = np.array([s.lvdt_noise_m, s.accel_noise_m_s2, s.force_noise_n])
-    noise = np.random.default_rng(seed).standard_normal((3, n)) * sigma[:, None]
+    noise = (np.random.default_rng(seed).standard_normal((n, 3)) * sigma).T
     bits = 2.0**s.adc_bits
     lsb = {"lvdt": 2 * s.lvdt_range_m / bits, "accel": 2 * s.accel_range_m_s2 / bits,
            "force": 2 * s.force_range_n / bits, "dac": 20 / 2.0**s.dac_bits}

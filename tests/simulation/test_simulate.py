@@ -223,15 +223,18 @@ def test_kernel_matches_its_python_source():
 
     p = preset("default")
     ref = np.ascontiguousarray(0.5 * np.sin(np.arange(60) / 5.0))
-    x0, noise, settings = _kernel_inputs("acceleration", ref, p, seed=9, initial_state=None,
-                                         spool_direct=False, stiffness_n_m=0.0)
+    x0, noise, settings, mem, _ = _kernel_inputs(
+        "acceleration", ref, p, seed=9, initial_state=None, spool_direct=False,
+        stiffness_n_m=0.0)
     n_rows = len(SK.LoopRecord._fields)
     fast = SK.LoopRecord._make(np.empty((n_rows, 60)))
     slow = SK.LoopRecord._make(np.empty((n_rows, 60)))
-    x_fast = SK.closed_loop(ref, noise, x0, settings, fast)
-    x_slow = SK.closed_loop.py_func(ref, noise, x0, settings, slow)
+    mem_slow = mem.copy()
+    x_fast = SK.closed_loop(ref, noise, x0, settings, fast, mem)
+    x_slow = SK.closed_loop.py_func(ref, noise, x0, settings, slow, mem_slow)
     assert_allclose(np.array(fast), np.array(slow), rtol=1e-12, atol=0)
     assert_allclose(np.array(x_fast), np.array(x_slow), rtol=1e-12, atol=0)
+    assert_allclose(mem, mem_slow, rtol=1e-12, atol=0)
 
 
 def test_one_position_loop_against_slow_reference():
@@ -243,7 +246,8 @@ def test_one_position_loop_against_slow_reference():
     n, n_sub, h, dt = 40, 10, 1e-4, 1e-3
     ref = _step(0.004, n, start=2)
     r = simulate("position", ref, params=p, seed=21)
-    noise = np.random.default_rng(21).standard_normal((3, n))[0] * p.sensors.lvdt_noise_m
+    # the LVDT's noise: the first of the three sensors' draws of each period
+    noise = np.random.default_rng(21).standard_normal((n, 3))[:, 0] * p.sensors.lvdt_noise_m
     pid = p.position
     tau = 1 / (2 * math.pi * pid.derivative_filter_hz)
     x = np.zeros(9)

@@ -165,29 +165,29 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "estimator starts from it (repeatable)")
     d = p.add_argument_group("change detection")
     d.add_argument("--compare", choices=("baseline", "recent"), default="baseline",
-                   help="compare with the baseline, or the model of --recent s ago")
-    d.add_argument("--frf-db", type=float, default=0.5, metavar="DB",
-                   help="threshold of the RMS dB distance of the responses over the band "
-                   "(default: %(default)s)")
-    d.add_argument("--gain-db", type=float, default=1.0, metavar="DB",
-                   help="threshold of the gain change at the band's lower edge (default: "
-                   "%(default)s)")
+                   help="test against the baseline, or against the loop --recent s ago")
+    d.add_argument("--false-alarm-hours", type=float, default=24.0, metavar="H",
+                   help="mean running time between false alarms, per channel, hours: the "
+                   "sequential test's threshold is set for it from the statistics of the "
+                   "learning time (default: %(default)g, one a day)")
+    d.add_argument("--frf-db", type=float, default=math.inf, metavar="DB",
+                   help="also require the RMS dB distance of the responses over the band "
+                   "beyond DB for an alarm (default: off; recorded all the same)")
+    d.add_argument("--gain-db", type=float, default=math.inf, metavar="DB",
+                   help="also require the gain change at the band's lower edge beyond DB "
+                   "(default: off)")
     d.add_argument("--pole-shift", type=float, default=math.inf, metavar="FRACTION",
-                   help="threshold of the relative shift of the dominant pole in the band "
-                   "(default: off; recorded all the same)")
-    d.add_argument("--hold", type=float, metavar="S",
-                   help="a figure must stay beyond its threshold this long (default: 1.5 "
-                   "memories of the estimator, at least 0.2 s: an excursion of the "
-                   "estimate under noise lasts about one memory; 1 s for unattended "
-                   "running)")
+                   help="also require the relative shift of the dominant pole in the band "
+                   "beyond FRACTION (default: off)")
     d.add_argument("--clear", type=float, default=2.0, metavar="S",
-                   help="all figures below their thresholds this long clear an alarm "
+                   help="the test below half its threshold this long clears an alarm "
                    "(default: %(default)s s)")
     d.add_argument("--learn", type=float, default=10.0, metavar="S",
                    help="stream time before detection; the baseline is identified over it "
-                   "when none is given (default: %(default)s s)")
+                   "when none is given, and the test calibrated (default: %(default)s s)")
     d.add_argument("--recent", type=float, default=5.0, metavar="S",
-                   help="look-back of --compare recent (default: %(default)s s)")
+                   help="look-back of --compare recent; a change that lasts this long is "
+                   "learned anew (default: %(default)s s)")
     d.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="analysis band, Hz (default: the baseline's, else where the "
                    "reference's spectrum is within 20 dB of its peak)")
@@ -196,6 +196,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "estimators' cost is mostly per call; default: %(default)s s)")
     d.add_argument("--update", type=float, default=0.1, metavar="S",
                    help="evaluation period, s of stream time (default: %(default)s)")
+    c = p.add_argument_group("compensation")
+    c.add_argument("--compensate", choices=("preview", "causal"),
+                   help="--rig: adapt each channel's inverse-model compensator while the rig "
+                        "runs (preview: the reference known ahead, a drive file streamed; "
+                        "causal: made online); guarded updates, cross-faded in by the "
+                        "target's filter; the log and figures go to stderr and --report")
+    c.add_argument("--rms", type=float, metavar="X",
+                   help="--compensate: RMS of the rig's reference in the loop's unit (default "
+                        "the rig's, e.g. 0.001 m; a compensated drive must stay within the "
+                        "rig's limits, which 0.0005 m over 0.5-20 Hz does); with --udp "
+                        "the RMS of the target's reference")
+    c.add_argument("--target", metavar="HOST:PORT",
+                   help="--compensate with --udp: where the compensator datagrams go "
+                        "(ehss.target.datagram); the stream must carry des<k>, each "
+                        "channel's desired reference, beside ref<k> (drive) and fb<k>")
     o = p.add_argument_group("output")
     o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
                    help="record samples, estimates and events (HDF5, readable while "
@@ -216,6 +231,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
+    from ehss.live.detect import check_baseline
+
     out = {}
     for item in items:
         ch, sep, path = item.rpartition("=")
@@ -225,6 +242,7 @@ def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
             model = ehss.ArmaxModel.load_json(path)
         except (OSError, ValueError, KeyError) as exc:
             raise DataError(f"{path!r}: not a model file ({exc})") from None
+        check_baseline(model, f"--baseline {path}")
         for name in (channels if ch is None else (ch,)):
             out[name] = model
     return out
@@ -262,12 +280,24 @@ def run(args: argparse.Namespace) -> int:
 
     if args.record is not None and Path(args.record).exists():
         raise DataError(f"{args.record!r} exists: a recording is never overwritten")
+    if args.compensate is None:
+        for flag, value in (("--rms", args.rms), ("--target", args.target)):
+            if value is not None:
+                raise ParameterError(f"{flag} applies to --compensate only")
+    if args.compensate is not None:
+        from ehss.cli._live_compensate import run_compensated
+
+        _check_positive("--speed", args.speed, allow_inf=True)
+        duration = RIG_DURATION_S if args.duration is None else args.duration
+        _check_positive("--duration", duration)
+        return run_compensated(args, duration)
     est = EstimatorSettings(na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
                             method=args.method, memory_s=args.memory,
                             forgetting=args.forgetting, p0=args.p0, u_scale=args.u_scale,
                             y_scale=args.y_scale)
-    det = DetectionSettings(compare=args.compare, frf_db=args.frf_db, gain_db=args.gain_db,
-                            pole_shift=args.pole_shift, hold_s=args.hold, clear_s=args.clear,
+    det = DetectionSettings(compare=args.compare, false_alarm_hours=args.false_alarm_hours,
+                            frf_db=args.frf_db, gain_db=args.gain_db,
+                            pole_shift=args.pole_shift, clear_s=args.clear,
                             learn_s=args.learn, recent_s=args.recent,
                             band_hz=None if args.band is None else tuple(args.band))
     source = _source(args)
@@ -344,9 +374,19 @@ def run(args: argparse.Namespace) -> int:
                         for k, v in report.final_theta.items()},
         "versions": versions(),
     }
+    untested = [p.name for p in session.channels if not p.detector.started]
+    out["detection_started"] = {p.name: p.detector.started for p in session.channels}
+    n_alarms = len([a for a in report.alarms if a["kind"] == "alarm"])
     print(f"ehss live: {report.samples} samples per channel ({report.stream_s:.1f} s), "
-          f"{len([a for a in report.alarms if a['kind'] == 'alarm'])} alarms, counters "
-          f"{report.counters}, lag p99 {report.lag_ms['p99']:.2f} ms", file=sys.stderr)
+          f"{'no detection' if untested and not n_alarms else f'{n_alarms} alarms'}, "
+          f"counters {report.counters}, lag p99 {report.lag_ms['p99']:.2f} ms",
+          file=sys.stderr)
+    if untested:
+        why = (f"the stream ended within --learn {args.learn:g} s"
+               if report.stream_s < args.learn else "see the messages above")
+        print(f"ehss live: warning: detection never started on channel"
+              f"{'s' if len(untested) > 1 else ''} {', '.join(untested)} ({why}): no alarm "
+              "could be raised there", file=sys.stderr)
     if args.report:
         ehss.write_json(args.report, out)
     return 0

@@ -2,8 +2,10 @@
 sliding H1 estimate and change detection.
 
 The estimator is :class:`ehss.RelsEstimator` (RELS, eqs (19)–(22), or RML) with
-forgetting λ, started from the baseline model's θ when one is given. Every evaluation
-period the current model is compared with the reference model (:mod:`ehss.live.detect`).
+forgetting λ, started from the baseline model's θ when one is given. The baseline's own
+prediction errors run beside it; every evaluation period their mean square over the
+period feeds the sequential test, and the current model is compared with the reference
+model for the figures (:mod:`ehss.live.detect`).
 """
 
 from __future__ import annotations
@@ -17,7 +19,16 @@ from scipy.signal import welch
 
 import ehss
 from ehss.errors import EhssError, ParameterError
-from ehss.live.detect import DetectionSettings, Detector, dominant_pole, figures
+from ehss.live.detect import (
+    BaselineResidual,
+    DetectionSettings,
+    Detector,
+    block_statistic,
+    calibrate,
+    check_baseline,
+    dominant_pole,
+    figures,
+)
 
 __all__ = ["EstimatorSettings", "ChannelProcessor", "reference_band"]
 
@@ -125,13 +136,13 @@ class ChannelProcessor:
         Sample rate, Hz.
     est : EstimatorSettings
     det : DetectionSettings
-        Without a hold time, the default for the estimator's memory is taken
-        (:meth:`DetectionSettings.for_memory`).
     baseline : ArmaxModel, optional
-        Baseline model: the estimator starts from its θ and detection compares with
-        it. Without one, the baseline is the mean of the estimates over the second half
-        of the first ``det.learn_s`` (the same estimator and memory as the comparisons:
-        its figures then measure change, not the difference of two estimators).
+        Baseline model (refused when unstable or with absurd coefficients,
+        :func:`~ehss.live.detect.check_baseline`): the estimator starts from its θ and
+        detection tests against it. Without one, the baseline is the mean of the
+        estimates over the second half of the first ``det.learn_s`` (the same estimator
+        and memory as the comparisons: its figures then measure change, not the
+        difference of two estimators).
     h1_window_s : float
         Length of the sliding window of the H1 estimate.
     """
@@ -141,8 +152,9 @@ class ChannelProcessor:
         self.name = name
         self.fs = float(fs)
         self.est = est
-        self.det = det = det.for_memory(est.memory(self.fs))
+        self.det = det
         if baseline is not None:
+            check_baseline(baseline, f"channel {name}: the baseline model")
             if (baseline.na, baseline.nb, baseline.nc, baseline.delay) != (
                     est.na, est.nb, est.nc, est.delay):
                 raise ParameterError(
@@ -177,8 +189,21 @@ class ChannelProcessor:
         self._h_ref: np.ndarray | None = None
         self._s_ref = complex("nan")
         self._recent: collections.deque = collections.deque()
-        self.figures = np.full(3, np.nan)
-        self.peak_figures = np.zeros(3)
+        self.figures = np.full(4, np.nan)
+        self.peak_figures = np.zeros(4)
+        # the sequential test: the baseline's prediction errors, their sum of squares
+        # over the current block, the block boundaries seen while learning, the samples
+        # that came after the learning time before the test was set up
+        self.residual: BaselineResidual | None = None
+        self._res_block: list[np.ndarray] = []
+        self._res_whole = False
+        self.block_stat = math.nan
+        self._marks: list[int] = []
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+        # the sample the learning time began at (later than 0 after a re-learning), and
+        # the stream time of the last alarm
+        self._learn_from = 0
+        self._alarm_t = math.nan
         self.dominant = complex("nan")
         self.track_sq = 0.0
         self.pred_sq = 0.0
@@ -203,10 +228,16 @@ class ChannelProcessor:
         k0 = self.n_samples
         n = u.size
         n_learn = self._learn[0].size
-        if k0 < n_learn:
-            m = min(n, n_learn - k0)
-            self._learn[0][k0:k0 + m] = u[:m]
-            self._learn[1][k0:k0 + m] = y[:m]
+        r0 = k0 - self._learn_from            # place in the learning time
+        if r0 < n_learn:
+            m = min(n, n_learn - r0)
+            self._learn[0][r0:r0 + m] = u[:m]
+            self._learn[1][r0:r0 + m] = y[:m]
+        if self.residual is not None:
+            self._res_block.append(self.residual(u, y))
+        elif r0 + n > n_learn:
+            m = max(0, n_learn - r0)
+            self._pending.append((u[m:].copy(), y[m:].copy()))
         self._push_ring(u, y)
         self.n_samples += n
         if self.estimator is None:
@@ -286,11 +317,44 @@ class ChannelProcessor:
                                      "are not meaningful")
             self._h_ref = self.baseline.frequency_response(self.grid_hz)
             self._s_ref = dominant_pole(self.baseline.a, 1.0 / self.fs, self.band_hz)
+            self._start_test()
         # z^-k on the grid, k = 0..na for A and d..d+nb for B: H = (V_b b) / (V_a a)
         e = self.est
         zi = np.exp(-2j * np.pi * self.grid_hz / self.fs)
         self._va = zi[:, None] ** np.arange(e.na + 1)
         self._vb = zi[:, None] ** (e.delay + np.arange(e.nb + 1))
+
+    def _start_test(self) -> None:
+        """Filter the learning time with the baseline, calibrate the test on its blocks'
+        statistics (the last three quarters), then catch up on the samples that came
+        since (:mod:`ehss.live.detect`)."""
+        m = self.baseline
+        self.residual = BaselineResidual(m.a, m.b, m.c, m.delay)
+        eps = self.residual(*self._learn)
+        pending, self._pending = self._pending, []
+        for u, y in pending:
+            self.residual(u, y)
+        n_learn = eps.size
+        marks = np.array([k for k in self._marks if n_learn // 4 <= k <= n_learn])
+        if marks.size < 2:
+            self.messages.append("detection off: the learning time holds too few "
+                                 "evaluations to calibrate the test")
+            return
+        x = np.array([block_statistic(eps[a:b]) for a, b in zip(marks[:-1], marks[1:],
+                                                                  strict=True)])
+        block_s = float(np.median(np.diff(marks))) / self.fs
+        arl_blocks = self.det.false_alarm_hours * 3600.0 / block_s
+        try:
+            cal = calibrate(x, arl_blocks=arl_blocks, two_sided=self.det.compare == "recent")
+        except EhssError as exc:
+            self.messages.append(f"detection off: {exc}")
+            return
+        lag = int(round(self.det.recent_s / block_s)) if self.det.compare == "recent" else 0
+        self.detector.start(cal, lag_blocks=max(lag, 1) if lag else 0)
+        self.messages.append(
+            f"detection started: CUSUM threshold {cal.threshold:.2f} for one false alarm per "
+            f"{self.det.false_alarm_hours:g} h, calibrated on {cal.n_blocks} blocks of learning "
+            f"(worth {cal.n_effective:.0f} independent ones)")
 
     def capture(self) -> np.ndarray | None:
         """θ̂ now (a copy; None before the estimator starts), and the tracking and
@@ -300,7 +364,15 @@ class ChannelProcessor:
             self.prediction_rms = math.sqrt(self.pred_sq / self._acc_n)
             self.track_sq = self.pred_sq = 0.0
             self._acc_n = 0
-        self._captured_learning = self.n_samples < self._learn[0].size
+        self._captured_learning = self.n_samples - self._learn_from < self._learn[0].size
+        if self.grid_hz is None:            # block boundaries until the set-up
+            self._marks.append(self.n_samples - self._learn_from)
+        # x = ln(median ε²) of the block since the last capture (a whole block only)
+        self.block_stat = math.nan
+        if self._res_whole and self._res_block:
+            self.block_stat = block_statistic(np.concatenate(self._res_block))
+        self._res_block = []
+        self._res_whole = self.residual is not None
         return None if self.estimator is None else self.estimator.theta
 
     def evaluate(self, t_s: float, theta: np.ndarray | None, *,
@@ -317,7 +389,8 @@ class ChannelProcessor:
         if theta is None:
             return None
         if self._captured_learning:
-            if self.baseline is None and self.n_samples >= self._learn[0].size / 2:
+            if self.baseline is None and \
+                    self.n_samples - self._learn_from >= self._learn[0].size / 2:
                 self._theta_sum = theta if self._theta_sum is None else self._theta_sum + theta
                 self._theta_count += 1
             return None
@@ -328,6 +401,42 @@ class ChannelProcessor:
             self.just_set_up = True
         h, s = self._response(theta)
         self.dominant = s
+        test = self.detector.statistic(self.block_stat)
+        ref = self._reference(t_s, h, s)
+        shown = np.full(3, np.nan) if ref is None else figures(h, *ref)
+        self.figures = np.append(shown, test)
+        finite = np.where(np.isfinite(self.figures), np.abs(self.figures), 0.0)
+        if not self.detector.active:
+            self.peak_figures = np.maximum(self.peak_figures, finite)
+        change = self.detector.step(t_s, self.figures)
+        if change == "alarm":
+            self._alarm_t = t_s
+        if self.det.compare == "recent" and self.detector.active and \
+                t_s - self._alarm_t >= self.det.recent_s - 1e-9:
+            self.messages.append(
+                f"the loop has differed from its past for {self.det.recent_s:g} s: "
+                f"learning it anew over {self.det.learn_s:g} s (the alarm clears when the "
+                "test starts again)")
+            self._relearn()
+        return change
+
+    def _relearn(self) -> None:
+        """Learn the baseline and calibrate the test anew, from the loop as it is now
+        (``compare="recent"``, once a change has lasted ``recent_s``: the test's
+        statistics of the learning time no longer describe the loop). The band stays."""
+        self._learn_from = self.n_samples
+        self._captured_learning = True
+        self.baseline, self._theta_sum, self._theta_count = None, None, 0
+        self.grid_hz, self._h_ref, self._s_ref = None, None, complex("nan")
+        self.residual, self._res_block, self._res_whole = None, [], False
+        self._marks, self._pending = [], []
+        self._alarm_t = math.nan
+        self.detector.restart()
+
+    def _reference(self, t_s: float, h: np.ndarray, s: complex
+                   ) -> tuple[np.ndarray, np.ndarray, complex, complex] | None:
+        """``(h_ref, s, s_ref)`` to compare ``h`` with (the baseline's, or the model's of
+        ``recent_s`` ago); None while there is none."""
         if self.det.compare == "recent":
             self._recent.append((t_s, h, s))
             while self._recent and self._recent[0][0] < t_s - self.det.recent_s - 1e-9:
@@ -335,15 +444,10 @@ class ChannelProcessor:
             if self._recent[0][0] > t_s - self.det.recent_s + 1e-9:
                 return None                      # not enough history yet
             _, h_ref, s_ref = self._recent[0]
-        elif self._h_ref is None:
+            return h_ref, s, s_ref
+        if self._h_ref is None:
             return None
-        else:
-            h_ref, s_ref = self._h_ref, self._s_ref
-        self.figures = figures(h, h_ref, s, s_ref)
-        finite = np.where(np.isfinite(self.figures), np.abs(self.figures), 0.0)
-        if not self.detector.active:
-            self.peak_figures = np.maximum(self.peak_figures, finite)
-        return self.detector.step(t_s, self.figures)
+        return self._h_ref, s, self._s_ref
 
     def _response(self, theta: np.ndarray) -> tuple[np.ndarray, complex]:
         """The response of the model θ̂ on the grid and its dominant pole.

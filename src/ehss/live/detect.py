@@ -1,87 +1,156 @@
-"""Change detection: figures that compare the current model with a reference model,
-and alarms raised when they stay beyond their thresholds.
+"""Change detection calibrated to the loop it watches: a sequential test (CUSUM) on the
+baseline model's prediction errors, with a false-alarm rate the user sets, and the
+figures engineers read.
 
-Three figures, each computed from the two models' frequency responses and poles over
-the analysis band [f_lo, f_hi]:
+The test
+--------
+The baseline model (given, or learned) predicts each feedback sample from the past:
+ε(t) = [A(q) y(t) − q^{-d} B(q) u(t)] / C(q) (the ARMAX prediction error, eq (19) of
+the paper written as a filter; C with any root outside the unit circle reflected
+inside, the same spectrum and a stable filter). While the loop is the one the baseline
+describes, the size of ε over each evaluation block (``update_s``, 0.1 s) has a
+stationary distribution, whatever the loop; a change of the loop adds the difference of
+the two responses, driven by the reference, and raises it. The statistic of block k is
 
-* ``frf_db``: the RMS over the band's frequency grid of 20 log10 |H(f) / H_ref(f)|,
-  the distance of the two responses in dB;
-* ``gain_db``: 20 log10 |H(f_lo) / H_ref(f_lo)|, the gain change at the band's lower
-  edge (the DC gain when the band starts at 0);
+    x_k = ln( median of ε² over block k ),
+
+close to Gaussian. The median, not the mean: a few samples of a block that a linear
+model misses by far (a valve's flow nonlinearity at the reference's peaks) give the mean
+square a heavy upper tail (skewness 1.8, kurtosis 7 on the simulated rig's position
+loop), which a test calibrated on a Gaussian would take for a change; the median of the
+same blocks has none (skewness 0.0, kurtosis 0.2), and a change of the loop raises every
+sample's error, so the median too.
+
+Its mean μ and spread are measured over the learning time (the last three quarters of
+``learn_s``; the first quarter is left to the start of the run), with the blocks'
+autocorrelation: the long-run variance σ² = s² (1 + ρ)/(1 − ρ) (ρ the lag-1
+autocorrelation, counted when positive: the AR(1) form) is the variance a sum of
+correlated blocks grows with, and n_eff = n s²/σ² the number of independent blocks the
+learning time held. The prediction errors of a fixed model are correlated over the
+loop's and the reference's memory (tens of ms), so blocks of 0.1 s are nearly
+independent (|ρ| < 0.05 on the loops of the tests), unlike the recursive estimates,
+correlated over the estimator's memory. Both are taken at their one-sided 97.5 %
+confidence bounds over that many blocks (μ + t·σ/√n_eff; σ·√((n_eff − 1)/χ²_0.025)), so
+that the stated rate is not broken by what a short learning time cannot know.
+
+The standardised z_k = (x_k − μ)/σ drive a one-sided CUSUM (Page's test; Basseville &
+Nikiforov 1993; Gustafsson 2000):
+
+    S_k = max(0, S_{k−1} + z_k − κ),   alarm when S_k ≥ h,
+
+with the drift κ = 1/2 (the test is quickest for a rise of one σ; a change of a loop's
+dynamics raises x by many σ and is flagged within a block or two). The threshold h sets
+the average run length between false alarms, ARL₀ = T / update_s for a mean time T
+between false alarms (``false_alarm_hours``); Siegmund's approximation for Gaussian
+increments (Siegmund 1985; Basseville & Nikiforov 1993):
+
+    ARL₀(h) ≈ (e^{2κb} − 1 − 2κb) / (2κ²),   b = h + 1.166,
+
+solved for h. With ``compare="recent"`` the test is two-sided on x_k − x_{k−R}, the
+statistic now against its value ``recent_s`` ago (standard deviation √2 σ, mean 0): a
+change is flagged when it comes, a slow drift is not. A change that lasts ``recent_s``
+leaves the learning time's statistics behind (a changed loop's errors spread
+differently), so the channel then learns the loop anew and the alarm clears when the
+new test starts (:class:`~ehss.live.channel.ChannelProcessor`).
+
+The figures
+-----------
+Each evaluation also compares the current model (the recursive estimator's) with the
+reference model, over the analysis band [f_lo, f_hi]:
+
+* ``frf_db``: the RMS over the band's frequency grid of 20 log10 |H(f) / H_ref(f)|;
+* ``gain_db``: 20 log10 |H(f_lo) / H_ref(f_lo)| (the DC gain when the band starts at 0);
 * ``pole_shift``: |s − s_ref| / |s_ref| for the dominant pole (the pole closest to the
-  unit circle, the slowest mode, in continuous time s = ln(z) / dt) among the poles
-  whose natural frequency lies in the band: a pole outside it is hardly determined by
-  the data, and its relative shift means little.
+  unit circle, s = ln(z) / dt) among the poles whose natural frequency is in the band;
+* ``test``: the CUSUM over its threshold, S/h (an alarm at 1; S is held at h at most,
+  and an alarm clears once S/h stays below 1/2 for ``clear_s``).
 
-An alarm is raised when any figure stays beyond its threshold for ``hold_s`` of stream
-time, and cleared when all of them stay below for ``clear_s``. A figure that cannot be
-computed (NaN: e.g. no pole in the band) raises nothing.
+The figures are recorded and shown; they raise no alarm unless a threshold is given
+(``frf_db``, ``gain_db``, ``pole_shift``: then an alarm also needs one of them beyond
+its threshold, a change worth stopping for rather than any change the test can see).
 
-The default hold follows the estimator: 1.5 times its memory 1/((1 − λ) fs). Its
-estimates are correlated over about one memory, so an excursion of the estimate under
-noise leaves a threshold for about that long, while a change of the loop stays.
+References
+----------
+Basseville, M. & Nikiforov, I. V. (1993) Detection of Abrupt Changes: Theory and
+Application. Prentice Hall. Gustafsson, F. (2000) Adaptive Filtering and Change
+Detection. Wiley. Siegmund, D. (1985) Sequential Analysis. Springer.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy import optimize, stats
 
 from ehss.errors import ParameterError
+from ehss.live._kernels import prediction_errors
 
-__all__ = ["FIGURES", "HOLD_MEMORIES", "MIN_HOLD_S", "DetectionSettings", "Detector",
+__all__ = ["FIGURES", "GATES", "DRIFT", "CLEAR_LEVEL", "MIN_EFFECTIVE_BLOCKS", "MAX_COEFFICIENT",
+           "DetectionSettings", "Calibration", "block_statistic", "calibrate",
+           "cusum_threshold", "Detector", "BaselineResidual", "check_baseline",
            "dominant_pole", "figures"]
 
 #: Names of the figures, in the order they are recorded.
-FIGURES = ("frf_db", "gain_db", "pole_shift")
-#: The default hold, in memories of the estimator (:meth:`DetectionSettings.for_memory`).
-HOLD_MEMORIES = 1.5
-#: The shortest default hold (s): two evaluations at the default 0.1 s interval.
-MIN_HOLD_S = 0.2
+FIGURES = ("frf_db", "gain_db", "pole_shift", "test")
+#: The figures that may gate an alarm with a threshold of their own.
+GATES = ("frf_db", "gain_db", "pole_shift")
+#: κ, the CUSUM's drift in σ: quickest for a rise of 2κ = 1 σ.
+DRIFT = 0.5
+#: An alarm clears when the test stays below this fraction of its threshold for
+#: ``clear_s``: a change that persists holds the CUSUM near h, and the loop back to
+#: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
+#: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
+CLEAR_LEVEL = 0.5
+#: Fewest independent blocks of learning the test is calibrated from.
+MIN_EFFECTIVE_BLOCKS = 5
+#: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
+_MAX_RHO = 0.9
+#: Siegmund's correction of the threshold for the overshoot of Gaussian increments.
+_OVERSHOOT = 1.166
+#: Largest magnitude of a baseline's coefficient: beyond it, a float64 response of the
+#: model, or the square of its prediction error, overflows.
+MAX_COEFFICIENT = 1e12
 
 
 @dataclass(frozen=True, kw_only=True)
 class DetectionSettings:
-    """Thresholds and times of change detection.
+    """How change detection decides.
 
     Attributes
     ----------
     compare : {"baseline", "recent"}
-        Compare with the baseline model (given, or identified over the first
-        ``learn_s``) or with the model of ``recent_s`` ago.
+        Test the loop against the baseline (given, or learned over ``learn_s``), or
+        against itself ``recent_s`` ago (the figures then compare with the model of
+        ``recent_s`` ago; a change that lasts ``recent_s`` is learned anew).
+    false_alarm_hours : float
+        Mean running time between false alarms, per channel, h (default 24: one false
+        alarm per channel per day of running, while the loop is the one it was while
+        learning). The test's threshold follows from it (module notes).
     frf_db, gain_db, pole_shift : float
-        Thresholds of the figures (dB, dB, fraction); ``inf`` disables one. The default
-        0.5 dB is half the 1 dB a validated model may differ from the H1 estimate; each
-        threshold should sit well above the figure's stationary spread (shown as the
-        peak figure by the summary and recorded with every evaluation). The pole shift
-        is computed and recorded but raises no alarm by default: a model of this order
-        places its dominant in-band pole poorly when the loop's main dynamics lie near
-        the band's edges (e.g. 0.1 turns it on).
-    hold_s : float or None
-        How long a figure must stay beyond its threshold before the alarm (s). None
-        (the default): :data:`HOLD_MEMORIES` times the estimator's memory, at least
-        :data:`MIN_HOLD_S` and at most ``learn_s`` (:meth:`for_memory`; 0.45 s for the
-        default 0.3 s memory).
+        Optional thresholds of the figures (dB, dB, fraction); ``inf`` (the default)
+        leaves a figure out of the decision. With any given, an alarm needs the test and
+        one of them beyond its threshold.
     clear_s : float
-        How long all figures must stay below before the alarm clears (s).
+        How long the test must stay below half its threshold before an alarm clears
+        (s).
     learn_s : float
-        Stream time before detection starts (the baseline is identified over it when
-        none is given).
+        Stream time before detection starts: the baseline is learned over it when none
+        is given, and the test is calibrated over its last three quarters.
     recent_s : float
         Look-back of ``compare="recent"`` (s).
     band_hz : (float, float) or None
-        Analysis band; default the baseline model's ``band_hz``, else the band where
-        the reference's spectrum is within 20 dB of its peak over the last 4 s of the
-        learning time.
+        Analysis band of the figures; default the baseline model's ``band_hz``, else the
+        band where the reference's spectrum is within 20 dB of its peak over the last 4 s
+        of the learning time.
     """
 
     compare: str = "baseline"
-    frf_db: float = 0.5
-    gain_db: float = 1.0
+    false_alarm_hours: float = 24.0
+    frf_db: float = math.inf
+    gain_db: float = math.inf
     pole_shift: float = math.inf
-    hold_s: float | None = None
     clear_s: float = 2.0
     learn_s: float = 10.0
     recent_s: float = 5.0
@@ -90,14 +159,15 @@ class DetectionSettings:
     def __post_init__(self) -> None:
         if self.compare not in ("baseline", "recent"):
             raise ParameterError(f"compare={self.compare!r} must be 'baseline' or 'recent'")
-        for name in ("frf_db", "gain_db", "pole_shift"):
+        v = self.false_alarm_hours
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ParameterError(f"false_alarm_hours={v!r} must be a finite time > 0 (h)")
+        for name in GATES:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and v > 0 and not math.isnan(v)):
-                raise ParameterError(f"{name}={v!r} must be > 0 (inf disables it)")
-        for name in ("hold_s", "clear_s", "learn_s", "recent_s"):
+                raise ParameterError(f"{name}={v!r} must be > 0 (inf leaves it out)")
+        for name in ("clear_s", "learn_s", "recent_s"):
             v = getattr(self, name)
-            if name == "hold_s" and v is None:
-                continue
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ParameterError(f"{name}={v!r} must be a finite time >= 0 (s)")
         if self.band_hz is not None:
@@ -108,14 +178,278 @@ class DetectionSettings:
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def for_memory(self, memory_s: float) -> DetectionSettings:
-        """These settings with the default hold set for an estimator of memory
-        ``memory_s`` (s; ``inf`` without forgetting): :data:`HOLD_MEMORIES` memories, at
-        least :data:`MIN_HOLD_S`, at most ``learn_s``. A hold already given is kept."""
-        if self.hold_s is not None:
-            return self
-        hold = min(max(MIN_HOLD_S, HOLD_MEMORIES * memory_s), max(MIN_HOLD_S, self.learn_s))
-        return replace(self, hold_s=hold)
+
+def block_statistic(eps: np.ndarray) -> float:
+    """x = ln(median ε²) of one block's prediction errors; NaN for an empty block or a
+    median of 0 (errors that are exactly zero: a noise-free record)."""
+    if not eps.size:
+        return math.nan
+    med = float(np.median(np.square(eps)))
+    return math.log(med) if med > 0 and math.isfinite(med) else math.nan
+
+
+def cusum_threshold(arl_blocks: float, drift: float = DRIFT) -> float:
+    """The threshold h of a one-sided CUSUM of N(0, 1) increments with drift κ whose
+    average run length to a false alarm is ``arl_blocks`` (Siegmund's approximation,
+    module notes); 0 when even h = 0 runs that long."""
+    if not (math.isfinite(arl_blocks) and arl_blocks > 0):
+        raise ParameterError(f"arl_blocks={arl_blocks!r} must be a finite number > 0")
+
+    def log_arl(h: float) -> float:
+        x = 2 * drift * (h + _OVERSHOOT)
+        # ln((e^x − 1 − x) / (2κ²)), computed without overflow for large x
+        return x + math.log(-math.expm1(-x) - x * math.exp(-x)) - math.log(2 * drift**2)
+
+    target = math.log(arl_blocks)
+    if log_arl(0.0) >= target:
+        return 0.0
+    hi = 1.0
+    while log_arl(hi) < target:
+        hi *= 2
+    return float(optimize.brentq(lambda h: log_arl(h) - target, 0.0, hi, xtol=1e-9))
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The statistics of the learning time that the test is set from.
+
+    Attributes
+    ----------
+    mean, sd : float
+        μ and σ of x = ln(median ε²) per block, at their 97.5 % confidence bounds.
+    mean_hat, sd_hat : float
+        The learning blocks' own mean and long-run standard deviation.
+    n_blocks : int
+        Blocks of learning used.
+    n_effective : float
+        Independent blocks they are worth (n s²/σ²).
+    threshold : float
+        h of the CUSUM (in σ).
+    arl_blocks : float
+        The average run length to a false alarm it is set for, in blocks.
+    """
+
+    mean: float
+    sd: float
+    mean_hat: float
+    sd_hat: float
+    n_blocks: int
+    n_effective: float
+    threshold: float
+    arl_blocks: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def calibrate(x: np.ndarray, *, arl_blocks: float, two_sided: bool = False) -> Calibration:
+    """Calibrate the test from the learning blocks' statistics ``x`` (module notes).
+
+    ``two_sided`` (``compare="recent"``): two CUSUMs share the rate, each set for twice
+    the run length.
+
+    Raises
+    ------
+    ParameterError
+        If the blocks are worth fewer than :data:`MIN_EFFECTIVE_BLOCKS` independent ones,
+        or do not vary (no noise at all: nothing to calibrate from).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    x = x[np.isfinite(x)]
+    n = x.size
+    if n < MIN_EFFECTIVE_BLOCKS:
+        raise ParameterError(f"{n} blocks of learning are too few to calibrate the test "
+                             f"(at least {MIN_EFFECTIVE_BLOCKS}): give a longer learn time")
+    mu, s = float(np.mean(x)), float(np.std(x, ddof=1))
+    if not s > 0:
+        raise ParameterError("the prediction errors of the learning time do not vary: "
+                             "no noise to calibrate the test from")
+    d = x - mu
+    # σ² = s² (1 + ρ)/(1 − ρ), ρ the lag-1 autocorrelation (AR(1) long-run variance)
+    rho = min(_MAX_RHO, max(0.0, float(np.dot(d[:-1], d[1:]) / np.dot(d, d))))
+    inflation = (1.0 + rho) / (1.0 - rho)
+    sd_lr = s * math.sqrt(inflation)
+    n_eff = n / inflation
+    if n_eff < MIN_EFFECTIVE_BLOCKS:
+        raise ParameterError(f"the learning time holds {n_eff:.1f} independent blocks, too "
+                             f"few to calibrate the test (at least {MIN_EFFECTIVE_BLOCKS}): "
+                             "give a longer learn time")
+    dof = n_eff - 1.0
+    # one-sided 97.5 % bounds: μ + t σ/√n_eff, σ √(dof / χ²_0.025(dof))
+    mean = mu + float(stats.t.ppf(0.975, dof)) * sd_lr / math.sqrt(n_eff)
+    sd = sd_lr * math.sqrt(dof / float(stats.chi2.ppf(0.025, dof)))
+    arl = arl_blocks * (2.0 if two_sided else 1.0)
+    return Calibration(mean=mean, sd=sd, mean_hat=mu, sd_hat=sd_lr, n_blocks=n,
+                       n_effective=n_eff, threshold=cusum_threshold(arl), arl_blocks=arl)
+
+
+class Detector:
+    """The sequential test and alarm logic of one channel.
+
+    Call :meth:`statistic` with each block's x = ln(median ε²) (NaN: no block), then
+    :meth:`step` with the figures;
+    it returns ``"alarm"`` when an alarm is raised, ``"clear"`` when one
+    clears, else None. Before :meth:`start` it decides nothing.
+    """
+
+    def __init__(self, settings: DetectionSettings) -> None:
+        self.settings = settings
+        self._limits = np.array([getattr(settings, g) for g in GATES])
+        self._gated = bool(np.any(np.isfinite(self._limits)))
+        self.calibration: Calibration | None = None
+        self.active = False
+        self._up = self._down = 0.0
+        self._since: float | None = None
+        self._past: list[float] = []
+        self._lag = 0
+        self._clear_on_start = False
+
+    def restart(self) -> None:
+        """Stop testing until :meth:`start` with a new calibration; an alarm that is on
+        clears at the first step after it."""
+        self.calibration = None
+        self._up = self._down = 0.0
+        self._since = None
+        self._past = []
+        self._clear_on_start = self.active
+
+    def start(self, calibration: Calibration, *, lag_blocks: int = 0) -> None:
+        """Start testing with ``calibration``; ``lag_blocks`` > 0: two-sided on the
+        statistic against its value that many blocks ago (``compare="recent"``)."""
+        self.calibration = calibration
+        self._lag = int(lag_blocks)
+
+    @property
+    def started(self) -> bool:
+        return self.calibration is not None
+
+    def exceeded(self, values: np.ndarray) -> list[str]:
+        """Names of the gated figures beyond their thresholds (NaN is not), and "test"
+        when the test is at or beyond its threshold."""
+        over = np.abs(np.asarray(values[:len(GATES)])) > self._limits
+        names = [name for name, o in zip(GATES, over, strict=True) if o]
+        return names + (["test"] if values[-1] >= 1.0 else [])
+
+    def _increment(self, x: float) -> tuple[float, float] | None:
+        """The standardised increments (upward, downward) of block x, None when the
+        block gives none."""
+        cal = self.calibration
+        if not math.isfinite(x):
+            return None
+        if self._lag == 0:
+            return (x - cal.mean) / cal.sd, -math.inf
+        self._past.append(x)
+        if len(self._past) <= self._lag:
+            return None
+        diff = (x - self._past.pop(0)) / (math.sqrt(2.0) * cal.sd)
+        return diff, -diff
+
+    def statistic(self, x: float) -> float:
+        """Update the CUSUM with block x; returns S/h (the ``test`` figure; NaN before
+        the test starts)."""
+        if self.calibration is None:
+            return math.nan
+        inc = self._increment(x)
+        h = self.calibration.threshold
+        if inc is not None:
+            # S_k = max(0, S_{k−1} + z_k − κ), both sides; held at h at most, so that it
+            # falls below h soon after the loop is back (the alarm then clears)
+            self._up = min(h, max(0.0, self._up + inc[0] - DRIFT))
+            self._down = min(h, max(0.0, self._down + inc[1] - DRIFT))
+        s = max(self._up, self._down)
+        return s / h if h > 0 else (1.0 if s > 0 else 0.0)
+
+    def step(self, t_s: float, values: np.ndarray) -> str | None:
+        """Decide on the figures ``values`` (the last is ``test``, S/h) at ``t_s``."""
+        if self.calibration is None:
+            return None
+        if self._clear_on_start:
+            self._clear_on_start = False
+            self.active = False
+            return "clear"
+        if not self.active:
+            if values[-1] >= 1.0 and (not self._gated or self.exceeded(values)[:-1]):
+                self.active, self._since = True, None
+                return "alarm"
+            return None
+        if values[-1] >= CLEAR_LEVEL:
+            self._since = None
+            return None
+        if self._since is None:
+            self._since = t_s
+        if t_s - self._since + 1e-9 >= self.settings.clear_s:
+            self.active, self._since = False, None
+            self._up = self._down = 0.0
+            return "clear"
+        return None
+
+
+def _reflect_inside(c: np.ndarray) -> np.ndarray:
+    """Monic C with its roots outside the unit circle reflected inside (1/z̄): the same
+    spectrum up to a gain, and 1/C a stable filter. Roots on the circle are pulled in to
+    radius 0.999."""
+    roots = np.roots(c) if c.size > 1 else np.empty(0)
+    r = np.abs(roots)
+    if not roots.size or np.all(r < 0.999):
+        return c
+    roots = np.where(r > 1.0, 1.0 / np.conj(roots), roots)
+    r = np.abs(roots)
+    roots = np.where(r >= 0.999, roots * (0.999 / np.maximum(r, 1e-300)), roots)
+    return np.real(np.poly(roots))
+
+
+class BaselineResidual:
+    """The prediction error ε = [A y − q^{-d} B u] / C of a fixed model, sample by sample
+    across blocks (the filters' state carried over).
+
+    Parameters
+    ----------
+    a, b, c : ndarray
+        ``[1, a1, …]``, ``[b0, …]``, ``[1, c1, …]`` of the model.
+    delay : int
+    """
+
+    def __init__(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, delay: int) -> None:
+        c = _reflect_inside(np.asarray(c, dtype=np.float64))
+        bd = np.concatenate((np.zeros(delay), np.asarray(b, dtype=np.float64)))
+        a = np.asarray(a, dtype=np.float64)
+        m = max(a.size, bd.size, c.size)
+        self._a, self._bd, self._c = (np.ascontiguousarray(np.pad(v, (0, m - v.size)))
+                                      for v in (a, bd, c))
+        # the last m − 1 values of y, u and ε, newest first (the filters' state)
+        self._hy, self._hu, self._he = np.zeros(m - 1), np.zeros(m - 1), np.zeros(m - 1)
+
+    def __call__(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """ε over the next samples ``u``, ``y``."""
+        out = np.empty(u.size)
+        prediction_errors(self._a, self._bd, self._c, np.ascontiguousarray(u, np.float64),
+                          np.ascontiguousarray(y, np.float64), self._hy, self._hu,
+                          self._he, out)
+        return out
+
+
+def check_baseline(model, name: str = "the baseline") -> None:
+    """Refuse a baseline model that cannot be a running loop's reference: coefficients
+    not finite or beyond ±:data:`MAX_COEFFICIENT`, or poles on or outside the unit
+    circle (the loop it describes would not be running).
+
+    Raises
+    ------
+    ParameterError
+        With one line that names the model and what is wrong.
+    """
+    theta = np.concatenate((model.a, model.b, model.c))
+    if not np.all(np.isfinite(theta)):
+        raise ParameterError(f"{name} has coefficients that are not finite numbers: "
+                             "not a model of a loop")
+    big = float(np.max(np.abs(theta)))
+    if big > MAX_COEFFICIENT:
+        raise ParameterError(f"{name} has a coefficient of {big:.3g}, beyond ±"
+                             f"{MAX_COEFFICIENT:.0e}: not a model of a loop")
+    radius = float(model.max_pole_radius())
+    if not radius < 1.0:
+        raise ParameterError(f"{name} is unstable (largest pole radius {radius:.4g} >= 1): "
+                             "a running loop's reference must be stable")
 
 
 def dominant_pole(a: np.ndarray, dt: float,
@@ -147,45 +481,9 @@ def figures(h: np.ndarray, h_ref: np.ndarray, s: complex, s_ref: complex) -> np.
     ``h`` and ``h_ref`` are the two responses on the band's grid (first point at the
     band's lower edge); ``s``, ``s_ref`` their dominant poles.
     """
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ratio_db = 20.0 * np.log10(np.abs(h) / np.abs(h_ref))
         frf = float(np.sqrt(np.mean(np.square(ratio_db))))
         gain = float(ratio_db[0])
         shift = abs(s - s_ref) / abs(s_ref) if abs(s_ref) > 0 else math.inf
     return np.array([frf, gain, shift])
-
-
-class Detector:
-    """Hold-time alarm logic of one channel.
-
-    Call :meth:`step` with each new set of figures; it returns ``"alarm"`` when an
-    alarm is raised, ``"clear"`` when one clears, else None.
-    """
-
-    def __init__(self, settings: DetectionSettings) -> None:
-        if settings.hold_s is None:
-            raise ParameterError("the hold time is not set: give hold_s, or take the "
-                                 "estimator's default with DetectionSettings.for_memory")
-        self.settings = settings
-        self._limits = np.array([settings.frf_db, settings.gain_db, settings.pole_shift])
-        self.active = False
-        self._since: float | None = None
-
-    def exceeded(self, values: np.ndarray) -> list[str]:
-        """Names of the figures beyond their thresholds (NaN is not)."""
-        over = np.abs(values) > self._limits
-        return [name for name, o in zip(FIGURES, over, strict=True) if o]
-
-    def step(self, t_s: float, values: np.ndarray) -> str | None:
-        over = bool(self.exceeded(values))
-        if over != (not self.active):
-            self._since = None          # the condition to change state does not hold
-            return None
-        if self._since is None:
-            self._since = t_s
-        wait = self.settings.hold_s if not self.active else self.settings.clear_s
-        if t_s - self._since + 1e-9 >= wait:
-            self.active = not self.active
-            self._since = None
-            return "alarm" if self.active else "clear"
-        return None

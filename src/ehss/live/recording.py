@@ -12,7 +12,7 @@ Layout:
 ``/sample_index``      (n,) int64, stream index of each row (a jump is a gap)
 ``/estimates/t``       (m,) float64, stream time of each evaluation, s
 ``/estimates/theta``   (m, C, P) float64, θ̂ = [a1..a_na, b0..b_nb, c1..c_nc] per channel
-``/estimates/figures`` (m, C, 3) float64, frf_db, gain_db, pole_shift (NaN: not yet)
+``/estimates/figures`` (m, C, 4) float64, frf_db, gain_db, pole_shift, test (NaN: not yet)
 ``/events``            (k,) JSON strings: alarms, clears, messages, start and stop
 ``/counters``          (j, len(COUNTERS)) int64, the source's counters at each flush
 

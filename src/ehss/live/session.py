@@ -22,7 +22,7 @@ import ehss
 from ehss._files import check_writable
 from ehss.errors import DataError, ParameterError
 from ehss.live.channel import ChannelProcessor, EstimatorSettings
-from ehss.live.detect import FIGURES, DetectionSettings
+from ehss.live.detect import FIGURES, BaselineResidual, DetectionSettings
 from ehss.live.recording import LiveRecorder
 from ehss.live.source import Block, Source
 
@@ -136,6 +136,7 @@ class LiveSession:
         warm = ehss.RelsEstimator(na=self.est.na, nb=self.est.nb, nc=self.est.nc,
                                   delay=self.est.delay, method=self.est.method)
         warm.update_many(np.zeros(64), np.zeros(64))
+        BaselineResidual(np.ones(1), np.zeros(1), np.ones(1), 1)(np.zeros(8), np.zeros(8))
         self.channels: list[ChannelProcessor] = []
         self.recorder: LiveRecorder | None = None
         self.events: list[dict] = []
@@ -174,7 +175,6 @@ class LiveSession:
 
     def _setup(self) -> None:
         fs = self.fs
-        self.det = self.det.for_memory(self.est.memory(fs))  # the hold it records
         self._eval_n = max(1, int(round(self._update_s * fs)))
         self._next_eval = self._eval_n
         self.channels = [

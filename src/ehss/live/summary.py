@@ -17,8 +17,9 @@ def _fmt(x: float, spec: str) -> str:
 
 
 def summary_table(snap: dict) -> Table:
-    """One row per channel: state, figures, dominant mode, tracking; packet counters
-    and lag in the caption."""
+    """One row per channel: state, the test (its statistic over its threshold: an alarm
+    at 1), the figures, dominant mode, tracking; packet counters and lag in the
+    caption."""
     c = snap["counters"]
     lag = snap["lag_ms"]
     table = Table(
@@ -29,14 +30,14 @@ def summary_table(snap: dict) -> Table:
                  f"foreign {c['foreign']}  truncated {c['truncated']}  lag p50/p99 "
                  f"{_fmt(lag['p50'], '.1f')}/{_fmt(lag['p99'], '.1f')} ms"),
     )
-    for col in ("ch", "state", "FRF dist dB", "gain dB", "pole shift", "dominant Hz",
+    for col in ("ch", "state", "test", "FRF dist dB", "gain dB", "pole shift", "dominant Hz",
                 "tracking rms", "pred. err rms"):
         table.add_column(col, justify="right")
     for ch in snap["channels"]:
         f = ch["figures"]
         state = ("[bold red]ALARM" if ch["alarm"] else
                  "learning" if ch["learning"] else "[green]ok")
-        table.add_row(ch["name"], state, _fmt(f[0], ".2f"), _fmt(f[1], "+.2f"),
+        table.add_row(ch["name"], state, _fmt(f[3], ".2f"), _fmt(f[0], ".2f"), _fmt(f[1], "+.2f"),
                       _fmt(f[2], ".3f"), _fmt(ch["dominant_hz"], ".1f"),
                       _fmt(ch["tracking_rms"], ".3g"), _fmt(ch["prediction_rms"], ".3g"))
     return table

@@ -3,7 +3,14 @@
 
 from __future__ import annotations
 
-from ehss.simulation.core import LOOPS, SimulationResult, simulate, with_control_rate
+from ehss.simulation.core import (
+    LOOPS,
+    SimulationResult,
+    SimulationState,
+    simulate,
+    with_control_rate,
+)
 from ehss.simulation.open_loop import simulate_open_loop
 
-__all__ = ["LOOPS", "SimulationResult", "simulate", "simulate_open_loop", "with_control_rate"]
+__all__ = ["LOOPS", "SimulationResult", "SimulationState", "simulate", "simulate_open_loop",
+           "with_control_rate"]

@@ -9,6 +9,12 @@ Timing of one control period k (t_k = k dt, dt = 1/fs):
 
 Everything recorded at index k refers to t_k. No allocation inside the loop.
 
+The controller's memory, the delay line and the count of periods already simulated
+live in one float64 array (``mem``, laid out by :data:`MEM_K`, :data:`MEM_PID`,
+:data:`MEM_TVC`, :data:`MEM_BUF`) that the kernel reads at its start and writes back at
+its end, so that a run continues where the previous one stopped: simulating [0, T) in
+blocks gives the same samples as one run.
+
 The kernel reads a :class:`LoopSettings` (the plant's, the sensors' and the controllers'
 settings, the timing), a :class:`SensorNoise` and writes a :class:`LoopRecord` of named
 rows; the plant and the controllers come from their packages' public kernels
@@ -35,6 +41,10 @@ from ehss.plant.kernels import (
 
 __all__ = [
     "LOOP_IDS",
+    "MEM_BUF",
+    "MEM_K",
+    "MEM_PID",
+    "MEM_TVC",
     "LoopRecord",
     "LoopSettings",
     "SensorNoise",
@@ -48,6 +58,12 @@ ACCELERATION = 1
 FORCE = 2
 OPEN = 3  # the reference is the valve command in volts (or the spool if prescribed)
 LOOP_IDS = {"position": POSITION, "acceleration": ACCELERATION, "force": FORCE, "open": OPEN}
+
+# layout of the loop's memory ``mem``: periods simulated, PidState, TvcState, delay line
+MEM_K = 0
+MEM_PID = 1  # 3 values (PidState)
+MEM_TVC = 4  # 5 values (TvcState)
+MEM_BUF = 9  # delay_samples + 1 values, drive[k] at index k mod (delay_samples + 1)
 
 
 class SensorSettings(NamedTuple):
@@ -114,7 +130,7 @@ class LoopRecord(NamedTuple):
 
 
 @njit(cache=True)
-def closed_loop(ref, noise, x0, s, rec):
+def closed_loop(ref, noise, x0, s, rec, mem):
     """Simulate ``ref.shape[0]`` control periods; fills ``rec``, returns the final state.
 
     Parameters
@@ -128,6 +144,9 @@ def closed_loop(ref, noise, x0, s, rec):
     s : LoopSettings
     rec : LoopRecord
         Preallocated rows of length n.
+    mem : float64[MEM_BUF + delay_samples + 1]
+        Controller memory and delay line at the start (see the module notes); holds
+        them at the end on return.
     """
     p = s.plant
     sen = s.sensors
@@ -136,10 +155,13 @@ def closed_loop(ref, noise, x0, s, rec):
     limit = s.tvc.output_limit_v if s.loop == ACCELERATION else s.pid.output_limit_v
     x = x0
     nbuf = s.delay_samples + 1
-    buf = np.full(nbuf, s.drive0_v)
-    pid = PidState(s.drive0_v, 0.0, 0.0)
-    tvc = TvcState(0.0, 0.0, 0.0, 0.0, 0.0)
+    k0 = int(mem[MEM_K])
+    buf = mem[MEM_BUF:MEM_BUF + nbuf]  # a view: the delay line is written in place
+    pid = PidState(mem[MEM_PID], mem[MEM_PID + 1], mem[MEM_PID + 2])
+    tvc = TvcState(mem[MEM_TVC], mem[MEM_TVC + 1], mem[MEM_TVC + 2], mem[MEM_TVC + 3],
+                   mem[MEM_TVC + 4])
     for k in range(ref.shape[0]):
+        g = k0 + k  # period index since the start of the test
         # ------------------------------------------------------------ true signals at t_k
         a_table = plant_derivative(x, 0.0, p).velocity_m_s
         # load cell: rod force Ap PL − Ff
@@ -151,7 +173,7 @@ def closed_loop(ref, noise, x0, s, rec):
         ym = adc(x.piston_displacement_m + noise.lvdt_m[k], sen.lvdt_range_m, sen.lvdt_lsb_m)
         am = adc(a_hp + noise.accel_m_s2[k], sen.accel_range_m_s2, sen.accel_lsb_m_s2)
         fm = adc(f_true + noise.force_n[k], sen.force_range_n, sen.force_lsb_n)
-        if k == 0:
+        if g == 0:
             # no derivative kick on the first sample: the previous measurements are these;
             # the generator and the velocity estimate v̂ start from rest
             pid = PidState(pid.integral_v, 0.0, fm if s.loop == FORCE else ym)
@@ -181,8 +203,8 @@ def closed_loop(ref, noise, x0, s, rec):
             u = adc(u, 10.0, sen.dac_lsb_v)
 
         # ------------------------------------------------------------ delay line + ZOH
-        buf[k % nbuf] = u
-        applied = buf[(k + 1) % nbuf]
+        buf[g % nbuf] = u
+        applied = buf[(g + 1) % nbuf]
         if p.spool_prescribed:
             # the drive is the spool position itself, held over the period
             x = with_spool(x, applied)
@@ -215,4 +237,7 @@ def closed_loop(ref, noise, x0, s, rec):
         # ------------------------------------------------------------ plant over one period
         for _ in range(s.substeps):
             x = clamp_state(rk4_step(x, ucmd, p, s.step_s), p)
+    mem[MEM_K] = k0 + ref.shape[0]
+    mem[MEM_PID], mem[MEM_PID + 1], mem[MEM_PID + 2] = pid
+    mem[MEM_TVC], mem[MEM_TVC + 1], mem[MEM_TVC + 2], mem[MEM_TVC + 3], mem[MEM_TVC + 4] = tvc
     return x

@@ -6,6 +6,12 @@ settings (:class:`~ehss.plant.kernels.PlantSettings`, the controllers'
 the sensors' and the timing), draws the sensor noise and runs the whole loop (plant,
 sensors, controller, delay) in one numba kernel
 (:func:`ehss.simulation._kernels.closed_loop`). The result is a :class:`SimulationResult`.
+
+Its ``final_state`` (a :class:`SimulationState`: plant, controller, delay line, sensor
+noise generator) continues the test: ``simulate(loop, r[n1:], initial_state=
+result.final_state)`` after ``result = simulate(loop, r[:n1], seed=s)`` gives the same
+samples, bit for bit, as ``simulate(loop, r, seed=s)``; the parameters may change between
+the two calls (a payload added while the rig runs) without restarting the controller.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ from ehss.plant.model import (
 )
 from ehss.simulation import _kernels as SK
 
-__all__ = ["LOOPS", "SimulationResult", "simulate", "with_control_rate"]
+__all__ = ["LOOPS", "SimulationResult", "SimulationState", "simulate", "with_control_rate"]
 
 #: Closed loops that :func:`simulate` can run.
 LOOPS = ("position", "acceleration", "force")
@@ -68,6 +74,45 @@ _SIGNAL_UNITS = {
 
 
 @dataclass(frozen=True, kw_only=True)
+class SimulationState:
+    """Everything a simulated test needs to continue where it stopped.
+
+    Attributes
+    ----------
+    loop : str
+        Loop it belongs to.
+    plant : PlantState
+        Plant state at the next control instant.
+    memory : ndarray, shape (9 + delay_samples + 1,)
+        Periods simulated so far, the controllers' memory and the delay line (the
+        layout of :mod:`ehss.simulation._kernels`; read-only).
+    rng_state : dict
+        State of the sensor noise generator (``numpy.random.PCG64``) after the last draw.
+    seed : int
+        Seed the test started with.
+    fs : float
+        Control rate, Hz.
+    """
+
+    loop: str
+    plant: PlantState
+    memory: np.ndarray = dataclasses.field(repr=False)
+    rng_state: dict = dataclasses.field(repr=False)
+    seed: int
+    fs: float
+
+    @property
+    def n_samples(self) -> int:
+        """Control periods simulated so far."""
+        return int(self.memory[SK.MEM_K])
+
+    @property
+    def delay_samples(self) -> int:
+        """Length of the delay line the state was made with, minus one."""
+        return self.memory.size - SK.MEM_BUF - 1
+
+
+@dataclass(frozen=True, kw_only=True)
 class SimulationResult:
     """Record of one simulated test, sampled at the control rate.
 
@@ -99,6 +144,8 @@ class SimulationResult:
         Seed of the sensor noise (drawn and recorded when none was given).
     params : RigParams
         Parameters used, with ``timing.control_rate_hz`` equal to ``fs``.
+    final_state : SimulationState or None
+        State at the end of the record, to continue the test (closed loops).
     """
 
     t: np.ndarray
@@ -110,6 +157,7 @@ class SimulationResult:
     fs: float
     seed: int
     params: RigParams
+    final_state: SimulationState | None = None
 
     def to_columns(self) -> dict[str, np.ndarray]:
         """Ordered columns ``t, reference, output`` then every signal."""
@@ -263,17 +311,53 @@ def _check_initial_state(initial_state: Any) -> Mapping[str, float] | None:
     return checked
 
 
+def _check_resume(state: SimulationState, loop: str, params: RigParams,
+                  seed: int | None) -> None:
+    """A full state continues only the loop and timing it was made with."""
+    if state.loop != loop:
+        raise ParameterError(f"initial_state is of a {state.loop!r} loop, not {loop!r}")
+    if seed is not None:
+        raise ParameterError("seed and a SimulationState exclude each other: the state "
+                             "carries the noise generator of the test it continues")
+    if state.fs != params.timing.control_rate_hz:
+        raise ParameterError(f"initial_state was made at fs={state.fs:g} Hz, the run is at "
+                             f"{params.timing.control_rate_hz:g} Hz")
+    if state.delay_samples != params.timing.delay_samples:
+        raise ParameterError(f"initial_state has a delay line of {state.delay_samples} "
+                             f"samples, params.timing.delay_samples="
+                             f"{params.timing.delay_samples}")
+
+
+def _fresh_memory(delay_samples: int, drive0_v: float) -> np.ndarray:
+    """Memory of a test that starts: no period run, the PID's integral and the delay
+    line holding ``drive0_v``, the TVC at rest."""
+    mem = np.zeros(SK.MEM_BUF + delay_samples + 1)
+    mem[SK.MEM_PID] = drive0_v
+    mem[SK.MEM_BUF:] = drive0_v
+    return mem
+
+
+def _draw_noise(rng: np.random.Generator, n: int, params: RigParams) -> SK.SensorNoise:
+    """Sensor noise of ``n`` periods, drawn period by period (LVDT, accelerometer, load
+    cell), so that blocks drawn one after another equal one draw."""
+    s = params.sensors
+    sigma = np.array([s.lvdt_noise_m, s.accel_noise_m_s2, s.force_noise_n])
+    noise = np.ascontiguousarray((rng.standard_normal((n, 3)) * sigma).T)
+    return SK.SensorNoise._make(noise)
+
+
 def _kernel_inputs(
     loop: str,
     values: np.ndarray,
     params: RigParams,
     *,
     seed: int,
-    initial_state: Mapping[str, float] | None,
+    initial_state: Mapping[str, float] | SimulationState | None,
     spool_direct: bool,
     stiffness_n_m: float,
-) -> tuple[PlantState, SK.SensorNoise, SK.LoopSettings]:
-    """Initial plant state, sensor noise and settings of the loop kernel for one run."""
+) -> tuple[PlantState, SK.SensorNoise, SK.LoopSettings, np.ndarray, np.random.Generator]:
+    """Initial plant state, sensor noise, settings, memory and noise generator of the
+    loop kernel for one run."""
     timing = params.timing
     h = 1.0 / timing.internal_rate_hz
     plant = plant_settings(
@@ -289,18 +373,25 @@ def _kernel_inputs(
         tvc = tvc_coefficients(params.acceleration, dt)
     drive0 = 0.0
     x0 = rest_state(params)
-    if loop == "force" and initial_state is None and values[0] != 0.0 and stiffness_n_m > 0.0:
+    resume = isinstance(initial_state, SimulationState)
+    if resume:
+        x0 = initial_state.plant
+    elif loop == "force" and initial_state is None and values[0] != 0.0 \
+            and stiffness_n_m > 0.0:
         # start in equilibrium on the first reference value (bumpless: the integrator
         # holds the drive that keeps the valve open against the leakage)
         x0, drive0 = static_force_state(params, float(values[0]), plant)
     elif loop == "open" and spool_direct:
         x0 = x0._replace(spool=float(values[0]))
-    x0 = apply_initial_state(x0, initial_state)
-
-    rng = np.random.default_rng(seed)
-    s = params.sensors
-    sigma = np.array([s.lvdt_noise_m, s.accel_noise_m_s2, s.force_noise_n])
-    noise = rng.standard_normal((3, values.size)) * sigma[:, None]
+    if resume:
+        mem = np.array(initial_state.memory, dtype=float)
+        rng = np.random.default_rng()
+        rng.bit_generator.state = initial_state.rng_state
+    else:
+        x0 = apply_initial_state(x0, initial_state)
+        mem = _fresh_memory(int(timing.delay_samples), drive0)
+        rng = np.random.default_rng(seed)
+    noise = _draw_noise(rng, values.size, params)
 
     settings = SK.LoopSettings(
         loop=SK.LOOP_IDS[loop],
@@ -313,7 +404,7 @@ def _kernel_inputs(
         delay_samples=int(timing.delay_samples),
         drive0_v=float(drive0),
     )
-    return x0, SK.SensorNoise._make(noise), settings
+    return x0, noise, settings, mem, rng
 
 
 def _run(
@@ -323,7 +414,7 @@ def _run(
     params: RigParams | None,
     fs: float | None,
     seed: int | None,
-    initial_state: Mapping[str, float] | None,
+    initial_state: Mapping[str, float] | SimulationState | None,
     spool_direct: bool = False,
     stiffness_n_m: float | None = None,
 ) -> SimulationResult:
@@ -332,10 +423,14 @@ def _run(
         params = preset("default")
     if not isinstance(params, RigParams):
         raise TypeError(f"params must be a RigParams, got {type(params).__name__}")
-    initial_state = _check_initial_state(initial_state)
     values, fs = _reference_values(reference, fs)
     params = with_control_rate(params, fs)
-    seed = _new_seed(seed)
+    if isinstance(initial_state, SimulationState):
+        _check_resume(initial_state, loop, params, seed)
+        seed = initial_state.seed
+    else:
+        initial_state = _check_initial_state(initial_state)
+        seed = _new_seed(seed)
     timing = params.timing
     fs = timing.control_rate_hz
     n = values.size
@@ -344,7 +439,7 @@ def _run(
         stiffness_n_m = (
             params.load.specimen_stiffness_n_m if loop == "force" else params.load.stiffness_n_m
         )
-    x0, noise, settings = _kernel_inputs(
+    x0, noise, settings, mem, rng = _kernel_inputs(
         loop, values, params, seed=seed, initial_state=initial_state,
         spool_direct=spool_direct, stiffness_n_m=stiffness_n_m,
     )
@@ -353,7 +448,11 @@ def _run(
         # numba types a read-only array apart from a writable one and would compile the
         # loop kernel a second time (seconds) for it; a copy costs microseconds
         values = values.copy()
-    SK.closed_loop(values, noise, x0, settings, record)
+    x_end = SK.closed_loop(values, noise, x0, settings, record, mem)
+    mem.setflags(write=False)
+    final_state = SimulationState(loop=loop, plant=PlantState._make(float(v) for v in x_end),
+                                  memory=mem, rng_state=rng.bit_generator.state, seed=seed,
+                                  fs=float(fs))
     rows = record._asdict()
     aux = rows.pop("aux")
     signals: dict[str, np.ndarray] = {}
@@ -389,6 +488,7 @@ def _run(
         fs=float(fs),
         seed=seed,
         params=params,
+        final_state=final_state,
     )
 
 
@@ -399,7 +499,7 @@ def simulate(
     params: RigParams | None = None,
     fs: float | None = None,
     seed: int | None = None,
-    initial_state: Mapping[str, float] | None = None,
+    initial_state: Mapping[str, float] | SimulationState | None = None,
 ) -> SimulationResult:
     """Simulate a closed-loop test of one actuator channel.
 
@@ -425,21 +525,26 @@ def simulate(
         ``timing.internal_rate_hz``.
     seed : int, optional
         Seed of the sensor noise; drawn at random (and recorded in the result) if None.
-    initial_state : mapping, optional
+    initial_state : mapping or SimulationState, optional
         Plant state overrides by name (:data:`ehss.plant.model.STATE_NAMES`). Without it
         the plant starts at rest mid-stroke with both chambers at (Ps + Pr)/2; the force
         loop starts in equilibrium holding the first reference value against the
         specimen stiffness (the paper's force sweep runs about a 25 kgf offset).
+        A :class:`SimulationState` (a previous result's ``final_state``) continues that
+        test instead: plant, controller, delay line and noise generator, bit for bit
+        (``seed`` must then be None; ``params`` may differ, with the same timing).
 
     Returns
     -------
     SimulationResult
+        With ``final_state`` to continue the test.
 
     Raises
     ------
     ParameterError
         Unknown loop, ``fs`` not dividing the internal rate, bad seed, unknown or
-        non-finite initial state.
+        non-finite initial state, a :class:`SimulationState` of another loop, rate or
+        delay, or with a seed.
     TypeError
         ``initial_state`` not a mapping of state names to real numbers.
     DataError

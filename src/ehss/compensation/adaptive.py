@@ -1,0 +1,576 @@
+"""Adaptive inverse-model compensation: the inverse of the online model, updated safely.
+
+A rig identified online (:class:`ehss.RelsEstimator`) has, at any time, a model
+``G = q^-d B/A`` of its closed loop. :func:`design_compensator` turns it into the
+compensator a real-time target runs (:mod:`ehss.target.filter`): second-order sections,
+an FIR part and an integer preview ``P``,
+
+.. math:: C(q) = q^{P}\\, S(q^{-1})\\, H(q^{-1}),
+
+with ``S = A / (k B_i)`` the exact inverse of the model's minimum-phase part (the
+sections of :func:`ehss.compensation.design_inverse`'s causal filter) and ``H`` an FIR
+of ``n_taps`` taps fitted by weighted least squares so that ``C`` matches, over the
+whole frequency axis, the compensator that ``ehss compensate`` applies to a drive file:
+
+.. math:: T(\\omega) = W(\\omega)\\, F(\\omega) + (1 - W(\\omega)),
+
+the exact stable inverse ``F`` inside the band limit ``W`` (the band the model is
+validated over), the reference itself outside it. The FIR carries everything that is
+not causal and minimum phase: the delay's advance ``q^d``, the anti-causal inverse of
+the non-minimum-phase zeros, the zeros near the unit circle and the band limit.
+
+Two reference modes:
+
+* **preview** (the reference is known ahead, a drive file streamed): ``P`` samples of
+  it are known, and the FIR spans ``P`` samples of the future. The fit is then exact
+  up to what the anti-causal part leaves beyond ``P`` samples (its error is reported).
+* **causal** (the reference is made online, ``P = 0``): the same fit with a causal FIR,
+  i.e. the least-squares causal predictor of the exact inverse over the band. It leaves
+  amplitude and phase errors, reported per design (:attr:`CompensatorDesign.errors`).
+
+:class:`AdaptiveCompensator` decides whether a new design may replace the running one
+(:class:`UpdateGuard`): the model must be stable, pass its band in phase at the low edge
+(a closed loop that tracks does), agree with the sliding H1 estimate over the band as
+:class:`ehss.workflow.Acceptance` asks (errors beyond the estimate's own standard error
+within 1 dB and 5°), and give, for the recent reference, a drive that the gain checks and
+the rig's limits of ``ehss compensate`` accept (:func:`ehss.compensation.check_drive`),
+and fit the newest quarter-second of feedback (fresh data, the free-run fit that
+:class:`~ehss.workflow.Acceptance` asks of a validated model).
+Otherwise the last good compensator stays and the reason is logged. Updates are at most
+one per ``min_interval_s``.
+
+References: eqs (16)–(22) of the paper (the model and its recursive estimate).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_drive
+from ehss.compensation.inverse import InverseModel, design_inverse
+from ehss.errors import EhssError, ParameterError
+from ehss.identification.model import ArmaxModel
+from ehss.validation import frf_error
+from ehss.workflow import Acceptance
+
+__all__ = [
+    "MODES",
+    "CompensatorDesign",
+    "UpdateGuard",
+    "Decision",
+    "AdaptiveCompensator",
+    "design_compensator",
+    "run_compensator",
+]
+
+#: Reference modes: known ahead (a drive file streamed) or made online.
+MODES = ("preview", "causal")
+
+#: Weights of the fit (inside the band, in the band limit's transitions, outside its
+#: support), per mode. Preview: the compensator matches the exact inverse everywhere, and
+#: outside the band (where the reference has almost no power) a tenth as closely. Causal:
+#: the fit is the least-squares causal *prediction* of the exact inverse for a reference
+#: that has its power in the band: 30 dB down in the transitions, 60 dB outside (a
+#: band-limited reference); it buys its accuracy in the band with gain outside it
+#: (:attr:`CompensatorDesign.peak_gain`), which the drive checks bound.
+_WEIGHTS = {"preview": (1.0, 1.0, 0.1), "causal": (1.0, 1e-3, 1e-6)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompensatorDesign:
+    """A compensator as a target runs it, and what it costs against the exact inverse.
+
+    Attributes
+    ----------
+    sos : ndarray, shape (n_sections, 6)
+        Second-order sections (scipy's layout), ``S = A/(k B_i)`` (the zeros of ``B_i``
+        whose modes outlast an eighth of the FIR are left to the FIR).
+    taps : ndarray, shape (n_taps,)
+        FIR part after the sections.
+    preview : int
+        Samples of reference the filter's input runs ahead of the drive.
+    fs_hz : float
+    mode : {"preview", "causal"}
+    band_hz : (float, float)
+        Band the model is trusted over (the inverse's band limit).
+    inverse : InverseModel
+        The exact stable inverse it realises (:func:`design_inverse`).
+    freq_hz : ndarray
+        Grid over the band where the errors were computed.
+    error : ndarray, complex
+        ``C / T - 1`` on that grid: the relative error against the exact inverse (what
+        the loop's response differs from 1 by, if the model is right).
+    peak_gain : float
+        Largest ``|C|`` from 0 to fs/2 (what the compensator can amplify).
+    settle_samples : int
+        Samples the filter needs to forget its start (sections' slowest mode, FIR span).
+    """
+
+    sos: np.ndarray = field(repr=False)
+    taps: np.ndarray = field(repr=False)
+    preview: int
+    fs_hz: float
+    mode: str
+    band_hz: tuple[float, float]
+    inverse: InverseModel = field(repr=False)
+    freq_hz: np.ndarray = field(repr=False)
+    error: np.ndarray = field(repr=False)
+    peak_gain: float
+    settle_samples: int
+
+    @property
+    def max_amplitude_error_db(self) -> float:
+        """Largest ``|20 log10 |C/T||`` over the band, dB."""
+        return float(np.max(np.abs(20.0 * np.log10(np.abs(1.0 + self.error)))))
+
+    @property
+    def max_phase_error_deg(self) -> float:
+        """Largest ``|arg(C/T)|`` over the band, degrees."""
+        return float(np.max(np.abs(np.degrees(np.angle(1.0 + self.error)))))
+
+    def frequency_response(self, freq_hz: Any) -> np.ndarray:
+        """Complex response ``C(e^{jω})`` of the compensator at ``freq_hz``."""
+        return _realised(self.sos, self.taps, self.preview,
+                         np.asarray(freq_hz, dtype=float) / self.fs_hz)
+
+    def errors(self) -> dict[str, float]:
+        """JSON-ready figures: max amplitude (dB) and phase (degrees) error over the band,
+        and the RMS relative error."""
+        return {"max_amplitude_error_db": self.max_amplitude_error_db,
+                "max_phase_error_deg": self.max_phase_error_deg,
+                "peak_gain": self.peak_gain,
+                "rms_relative_error": float(np.sqrt(np.mean(np.abs(self.error) ** 2)))}
+
+
+def _sections(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    """``num/den`` (ascending powers of q^-1) as second-order sections."""
+    n = max(num.size, den.size)
+    b = np.zeros(n)
+    a = np.zeros(n)
+    b[:num.size] = num
+    a[:den.size] = den
+    if n == 1:
+        return np.array([[b[0] / a[0], 0.0, 0.0, 1.0, 0.0, 0.0]])
+    return np.ascontiguousarray(scipy.signal.tf2sos(b, a))
+
+
+def _fast_part(den: np.ndarray, n_taps: int) -> np.ndarray:
+    """The factor of ``den`` (monic, roots inside the unit circle) whose modes die out
+    within an eighth of the FIR's span; the slower ones are left to the FIR's fit.
+
+    A zero of the model close to ``z = 1`` gives the inverse a mode of seconds; run as a
+    section it would need seconds in shadow before each update could be faded in. Its
+    effect lies below the band, where the target is the reference itself, and the FIR
+    fits it there.
+    """
+    roots = np.roots(den) if den.size > 1 else np.zeros(0, complex)
+    fast = roots[np.abs(roots) <= math.exp(-8.0 / n_taps)]
+    return np.real_if_close(np.poly(fast), tol=1e6).real if fast.size else np.ones(1)
+
+
+def _sos_response(sos: np.ndarray, w: np.ndarray) -> np.ndarray:
+    h = np.ones(w.shape, complex)
+    x = np.exp(-1j * w)
+    for b0, b1, b2, a0, a1, a2 in sos:
+        h *= (b0 + b1 * x + b2 * x * x) / (a0 + a1 * x + a2 * x * x)
+    return h
+
+
+def _realised(sos: np.ndarray, taps: np.ndarray, preview: int, f_norm: np.ndarray
+              ) -> np.ndarray:
+    """``e^{jωP} S(ω) H(ω)`` at normalised frequencies ``f/fs``."""
+    w = 2.0 * np.pi * f_norm
+    fir = np.exp(-1j * np.outer(w, np.arange(taps.size))) @ taps
+    return np.exp(1j * w * preview) * _sos_response(sos, w) * fir
+
+
+def _fit_taps(s_resp: np.ndarray, target: np.ndarray, weight: np.ndarray, preview: int,
+              n_taps: int) -> np.ndarray:
+    """Weighted least squares: ``min sum weight |e^{jωP} S H - T|^2`` over real taps.
+
+    On the uniform grid ``ω_k = π k / K`` (k = 0..K) with the FIR's columns
+    ``e^{jω(P-j)} S(ω)``, the normal equations' matrix is Toeplitz,
+    ``R[i, j] = sum weight |S|^2 cos(ω (i - j))``, and the right-hand side
+    ``b[j] = sum weight Re(conj(S) T e^{jω(j-P)})``: both are inverse FFTs of length 2K,
+    and Levinson's recursion solves the equations in O(n_taps^2).
+    """
+    k = s_resp.size - 1
+    c = weight * np.abs(s_resp) ** 2
+    r = np.fft.ifft(np.concatenate([c, np.zeros(k - 1)])).real[:n_taps]
+    g = weight * np.conj(s_resp) * target
+    lag = (np.arange(n_taps) - preview) % (2 * k)
+    b = np.fft.ifft(np.concatenate([g, np.zeros(k - 1)]))[lag].real
+    # a relative 1e-10 on the diagonal: the taps stay bounded where the weight is small
+    r[0] *= 1.0 + 1e-10
+    return scipy.linalg.solve_toeplitz(r, b)
+
+
+def _grid_size(fs: float, band: tuple[float, float], n_taps: int) -> int:
+    """K of the grid ``f_k = k fs / (2K)``: 16 points per tap, and 8 across the band
+    limit's lower transition (``lo/2`` wide)."""
+    lo = band[0] if band[0] > 0 else band[1]
+    want = max(16 * n_taps, 8.0 * fs / lo)
+    return int(2 ** math.ceil(math.log2(min(want, 2.0**18))))
+
+
+def design_compensator(model: ArmaxModel, *, band_hz: tuple[float, float] | None = None,
+                       mode: str = "preview", preview: int | None = None,
+                       n_taps: int = 256, max_sections: int = 16) -> CompensatorDesign:
+    """The compensator of ``model`` as sections, an FIR part and a preview.
+
+    Parameters
+    ----------
+    model : ArmaxModel
+        Closed-loop model (reference → feedback), e.g. ``RelsEstimator.model``.
+    band_hz : (lo, hi), optional
+        Band the model is trusted over (default ``model.band_hz``; one is needed).
+    mode : {"preview", "causal"}
+    preview : int, optional
+        Samples known ahead in preview mode (default ``n_taps // 2``); must be 0 or
+        absent in causal mode.
+    n_taps : int
+        FIR length (the target's limit, e.g. 256).
+    max_sections : int
+        Most second-order sections the target runs.
+
+    Returns
+    -------
+    CompensatorDesign
+
+    Raises
+    ------
+    ParameterError
+        No band, a bad mode, preview or size, or a model that cannot be inverted
+        (:func:`ehss.compensation.design_inverse`: unstable, zero on the unit circle in
+        the band).
+
+    Examples
+    --------
+    >>> from ehss.identification.model import ArmaxModel
+    >>> m = ArmaxModel(a=[1.0, -0.9], b=[0.1], delay=1, dt=1e-3)
+    >>> d = design_compensator(m, band_hz=(1.0, 50.0), n_taps=64)
+    >>> d.preview, d.max_amplitude_error_db < 0.01
+    (32, True)
+    """
+    if not isinstance(model, ArmaxModel):
+        raise TypeError(f"model must be an ArmaxModel, not {type(model).__name__}")
+    if mode not in MODES:
+        raise ParameterError(f"mode={mode!r} must be one of {MODES}")
+    if isinstance(n_taps, bool) or not isinstance(n_taps, int) or n_taps < 1:
+        raise ParameterError(f"n_taps={n_taps!r} must be an integer >= 1")
+    preview = _check_preview(mode, preview, n_taps)
+    band = band_hz if band_hz is not None else model.band_hz
+    if band is None:
+        raise ParameterError("the compensator needs the band the model is trusted over: "
+                             "give band_hz (or a model with one)")
+    inv = design_inverse(model, band_hz=band)
+    sos = _sections(inv.num, _fast_part(inv.den, n_taps))
+    if sos.shape[0] > max_sections:
+        raise ParameterError(f"the inverse needs {sos.shape[0]} second-order sections, the "
+                             f"target runs {max_sections}; identify a lower order")
+    fs = model.fs
+    lo, hi = inv.band_hz
+    k = _grid_size(fs, inv.band_hz, n_taps)
+    f = np.arange(k + 1) * (0.5 * fs / k)
+    w = np.pi * np.arange(k + 1) / k
+    band_w = inv.band_response(f)
+    # T = W F + (1 - W): the exact inverse in the band, the reference outside it
+    target = inv.frequency_response(f, band=True) + (1.0 - band_w)
+    w_in, w_edge, w_out = _WEIGHTS[mode]
+    weight = np.where(band_w >= 1.0, w_in, np.where(band_w > 0.0, w_edge, w_out))
+    s_resp = _sos_response(sos, w)
+    taps = _fit_taps(s_resp, target, weight, preview, n_taps)
+    # C = e^{jωP} S H on the grid
+    got = np.exp(1j * w * preview) * s_resp * np.fft.rfft(taps, 2 * k)
+    inside = (f >= lo) & (f <= hi)
+    return CompensatorDesign(
+        sos=sos, taps=np.ascontiguousarray(taps), preview=int(preview), fs_hz=float(fs),
+        mode=mode, band_hz=(float(lo), float(hi)), inverse=inv, freq_hz=f[inside],
+        error=got[inside] / target[inside] - 1.0, peak_gain=float(np.max(np.abs(got))),
+        settle_samples=_settle_samples(sos) + n_taps,
+    )
+
+
+#: A filter started at rest has forgotten its start after this many time constants of
+#: its slowest mode (e^-7 < 0.1 %).
+_SETTLE_TIME_CONSTANTS = 7.0
+
+
+def _settle_samples(sos: np.ndarray) -> int:
+    """Samples for the sections' start-up transient to fall below 0.1 %."""
+    radius = 0.0
+    for a1, a2 in sos[:, 4:6]:
+        roots = np.roots([1.0, a1, a2])
+        radius = max(radius, float(np.max(np.abs(roots))) if roots.size else 0.0)
+    if radius <= 0.0:
+        return 0
+    return int(math.ceil(_SETTLE_TIME_CONSTANTS / max(-math.log(min(radius, 1.0 - 1e-12)),
+                                                       1e-12)))
+
+
+def _check_preview(mode: str, preview: Any, n_taps: int) -> int:
+    if mode == "causal":
+        if preview not in (None, 0):
+            raise ParameterError(f"preview={preview!r}: the causal mode has none (0)")
+        return 0
+    if preview is None:
+        return n_taps // 2
+    if isinstance(preview, bool) or not isinstance(preview, (int, np.integer)) \
+            or not 0 <= preview < n_taps:
+        raise ParameterError(f"preview={preview!r} must be an integer in [0, n_taps)")
+    return int(preview)
+
+
+def run_compensator(design: CompensatorDesign, reference: Any) -> np.ndarray:
+    """The drive ``design`` gives for ``reference`` over a record, started at rest.
+
+    ``u[k] = (h * S r)[k + P]``: the same sections and FIR the target runs, with the
+    reference known to the record's end (held at its last value beyond it).
+
+    Parameters
+    ----------
+    design : CompensatorDesign
+    reference : array_like, shape (n,)
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    r = np.asarray(reference, dtype=float)
+    p = design.preview
+    x = np.concatenate([r[p:], np.full(min(p, r.size), r[-1] if r.size else 0.0)])
+    v = scipy.signal.sosfilt(design.sos, x)
+    return scipy.signal.lfilter(design.taps, [1.0], v)
+
+
+# --------------------------------------------------------------------------- guard
+@dataclass(frozen=True, kw_only=True)
+class UpdateGuard:
+    """When a new compensator may replace the running one.
+
+    Attributes
+    ----------
+    acceptance : Acceptance
+        Agreement of the model with the sliding H1 estimate over the band, judged as a
+        validated model is (:class:`ehss.workflow.Acceptance`: the errors beyond
+        ``uncertainty_sigmas`` standard errors of the estimate within
+        ``max_magnitude_db`` and ``max_phase_deg`` at ``min_frf_points`` or more coherent
+        points).
+    max_gain : float or None
+        Drive-to-reference RMS and peak bound (:data:`DEFAULT_MAX_GAIN`).
+    limits : DriveLimits, optional
+        Explicit bounds of the drive.
+    min_interval_s : float
+        Fewest seconds between two updates of a channel.
+    crossfade_s : float
+        Length of the cross-fade from the old compensator to the new, s.
+    fit_s : float
+        Length of the newest stretch of feedback the model must fit (fresh data), s.
+    """
+
+    acceptance: Acceptance = field(default_factory=Acceptance)
+    max_gain: float | None = DEFAULT_MAX_GAIN
+    limits: DriveLimits | None = None
+    min_interval_s: float = 0.5
+    crossfade_s: float = 0.1
+    fit_s: float = 0.25
+
+    def __post_init__(self) -> None:
+        for name in ("min_interval_s", "crossfade_s", "fit_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ParameterError(f"{name}={v!r} must be a number >= 0 (s)")
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What :meth:`AdaptiveCompensator.propose` decided.
+
+    Attributes
+    ----------
+    t_s : float
+    accepted : bool
+    reason : str
+        Why not ("" when accepted).
+    design : CompensatorDesign or None
+        The new compensator (when accepted).
+    figures : dict
+        The figures judged (H1 agreement, drive gains), JSON-ready.
+    """
+
+    t_s: float
+    accepted: bool
+    reason: str
+    design: CompensatorDesign | None = field(default=None, repr=False)
+    figures: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"t_s": self.t_s, "accepted": self.accepted,
+                               "reason": self.reason, **self.figures}
+        if self.design is not None:
+            out.update(self.design.errors())
+        return out
+
+
+def _polarity_fault(model: ArmaxModel, band: tuple[float, float]) -> str:
+    """A closed loop that tracks passes the low edge of its band in phase (|φ| < 90°)."""
+    lo = max(band[0], 1e-3 * band[1])
+    h = complex(model.frequency_response(np.array([lo]))[0])
+    if h.real <= 0.0:
+        return (f"the model's phase at the band's low edge ({lo:g} Hz) is "
+                f"{math.degrees(math.atan2(h.imag, h.real)):.0f}°: a loop that follows its "
+                "reference cannot be out of phase there (feedback sign or wiring?)")
+    return ""
+
+
+class AdaptiveCompensator:
+    """The compensator of one channel, updated from its online model when it is safe.
+
+    Parameters
+    ----------
+    fs_hz : float
+    band_hz : (lo, hi)
+        Band of the reference, which the model is validated over.
+    mode : {"preview", "causal"}
+    preview : int, optional
+        See :func:`design_compensator`.
+    n_taps, max_sections : int
+        The target's sizes.
+    guard : UpdateGuard, optional
+    loop : str, optional
+        With ``params``: the loop the drive is played into, whose limits it must respect
+        (:func:`ehss.compensation.check_drive`).
+    params : RigParams, optional
+
+    Attributes
+    ----------
+    current : CompensatorDesign or None
+        The last good design (None: no compensation yet).
+    current_model : ArmaxModel or None
+        The model it was designed from.
+    log : list of Decision
+    """
+
+    def __init__(self, fs_hz: float, band_hz: tuple[float, float], *, mode: str = "preview",
+                 preview: int | None = None, n_taps: int = 256, max_sections: int = 16,
+                 guard: UpdateGuard | None = None, loop: str | None = None,
+                 params: Any = None) -> None:
+        if mode not in MODES:
+            raise ParameterError(f"mode={mode!r} must be one of {MODES}")
+        self.fs_hz = float(fs_hz)
+        self.band_hz = (float(band_hz[0]), float(band_hz[1]))
+        self.mode = mode
+        self.preview = _check_preview(mode, preview, int(n_taps))
+        self.n_taps = int(n_taps)
+        self.max_sections = int(max_sections)
+        self.guard = guard if guard is not None else UpdateGuard()
+        self.loop, self.params = loop, params
+        self.current: CompensatorDesign | None = None
+        self.current_model: ArmaxModel | None = None
+        self.log: list[Decision] = []
+        self._last_t = -math.inf
+
+    def due(self, t_s: float) -> bool:
+        """Whether the rate limit lets an update through at ``t_s``."""
+        return t_s - self._last_t >= self.guard.min_interval_s
+
+    def propose(self, t_s: float, model: ArmaxModel, h1: Any, reference: np.ndarray,
+                window: tuple[np.ndarray, np.ndarray] | None = None) -> Decision:
+        """Judge the compensator of ``model`` at stream time ``t_s``.
+
+        Parameters
+        ----------
+        t_s : float
+        model : ArmaxModel
+            The current online model.
+        h1 : FrequencyResponse or None
+            Sliding H1 estimate of the same loop (drive → feedback).
+        reference : ndarray
+            Recent reference (the desired output), to check the drive it would give.
+        window : (u, y), optional
+            The drive and feedback the H1 estimate was made from: the model simulated
+            on ``u`` must fit the latest ``guard.fit_s`` of ``y`` (fresh data) as
+            ``acceptance.min_fit_pct`` asks.
+
+        Returns
+        -------
+        Decision
+            Also appended to :attr:`log`; when accepted, :attr:`current` is its design.
+        """
+        decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float))
+        if decision.accepted and window is not None:
+            decision = self._judge_fit(decision, model, *window)
+        self.log.append(decision)
+        if decision.accepted:
+            self.current = decision.design
+            self.current_model = model
+            self._last_t = t_s
+        return decision
+
+    def _judge_fit(self, decision: Decision, model: ArmaxModel, u: np.ndarray,
+                   y: np.ndarray) -> Decision:
+        """The model's free-run simulation over the window must fit its latest part.
+
+        The H1 estimate weighs the whole window; a sensor that fails (sticks, flips,
+        bursts) shows first in the newest samples, which the model's simulation on the
+        drive no longer fits.
+        """
+        acc = self.guard.acceptance
+        n_fit = max(1, min(int(round(self.guard.fit_s * self.fs_hz)), u.size // 2))
+        b = np.concatenate([np.zeros(model.delay), model.b])
+        y_hat = scipy.signal.lfilter(b, model.a, u)[-n_fit:]
+        y_new = y[-n_fit:]
+        spread = float(np.linalg.norm(y_new - np.mean(y_new)))
+        # fit = 100 (1 - |y - ŷ| / |y - mean y|), as ehss.validation computes it
+        fit = 100.0 * (1.0 - float(np.linalg.norm(y_new - y_hat)) / spread) \
+            if spread > 0 else -math.inf
+        figures = {**decision.figures, "fresh_fit_pct": fit}
+        if fit < acc.min_fit_pct:
+            return Decision(decision.t_s, False, f"the model fits the latest "
+                            f"{n_fit / self.fs_hz:g} s of feedback by {fit:.1f} % (needs "
+                            f"{acc.min_fit_pct:g} %): the sensor or the loop misbehaves",
+                            figures=figures)
+        return Decision(decision.t_s, True, "", decision.design, figures)
+
+    def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray) -> Decision:
+        g = self.guard
+        if not model.is_stable():
+            radius = float(np.max(np.abs(np.roots(model.a))))
+            return Decision(t_s, False, f"the model is unstable (pole radius {radius:.4g})")
+        fault = _polarity_fault(model, self.band_hz)
+        if fault:
+            return Decision(t_s, False, fault)
+        if h1 is None:
+            return Decision(t_s, False, "no H1 estimate to confirm the model yet")
+        acc = g.acceptance
+        err = frf_error(model, h1, band_hz=self.band_hz, min_coherence=acc.min_coherence)
+        figures = {"h1_points": err.n_points}
+        if err.n_points < acc.min_frf_points:
+            return Decision(t_s, False, f"the H1 estimate confirms {err.n_points} points of "
+                            f"the band (coherence >= {acc.min_coherence:g}), fewer than "
+                            f"{acc.min_frf_points}", figures=figures)
+        mag_db, ph_deg = err.beyond_uncertainty(acc.uncertainty_sigmas)
+        figures.update(h1_magnitude_db=mag_db, h1_phase_deg=ph_deg)
+        if mag_db > acc.max_magnitude_db or ph_deg > acc.max_phase_deg:
+            return Decision(t_s, False, f"the model disagrees with the H1 estimate by "
+                            f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty (bounds "
+                            f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",
+                            figures=figures)
+        try:
+            design = design_compensator(model, band_hz=self.band_hz, mode=self.mode,
+                                        preview=self.preview, n_taps=self.n_taps,
+                                        max_sections=self.max_sections)
+            drive = run_compensator(design, r)
+            skip = min(design.settle_samples, r.size // 2)
+            check = check_drive(drive[skip:], r[skip:], self.fs_hz, max_gain=g.max_gain,
+                                limits=g.limits, loop=self.loop, params=self.params)
+        except EhssError as exc:
+            return Decision(t_s, False, str(exc), figures=figures)
+        figures.update(rms_gain=check.rms_gain, peak_gain=check.peak_gain)
+        return Decision(t_s, True, "", design, figures)

@@ -1,0 +1,546 @@
+"""Adaptive compensation while the rig runs: the online model's inverse, sent to the target.
+
+Each channel has its own recursive estimator of the loop from the drive it receives to
+its feedback (:class:`ehss.RelsEstimator`, eqs (19)–(22) of the paper), the sliding
+windows of drive, feedback and desired reference, and an
+:class:`~ehss.compensation.adaptive.AdaptiveCompensator`. Every ``update_s`` of stream
+time the current model is judged (:class:`~ehss.compensation.adaptive.UpdateGuard`);
+a compensator that passes is sent to the target (:meth:`Target.load`), which runs it in
+shadow until its start-up has died out and cross-fades it in; one that fails is not
+sent, the last good one keeps running, and the refusal is logged (an alarm when a
+channel that had a good compensator starts refusing, a clear when it accepts again).
+
+The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
+``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
+either the whole ``desired`` reference or its ``reference_rms``:
+:class:`ehss.live.rig.SteppingRig` in process, or :class:`UdpTarget`, a remote target
+whose compensators :class:`DatagramSender` sends as :mod:`ehss.target.datagram`
+datagrams. ``apply_index`` counts drive samples from the start of the stream.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+import ehss
+from ehss.compensation.adaptive import MODES, AdaptiveCompensator, Decision, UpdateGuard
+from ehss.errors import EhssError, ParameterError
+from ehss.live.channel import reference_band
+
+__all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
+           "Target", "DatagramSender", "UdpTarget"]
+
+
+class Target(Protocol):
+    """What :class:`AdaptiveLoop` drives."""
+
+    fs: float
+    channels: tuple[str, ...]
+    preview: int
+    index: int
+
+    def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        """Hand over a compensator (False if the target refuses it)."""
+
+    def step(self, n: int) -> Any:
+        """Run the next ``n`` samples; a block with ``first_index``, ``desired``,
+        ``drive`` and ``feedback`` (each shape (n_channels, n))."""
+
+    @property
+    def finished(self) -> bool:
+        """True when the test is over."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompensationSettings:
+    """Settings of adaptive compensation.
+
+    Attributes
+    ----------
+    mode : {"preview", "causal"}
+    band_hz : (lo, hi), optional
+        Band of the compensation and of the model's validation; default the band of the
+        desired reference (within 20 dB of its peak, :func:`ehss.live.reference_band`).
+    na, nb, nc, delay, method
+        Structure of each channel's estimator: RELS of the paper (eqs (19)–(22)), sixth
+        order. The drive is a known, broadband signal and the feedback nearly
+        noise-free, where RELS follows a change of the rig faster than RML (about 2 s
+        against 3 s on the simulated rig's +40 % payload) and a sixth-order model fits
+        the heavier loop's resonance within the band.
+    memory_s : float
+        Memory of its forgetting, λ = 1 − 1/(memory_s fs): how fast the model follows
+        the rig, against how much it scatters.
+    p0 : float
+        α of P(0) = α I, which also bounds tr P: large, so that the bound does not hold
+        the tracking speed below what the forgetting asks for (as
+        :class:`ehss.live.EstimatorSettings`).
+    h1_window_s : float
+        Length of the sliding H1 estimate that must confirm a model (and of the recent
+        reference the drive checks run on). A change of the rig shows in full in it
+        after this long.
+    update_s : float
+        Period of the judgements (stream time).
+    start_s : float
+        First judgement (the estimator and the window need data first).
+    adapt_until_s : float
+        No update after this time (inf: always adapt); to compare with an inverse that
+        is not adapted.
+    alarm_after : int
+        Consecutive refusals (of a channel that has a good compensator) that raise an
+        alarm: one refusal is the guard doing its work on a scattered estimate; three
+        (0.75 s at the default period) are a fault.
+    n_taps, max_sections : int
+        The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
+    guard : UpdateGuard
+    """
+
+    mode: str = "preview"
+    band_hz: tuple[float, float] | None = None
+    na: int = 6
+    nb: int = 5
+    nc: int = 6
+    delay: int = 1
+    method: str = "rels"
+    memory_s: float = 0.3
+    p0: float = 1e6
+    average_s: float = 0.3
+    h1_window_s: float = 1.5
+    update_s: float = 0.25
+    start_s: float = 2.0
+    adapt_until_s: float = math.inf
+    alarm_after: int = 3
+    n_taps: int = 256
+    max_sections: int = 16
+    guard: UpdateGuard = field(default_factory=UpdateGuard)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ParameterError(f"mode={self.mode!r} must be one of {MODES}")
+        for name in ("memory_s", "h1_window_s", "update_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ParameterError(f"{name}={v!r} must be a number > 0 (s)")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
+                "h1_window_s": self.h1_window_s, "update_s": self.update_s,
+                "start_s": self.start_s, "adapt_until_s": self.adapt_until_s,
+                "n_taps": self.n_taps, "estimator": [self.na, self.nb, self.nc, self.delay,
+                                                     self.method],
+                "min_interval_s": self.guard.min_interval_s,
+                "crossfade_s": self.guard.crossfade_s, "max_gain": self.guard.max_gain}
+
+
+class _Ring:
+    """The latest ``size`` samples of a few signals."""
+
+    def __init__(self, n_rows: int, size: int) -> None:
+        self.buf = np.zeros((n_rows, size))
+        self.fill = 0
+        self.pos = 0
+
+    def push(self, x: np.ndarray) -> None:
+        size = self.buf.shape[1]
+        n = x.shape[1]
+        if n >= size:
+            self.buf[:] = x[:, -size:]
+            self.pos, self.fill = 0, size
+            return
+        idx = (self.pos + np.arange(n)) % size
+        self.buf[:, idx] = x
+        self.pos = (self.pos + n) % size
+        self.fill = min(size, self.fill + n)
+
+    def latest(self) -> np.ndarray:
+        if self.fill < self.buf.shape[1]:
+            return self.buf[:, :self.fill].copy()
+        return np.roll(self.buf, -self.pos, axis=1)
+
+
+class ChannelAdapter:
+    """Estimator, sliding windows and adaptive compensator of one channel.
+
+    Parameters
+    ----------
+    name : str
+    fs : float
+    band_hz : (lo, hi)
+    scale : float
+        RMS of the channel's reference (the estimator's scale of u and y).
+    settings : CompensationSettings
+    loop : str, optional
+    params : RigParams, optional
+        With ``loop``: the rig whose limits the drive must respect.
+    preview : int
+        The target filter's preview (the compensators' preview in preview mode).
+    """
+
+    def __init__(self, name: str, fs: float, band_hz: tuple[float, float], scale: float,
+                 settings: CompensationSettings, *, loop: str | None = None,
+                 params: Any = None, preview: int = 0) -> None:
+        s = settings
+        self.name = name
+        self.fs = float(fs)
+        self.settings = s
+        self._scale = scale
+        self.estimator = self._new_estimator(None)
+
+        self.window = _Ring(3, max(64, int(round(s.h1_window_s * self.fs))))
+        self.compensator = AdaptiveCompensator(
+            self.fs, band_hz, mode=s.mode, preview=preview if s.mode == "preview" else None,
+            n_taps=s.n_taps, max_sections=s.max_sections, guard=s.guard, loop=loop,
+            params=params)
+        self.alarm = False
+        self.refusals = 0
+        self.busy_until = 0
+        self._n = 0
+        self._n_average = int(round(s.average_s * self.fs))
+        self._thetas: collections.deque = collections.deque()
+
+    def _new_estimator(self, theta0: np.ndarray | None) -> ehss.RelsEstimator:
+        s = self.settings
+        return ehss.RelsEstimator(
+            na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, method=s.method, theta0=theta0, p0=s.p0,
+            forgetting=1.0 - 1.0 / (s.memory_s * self.fs), dt=1.0 / self.fs,
+            u_scale=self._scale, y_scale=self._scale)
+
+    def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> None:
+        """Consecutive samples of the drive (model input), feedback and desired reference."""
+        self.estimator.update_many(drive, feedback)
+        self.window.push(np.vstack([drive, feedback, desired]))
+        self._n += drive.size
+        self._thetas.append((self._n, self.estimator.theta))
+        while self._thetas and self._thetas[0][0] < self._n - self._n_average:
+            self._thetas.popleft()
+
+    def model(self) -> ehss.ArmaxModel:
+        """The model judged: θ̂ averaged over the last ``average_s`` (one estimate per
+        block fed), which halves its scatter at the cost of that much more lag."""
+        s = self.settings
+        th = np.mean([t for _, t in self._thetas], axis=0)
+        return ehss.ArmaxModel(a=np.r_[1.0, th[:s.na]], b=th[s.na:s.na + s.nb + 1],
+                               c=np.r_[1.0, th[s.na + s.nb + 1:]], delay=s.delay,
+                               dt=1.0 / self.fs)
+
+    def judge(self, t_s: float) -> Decision:
+        """The decision on the current model at stream time ``t_s``."""
+        u, y, r = self.window.latest()
+        try:
+            model = self.model()
+            # segments of a third of the window (a power of two): 4 averages with half
+            # overlap, and as long as the loop's memory asks (short ones leak and lose
+            # their coherence)
+            nper = int(2 ** round(math.log2(max(16, u.size / 3))))
+            h1 = ehss.h1_estimate(u, y, fs=self.fs, nperseg=min(nper, u.size))
+        except EhssError as exc:
+            decision = Decision(t_s, False, f"no model or H1 estimate: {exc}")
+            self.compensator.log.append(decision)
+            return decision
+        return self.compensator.propose(t_s, model, h1, r, window=(u, y))
+
+
+@dataclass(frozen=True)
+class CompensationRecord:
+    """What an :class:`AdaptiveLoop` run did.
+
+    Attributes
+    ----------
+    fs : float
+    channels : tuple of str
+    desired, drive, feedback : ndarray, shape (n_channels, n)
+    decisions : dict of str to list of dict
+        Every judgement per channel (:meth:`Decision.to_dict`).
+    loads : list of dict
+        Compensators sent to the target: ``t_s``, ``channel``, ``apply_index``,
+        ``crossfade``, ``accepted`` (by the target).
+    events : list of dict
+        Alarms and clears.
+    settings : dict
+    """
+
+    fs: float
+    channels: tuple[str, ...]
+    desired: np.ndarray = field(repr=False)
+    drive: np.ndarray = field(repr=False)
+    feedback: np.ndarray = field(repr=False)
+    decisions: dict = field(repr=False)
+    loads: list = field(repr=False)
+    events: list = field(repr=False)
+    settings: dict = field(repr=False)
+
+    def tracking_rms(self, t0_s: float, t1_s: float) -> np.ndarray:
+        """RMS of desired − feedback of each channel over ``[t0_s, t1_s)``."""
+        a, b = int(round(t0_s * self.fs)), int(round(t1_s * self.fs))
+        e = self.desired[:, a:b] - self.feedback[:, a:b]
+        return np.sqrt(np.mean(e * e, axis=1))
+
+
+class AdaptiveLoop:
+    """Run a target block by block, adapting each channel's compensator.
+
+    Parameters
+    ----------
+    target : Target
+    settings : CompensationSettings
+    loop : str, optional
+    params : RigParams, optional
+        The rig whose limits the drives must respect (with ``loop``).
+    log : callable, optional
+        Receives each event dict (loads, refusals that change, alarms, clears).
+    """
+
+    def __init__(self, target: Target, settings: CompensationSettings, *,
+                 loop: str | None = None, params: Any = None,
+                 log: Callable[[dict], None] | None = None) -> None:
+        self.target = target
+        self.settings = settings
+        self.fs = float(target.fs)
+        band = settings.band_hz
+        desired = getattr(target, "desired", None)
+        if desired is not None:
+            desired = np.atleast_2d(desired)
+            scales = np.sqrt(np.mean(desired**2, axis=1))
+        else:
+            # a remote target: its reference is not here ahead of time
+            scales = np.asarray(target.reference_rms, dtype=float)
+            if band is None:
+                raise ParameterError("a remote target needs the band of its reference "
+                                     "(band_hz / --band)")
+        if band is None:
+            band = reference_band(desired[0], self.fs)
+            band = (max(band[0], 2.0 * self.fs / desired.shape[1]), band[1])
+        self.band_hz = (float(band[0]), float(band[1]))
+        self.adapters = [
+            ChannelAdapter(name, self.fs, self.band_hz, float(scales[k]) or 1.0, settings,
+                           loop=loop, params=params, preview=target.preview)
+            for k, name in enumerate(target.channels)]
+        self._log = log
+        self.events: list[dict] = []
+        self.loads: list[dict] = []
+        self._warm_up(loop, params)
+        self._last_reason = [""] * len(self.adapters)
+
+    def _warm_up(self, loop: str | None, params: Any) -> None:
+        """One judgement on a throwaway channel, so that the estimator's compiled
+        kernels are loaded before the first block: a target's stream does not wait."""
+        n = int(self.settings.h1_window_s * self.fs)
+        u = np.random.default_rng(0).standard_normal(n)
+        warm = ChannelAdapter("warm-up", self.fs, self.band_hz, 1.0, self.settings,
+                              loop=loop, params=params, preview=self.target.preview)
+        warm.feed(u, 0.5 * u, u)
+        warm.judge(0.0)
+
+    def _event(self, record: dict) -> None:
+        self.events.append(record)
+        if self._log is not None:
+            self._log(record)
+
+    def _update(self, t_s: float) -> None:
+        from ehss.target.filter import Compensator
+
+        s = self.settings
+        for k, ad in enumerate(self.adapters):
+            # one compensator at a time: the last one sent must be in before the next
+            if not ad.compensator.due(t_s) or self.target.index < ad.busy_until:
+                continue
+            d = ad.judge(t_s)
+            name = ad.name
+            if not d.accepted:
+                # the same refusal with other figures is logged once
+                key = re.sub(r"[-+0-9.]+", "#", d.reason)
+                if key != self._last_reason[k]:
+                    self._event({"kind": "compensator_refused", "channel": name,
+                                 "t_s": t_s, "reason": d.reason})
+                ad.refusals += 1
+                if ad.compensator.current is not None and not ad.alarm \
+                        and ad.refusals >= s.alarm_after:
+                    ad.alarm = True
+                    self._event({"kind": "alarm", "channel": name, "t_s": t_s,
+                                 "text": f"compensator kept: {d.reason}"})
+                self._last_reason[k] = key
+                continue
+            self._last_reason[k] = ""
+            ad.refusals = 0
+            if ad.alarm:
+                ad.alarm = False
+                self._event({"kind": "clear", "channel": name, "t_s": t_s})
+            design = d.design
+            try:
+                # the target's own checks (sizes, finite, every section stable)
+                comp = Compensator(sos=design.sos, taps=design.taps, preview=design.preview,
+                                   fs_hz=design.fs_hz)
+            except EhssError as exc:
+                self._event({"kind": "compensator_refused", "channel": name, "t_s": t_s,
+                             "reason": f"the target cannot run it: {exc}"})
+                continue
+            apply_index = self.target.index + design.settle_samples
+            crossfade = max(1, int(round(s.guard.crossfade_s * self.fs)))
+            ok = self.target.load(k, comp, apply_index, crossfade)
+            ad.busy_until = apply_index + crossfade
+            load = {"kind": "compensator", "channel": name, "t_s": t_s,
+                    "apply_index": int(apply_index), "crossfade": crossfade,
+                    "accepted": bool(ok), **d.figures, **design.errors()}
+            self.loads.append(load)
+            self._event(load)
+
+    def run(self, *, block_s: float = 0.05, duration_s: float | None = None,
+            speed: float = math.inf, stop: Any = None) -> CompensationRecord:
+        """Run until the target finishes, ``duration_s`` of stream time passes or
+        ``stop`` (a :class:`threading.Event`) is set; ``speed`` × real time (inf: as
+        fast as it computes)."""
+        s = self.settings
+        wall0 = time.monotonic()
+        n_block = max(1, int(round(block_s * self.fs)))
+        limit = math.inf if duration_s is None else int(round(duration_s * self.fs))
+        next_update = max(s.start_s, s.update_s)
+        parts: list[Any] = []
+        while not self.target.finished and self.target.index < limit:
+            if stop is not None and stop.is_set():
+                break
+            ahead = self.target.index / self.fs / speed - (time.monotonic() - wall0)
+            if ahead > 0:
+                time.sleep(ahead)
+            block = self.target.step(int(min(n_block, limit - self.target.index)))
+            if not block.drive.shape[1]:
+                continue
+            parts.append(block)
+            for k, ad in enumerate(self.adapters):
+                ad.feed(block.drive[k], block.feedback[k], block.desired[k])
+            t_s = self.target.index / self.fs
+            if t_s + 1e-12 >= next_update:
+                if t_s <= s.adapt_until_s:
+                    self._update(t_s)
+                next_update += s.update_s
+        cat = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
+               for name in ("desired", "drive", "feedback")}
+        return CompensationRecord(
+            fs=self.fs, channels=tuple(self.target.channels), **cat,
+            decisions={ad.name: [d.to_dict() for d in ad.compensator.log]
+                       for ad in self.adapters},
+            loads=list(self.loads), events=list(self.events),
+            settings={**s.to_dict(), "band_hz": list(self.band_hz)})
+
+
+# ----------------------------------------------------------------------------- over UDP
+class DatagramSender:
+    """Sends compensators to a remote target, one :mod:`ehss.target.datagram` each.
+
+    Parameters
+    ----------
+    address : (host, port)
+        The target's compensator port.
+    first_sequence : int, optional
+        Sequence number of the first datagram (default: the Unix time in ms, so that a
+        restarted host keeps numbering upwards).
+    """
+
+    def __init__(self, address: tuple[str, int], *, first_sequence: int | None = None) -> None:
+        import socket
+
+        self.address = (str(address[0]), int(address[1]))
+        self.sequence = int(time.time() * 1000) if first_sequence is None \
+            else int(first_sequence)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sent = 0
+
+    def send(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        """Encode and send one update; True once sent (the target may still refuse it)."""
+        from ehss.target.datagram import CompensatorUpdate, encode
+
+        update = CompensatorUpdate(channel=channel, sequence=self.sequence,
+                                   apply_index=int(apply_index), crossfade=int(crossfade),
+                                   compensator=compensator)
+        self._sock.sendto(encode(update), self.address)
+        self.sequence += 1
+        self.sent += 1
+        return True
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+@dataclass(frozen=True)
+class _UdpBlock:
+    first_index: int
+    desired: np.ndarray
+    drive: np.ndarray
+    feedback: np.ndarray
+
+
+class UdpTarget:
+    """A remote target as :class:`AdaptiveLoop` drives it.
+
+    The target streams, in the ``ehss live`` wire format, each channel's drive
+    (``ref<k>``, the model's input), feedback (``fb<k>``) and desired reference
+    (``des<k>``), and takes compensators back as :mod:`ehss.target.datagram` datagrams;
+    its filters read the reference ``preview`` samples ahead, and sample indices are the
+    stream's.
+
+    Parameters
+    ----------
+    source : UdpSource
+        Receives the stream (its layout must have ``des<k>`` for every channel).
+    sender : DatagramSender
+    fs : float
+    preview : int
+    reference_rms : sequence of float
+        RMS of each channel's desired reference (the estimators' scale).
+    idle_stop_s : float
+        The run ends when no data came for this long after the first.
+    """
+
+    def __init__(self, source: Any, sender: DatagramSender, *, fs: float, preview: int,
+                 reference_rms: Any, idle_stop_s: float = 1.0) -> None:
+        layout = source.layout
+        self.channels = tuple(layout.channels)
+        missing = [f"des{c}" for c in self.channels if f"des{c}" not in layout.fields]
+        if missing:
+            raise ParameterError(f"the stream has no field {missing[0]!r}: a target that "
+                                 "takes compensators sends each channel's desired reference")
+        self.source, self.sender = source, sender
+        self.fs, self.preview = float(fs), int(preview)
+        self.reference_rms = np.asarray(reference_rms, dtype=float)
+        self._ri, self._fi = layout.ref_index, layout.fb_index
+        self._di = [layout.fields.index(f"des{c}") for c in self.channels]
+        self._idle = float(idle_stop_s)
+        self._last = None
+        self._done = False
+        self.index = 0
+
+    @property
+    def finished(self) -> bool:
+        return self._done or self.source.finished
+
+    def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        return self.sender.send(channel, compensator, apply_index, crossfade)
+
+    def step(self, n: int) -> _UdpBlock:
+        """The samples that arrived (at least one unless the stream went idle)."""
+        got: list[np.ndarray] = []
+        have = 0
+        while have < n:
+            blocks = self.source.poll(0.05)
+            for b in blocks:
+                got.append(b.samples)
+                have += b.samples.shape[0]
+            now = time.monotonic()
+            if blocks:
+                self._last = now
+            elif self._last is not None and now - self._last >= self._idle:
+                self._done = True
+                break
+            elif have:
+                break
+        x = np.concatenate(got) if got else np.empty((0, len(self.source.layout.fields)))
+        first = self.index
+        self.index += x.shape[0]
+        return _UdpBlock(first, x[:, self._di].T.copy(), x[:, list(self._ri)].T.copy(),
+                         x[:, list(self._fi)].T.copy())

@@ -1,0 +1,151 @@
+"""Loops other than the simulated rig, as linear state-space models (scipy), for the
+change-detection tests: each returns a live record ``(layout, samples, fs)`` like
+:func:`ehss.live.rig_record`, with a parameter that may change at a given time.
+
+* :func:`servo_record`: a position loop whose closed-loop response is a second-order
+  mode (25 Hz, ζ = 0.4) behind a valve (80 Hz, ζ = 0.7), at 2 kHz;
+* :func:`specimen_record`: a servo-hydraulic actuator pushing a specimen spring, at
+  4 kHz: valve lag, piston and specimen mass on the oil column's stiffness and the
+  spring, proportional position control.
+
+Each channel's reference is band-pass filtered random noise and its feedback carries white
+sensor noise of 1 % of the feedback's RMS (seeds per channel). A change multiplies one
+physical parameter by ``factor`` from ``change_s`` on, the state carried over.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from scipy.signal import StateSpace, butter, cont2discrete, sosfilt
+
+from ehss.live.rig import rig_layout
+
+__all__ = ["servo_record", "specimen_record"]
+
+
+def _servo_ss(wn_scale: float) -> StateSpace:
+    """Closed-loop position response: valve (80 Hz, ζ 0.7) then a 25 Hz, ζ 0.4 mode
+    whose natural frequency is scaled by ``wn_scale`` (a mass × m scales it by 1/√m)."""
+    wv, zv = 2 * math.pi * 80.0, 0.7
+    wn, zn = 2 * math.pi * 25.0 * wn_scale, 0.4
+    # states: valve q, q', position x, x'
+    a = np.array([[0, 1, 0, 0],
+                  [-wv**2, -2 * zv * wv, 0, 0],
+                  [0, 0, 0, 1],
+                  [wn**2, 0, -wn**2, -2 * zn * wn]])
+    b = np.array([[0.0], [wv**2], [0.0], [0.0]])
+    c = np.array([[0.0, 0.0, 1.0, 0.0]])
+    return StateSpace(a, b, c, np.zeros((1, 1)))
+
+
+def _specimen_ss(stiffness_scale: float) -> StateSpace:
+    """An actuator (piston area A, moving mass m) on its oil column (bulk modulus β,
+    volume V, leakage C_l) pushing a specimen spring k_s·``stiffness_scale``; a valve
+    with a first-order lag (150 Hz) and flow gain K_q; a proportional position
+    controller K_p. Load flow Q = K_q x_v; (V / 4β) ṗ = Q − A ẋ − C_l p;
+    m ẍ = A p − c ẋ − k_s x."""
+    area, mass, damping = 2.0e-3, 200.0, 1.0e4
+    beta, volume, leak = 1.4e9, 1.0e-3, 5.0e-11
+    k_s = 1.0e7 * stiffness_scale
+    tau_v = 1 / (2 * math.pi * 150.0)
+    k_q = 0.5                      # m³/s per unit spool
+    k_p = 2 * math.pi * 20.0 * area / k_q   # crossover near 20 Hz without the spring
+    ch = volume / (4 * beta)
+    # states: spool x_v, load pressure p, position x, velocity v; input r
+    a = np.array([
+        [-1 / tau_v, 0, -k_p / tau_v, 0],
+        [k_q / ch, -leak / ch, 0, -area / ch],
+        [0, 0, 0, 1],
+        [0, area / mass, -k_s / mass, -damping / mass],
+    ])
+    b = np.array([[k_p / tau_v], [0.0], [0.0], [0.0]])
+    c = np.array([[0.0, 0.0, 1.0, 0.0]])
+    return StateSpace(a, b, c, np.zeros((1, 1)))
+
+
+def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
+            rms: float, band_hz: tuple[float, float], change_s: float | None,
+            factor: float, channel: int, noise: float = 0.01):
+    layout = rig_layout(n_channels)
+    n = int(round(duration_s * fs))
+    out = np.empty((n, layout.n_fields))
+    out[:, 0] = np.arange(n) / fs
+    cut = n if change_s is None else int(round(change_s * fs))
+    for k in range(1, n_channels + 1):
+        r = _reference(n, fs, band_hz, rms, seed + k)
+        y = np.empty(n)
+        state = None
+        for scale, (a, b) in ((1.0, (0, cut)),
+                              (factor if k == channel else 1.0, (cut, n))):
+            if b <= a:
+                continue
+            ad, bd, cd, _, _ = cont2discrete((*_ss_arrays(make(scale)),), 1 / fs,
+                                             method="zoh")
+            x0 = np.zeros(ad.shape[0]) if state is None else state
+            state = _simulate(np.ascontiguousarray(ad), bd[:, 0].copy(), cd[0].copy(),
+                              r[a:b], x0, y[a:b])
+        noise_rng = np.random.default_rng(seed + 1000 + k)
+        y_rms = float(np.sqrt(np.mean(y[:cut] ** 2)))
+        out[:, layout.ref_index[k - 1]] = r
+        out[:, layout.fb_index[k - 1]] = y + noise * y_rms * noise_rng.standard_normal(n)
+    return layout, out, fs
+
+
+@njit(cache=True)
+def _simulate(a, b, c, u, x0, y):
+    """x(k+1) = A x(k) + B u(k), y(k) = C x(k) from x(0) = x0 into ``y``; returns the
+    state after the last sample."""
+    n = x0.size
+    x = x0.copy()
+    nxt = np.empty(n)
+    for k in range(u.size):
+        acc = 0.0
+        for i in range(n):
+            acc += c[i] * x[i]
+        y[k] = acc
+        for i in range(n):
+            acc = b[i] * u[k]
+            for j in range(n):
+                acc += a[i, j] * x[j]
+            nxt[i] = acc
+        x[:] = nxt
+    return x
+
+
+def _reference(n: int, fs: float, band_hz: tuple[float, float], rms: float,
+               seed: int) -> np.ndarray:
+    """Gaussian noise through a 4th-order Butterworth band-pass, scaled to ``rms`` and
+    faded in over 0.2 s (O(n): a 10-minute record at 4 kHz in milliseconds)."""
+    sos = butter(4, band_hz, btype="bandpass", fs=fs, output="sos")
+    r = sosfilt(sos, np.random.default_rng(seed).standard_normal(n))
+    r *= rms / np.sqrt(np.mean(r**2))
+    m = min(n, int(0.2 * fs))
+    r[:m] *= 0.5 - 0.5 * np.cos(np.pi * np.arange(m) / m)
+    return r
+
+
+def _ss_arrays(ss: StateSpace):
+    return ss.A, ss.B, ss.C, ss.D
+
+
+def servo_record(*, n_channels: int = 2, duration_s: float, seed: int,
+                 change_s: float | None = None, mass_factor: float = 1.0,
+                 channel: int = 1):
+    """The 25 Hz servo at 2 kHz; from ``change_s`` the moving mass of ``channel`` is
+    ``mass_factor`` times larger (its natural frequency 1/√ that)."""
+    return _record(lambda m: _servo_ss(1 / math.sqrt(m)), 2000.0, n_channels=n_channels,
+                   duration_s=duration_s, seed=seed, rms=1e-3, band_hz=(1.0, 60.0),
+                   change_s=change_s, factor=mass_factor, channel=channel)
+
+
+def specimen_record(*, n_channels: int = 2, duration_s: float, seed: int,
+                    change_s: float | None = None, stiffness_factor: float = 1.0,
+                    channel: int = 1):
+    """The actuator on its specimen at 4 kHz; from ``change_s`` the specimen of
+    ``channel`` is ``stiffness_factor`` times stiffer."""
+    return _record(_specimen_ss, 4000.0, n_channels=n_channels, duration_s=duration_s,
+                   seed=seed, rms=1e-3, band_hz=(1.0, 100.0), change_s=change_s,
+                   factor=stiffness_factor, channel=channel)
