@@ -60,8 +60,8 @@ ALLOWED_UPWARD: frozenset[tuple[str, str]] = frozenset()
 CHECKS_MODULE = "_checks.py"
 
 # Modules (paths under src/ehss) that still test types inline instead of calling
-# ehss._checks; each entry leaves the list when its module is converted. Only modules
-# whose packages were being changed elsewhere when the checks were gathered are here.
+# ehss._checks, named by file; each entry leaves the list when its module is converted
+# (test_inline_check_allow_list_holds_only_modules_that_still_need_it holds it to that).
 ALLOWED_INLINE_CHECKS: frozenset[str] = frozenset({
     "identification/model.py",  # ArmaxModel fields, predict horizon, rounding digits
     "identification/order.py",  # order grids and the fit tolerance
