@@ -113,7 +113,7 @@ def test_band_and_columns(rng):
     assert list(cols) == ["freq_hz", "magnitude_db", "phase_deg", "coherence"]
     assert_allclose(cols["magnitude_db"], 20 * np.log10(2.0), atol=1e-9)  # exact ratio
     assert frf.resolution_hz == pytest.approx(FS / frf.nperseg)
-    with pytest.raises(ParameterError, match="lo <= hi"):
+    with pytest.raises(ParameterError, match="lo < hi"):
         frf.band(20, 10)
 
 

@@ -1,4 +1,5 @@
-"""The package's floors: no module imports a higher floor or another package's private names.
+"""The package's floors: no module imports a higher floor or another package's private names;
+and arguments are checked in one place.
 
 Every module under ``src/ehss`` is parsed (no import is executed) and each of its
 ``import`` / ``from ... import`` statements, wherever it stands (module level or inside
@@ -7,6 +8,10 @@ a function), is resolved to the ehss module and name it reaches.
 Floors, lowest first; a module may import its own floor and any floor below. The
 shared helpers (``errors`` and the private ``_checks``, ``_files``, ``_provenance`` of
 the ``ehss`` package itself) are the ground floor.
+
+Argument checks go through ``ehss._checks``, so that one mistake is reported with one
+error type and one message wherever it is made: no other module may test a type inline
+as ``isinstance(x, bool) or not isinstance(x, ...)``.
 """
 
 from __future__ import annotations
@@ -50,6 +55,19 @@ FLOORS: tuple[tuple[str, ...], ...] = (
 # (importing module, imported module or name).
 ALLOWED_PRIVATE: frozenset[tuple[str, str]] = frozenset()
 ALLOWED_UPWARD: frozenset[tuple[str, str]] = frozenset()
+
+#: The one module that may test types inline: the checks everything else calls.
+CHECKS_MODULE = "_checks.py"
+
+# Modules (paths under src/ehss) that still test types inline instead of calling
+# ehss._checks, named by file; each entry leaves the list when its module is converted
+# (test_inline_check_allow_list_holds_only_modules_that_still_need_it holds it to that).
+ALLOWED_INLINE_CHECKS: frozenset[str] = frozenset({
+    "identification/model.py",  # ArmaxModel and JSON fields, predict horizon, digits
+    "identification/order.py",  # order grids and the fit tolerance
+    "identification/rels.py",  # orders and forgetting settings
+    "simulation/core.py",  # seed and simulation settings
+})
 
 
 @dataclass(frozen=True)
@@ -197,6 +215,76 @@ def test_allow_lists_hold_only_imports_that_exist(imports, allow):
         if not any(w == who and (t == what or t.startswith(what + ".")) for w, t in found)
     ]
     assert not stale, f"allow-list entries with no such import: {stale}"
+
+
+# --------------------------------------------------------------------- inline type checks
+def _is_isinstance(node: ast.AST, *, of_bool: bool = False) -> bool:
+    """``node`` is ``isinstance(x, kinds)`` (with ``bool`` or ``np.bool_`` among the
+    kinds when ``of_bool``)."""
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+            and node.func.id == "isinstance" and len(node.args) == 2):
+        return False
+    if not of_bool:
+        return True
+    kinds = node.args[1].elts if isinstance(node.args[1], ast.Tuple) else [node.args[1]]
+    return any((isinstance(k, ast.Name) and k.id == "bool")
+               or (isinstance(k, ast.Attribute) and k.attr == "bool_") for k in kinds)
+
+
+def inline_type_checks(source: str) -> list[int]:
+    """Lines of ``source`` holding ``isinstance(x, bool) or not isinstance(x, ...)``."""
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.BoolOp) and isinstance(node.op, ast.Or):
+            pairs = zip(node.values[:-1], node.values[1:], strict=True)
+            if any(_is_isinstance(a, of_bool=True) and isinstance(b, ast.UnaryOp)
+                   and isinstance(b.op, ast.Not) and _is_isinstance(b.operand)
+                   for a, b in pairs):
+                lines.append(node.lineno)
+    return lines
+
+
+def modules_with_inline_checks(package: Path = PACKAGE) -> dict[str, list[int]]:
+    """Each module under ``package`` (path relative to it) with its inline type checks."""
+    found = {}
+    for path in sorted(package.rglob("*.py")):
+        lines = inline_type_checks(path.read_text(encoding="utf-8"))
+        if lines:
+            found[path.relative_to(package).as_posix()] = lines
+    return found
+
+
+def test_types_are_checked_only_in_the_checks_module():
+    found = modules_with_inline_checks()
+    bad = {f: lines for f, lines in found.items()
+           if f != CHECKS_MODULE and f not in ALLOWED_INLINE_CHECKS}
+    assert not bad, ("inline type checks; call ehss._checks (check_int, check_real, "
+                     f"check_fs, check_band...) instead: {bad}")
+    assert CHECKS_MODULE in found  # the walk does see the pattern where it belongs
+
+
+def test_inline_check_allow_list_holds_only_modules_that_still_need_it():
+    # A module converted to ehss._checks must leave the list, so that the list cannot
+    # quietly cover a new inline check.
+    found = modules_with_inline_checks()
+    stale = sorted(f for f in ALLOWED_INLINE_CHECKS if f not in found)
+    assert not stale, f"allow-list entries with no inline type check: {stale}"
+
+
+def test_inline_check_finder():
+    source = (
+        "import numpy as np\n"
+        "def f(n, x, k):\n"
+        "    if isinstance(n, bool) or not isinstance(n, int):\n"
+        "        raise TypeError(n)\n"
+        "    if (k < 0 or isinstance(x, (bool, np.bool_))\n"
+        "            or not isinstance(x, (int, float))):\n"
+        "        raise TypeError(x)\n"
+        "    if isinstance(k, bool) and not isinstance(k, int):\n"  # not the pattern
+        "        pass\n"
+        "    return isinstance(n, str) or not isinstance(x, int)\n"  # no bool: not it
+    )
+    assert inline_type_checks(source) == [3, 5]
 
 
 # --------------------------------------------------------------------------- the checker

@@ -87,7 +87,7 @@ def test_partial_toml_and_unknown_key(tmp_path):
 
 
 def test_rig_params_type_checked():
-    with pytest.raises(ParameterError, match="LoadParams"):
+    with pytest.raises(TypeError, match="LoadParams"):
         RigParams(load=ActuatorParams())
 
 

@@ -78,7 +78,7 @@ def test_decimate_checks():
     u = np.ones(1000)
     with pytest.raises(ParameterError, match="must be >= 1"):
         decimate(u, u, 0)
-    with pytest.raises(ParameterError, match="integer"):
+    with pytest.raises(TypeError, match="factor=2.5 must be an integer"):  # a wrong type
         decimate(u, u, 2.5)
     with pytest.raises(DataError, match="fewer than 256"):
         decimate(u, u, 5)

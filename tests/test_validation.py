@@ -123,7 +123,7 @@ def test_frf_error_no_points(true_model):
     assert all(math.isnan(x) for x in err.compared_hz)
     with pytest.raises(ParameterError, match="min_coherence"):
         frf_error(true_model, frf, band_hz=(0, 10), min_coherence=2)
-    with pytest.raises(ParameterError, match="lo <= hi"):
+    with pytest.raises(ParameterError, match="lo < hi"):
         frf_error(true_model, frf, band_hz=(10, 0))
 
 

@@ -1,13 +1,27 @@
 """Checks of user-supplied values, shared by every public entry point.
 
-Two families:
+One error type per kind of mistake, everywhere in ehss:
+
+- a value of the wrong Python type (a string where a number is expected, a bool where
+  a count is, a float where an integer is) raises :class:`TypeError`;
+- a value of the right type that is out of range, not finite, not among the choices or
+  inconsistent (a band whose lower edge is not below its upper edge) raises
+  :class:`~ehss.errors.ParameterError`, a :class:`ValueError`;
+- bad samples (a signal that is not a finite 1-D array) raise
+  :class:`~ehss.errors.DataError`, also a :class:`ValueError`.
+
+Every message names the value and what is accepted, e.g.
+``damping=-1.0 must be in (0, 100]``. Public functions check their arguments with these
+functions rather than with their own ``isinstance`` tests, so that the same mistake is
+reported the same way wherever it is made (``tests/test_layering.py`` keeps it so).
 
 Scalars — :func:`check_real`, :func:`check_int`, :func:`check_bool`, :func:`check_choice`.
     Each takes the value and the name to show (``"valve.damping"``, ``"--fs"``) and
-    returns the value converted to a plain Python type. A value of the wrong Python type
-    raises :class:`TypeError`; a value of the right type that is out of range, not finite
-    or not among the choices raises :class:`~ehss.errors.ParameterError`. The message names
-    the value and what is accepted, e.g. ``damping=-1.0 must be in (0, 100]``.
+    returns the value converted to a plain Python type.
+
+Rates and bands — :func:`check_fs`, :func:`check_band`.
+    A sample rate in ``SAMPLE_RATE_RANGE_HZ``; a frequency band ``(lo, hi)`` in Hz with
+    ``0 <= lo < hi``, and ``hi <= fs/2`` when the sample rate is known.
 
 Sample arrays — :func:`as_signal`, :func:`as_record`.
     A signal must be a 1-D array of finite real numbers; the error names the argument,
@@ -31,7 +45,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Collection
+from collections.abc import Collection, Iterable
 from typing import Any
 
 import numpy as np
@@ -41,8 +55,11 @@ from ehss.errors import DataError, ParameterError
 __all__ = [
     "check_real",
     "check_int",
+    "check_int_list",
     "check_bool",
     "check_choice",
+    "check_fs",
+    "check_band",
     "format_range",
     "SAMPLE_RATE_RANGE_HZ",
     "SCALE_RANGE",
@@ -162,18 +179,23 @@ def check_real(
     ParameterError
         If it is NaN, infinite, too large for a float or outside the range.
     """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name}={show(value)} must be a real number, not {type(value).__name__}")
-    try:
-        x = float(value)
-    except OverflowError:
-        raise ParameterError(f"{name}={show(value)} is too large for a float") from None
+    x = _real(value, name)
     accepted = format_range(lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
     if not math.isfinite(x):
         raise ParameterError(f"{name}={show(value)} must be finite, in {accepted}")
     if not _in_range(x, lo, hi, lo_open, hi_open):
         raise ParameterError(f"{name}={show(value)} must be in {accepted}")
     return x
+
+
+def _real(value: Any, name: str) -> float:
+    """``value`` as a float (maybe NaN or infinite); TypeError if it is not a real number."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name}={show(value)} must be a real number, not {type(value).__name__}")
+    try:
+        return float(value)
+    except OverflowError:
+        raise ParameterError(f"{name}={show(value)} is too large for a float") from None
 
 
 def check_int(value: Any, name: str, *, lo: int | None = None, hi: int | None = None) -> int:
@@ -193,6 +215,31 @@ def check_int(value: Any, name: str, *, lo: int | None = None, hi: int | None = 
         raise ParameterError(f"{name}={show(value)} must be an integer in "
                              f"{format_range(lo, hi)}")
     return k
+
+
+def check_int_list(value: Any, name: str, *, lo: int) -> list[int]:
+    """``value`` (one integer or a collection of them) as a non-empty list of ints >= ``lo``.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` or one of its items is not an integer (a float, a string, a bool).
+    ParameterError
+        If it is empty or an item is below ``lo``.
+    """
+    if isinstance(value, (str, bytes)) or not isinstance(value, (numbers.Integral, Iterable)):
+        raise TypeError(f"{name}={show(value)} must hold integers >= {lo}, "
+                        f"not {type(value).__name__}")
+    values = [value] if isinstance(value, numbers.Integral) else list(value)
+    for v in values:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral):
+            raise TypeError(f"{name}={show(value)} must hold integers >= {lo}, "
+                            f"not {type(v).__name__}")
+        if v < lo:
+            raise ParameterError(f"{name}={show(value)} must hold integers >= {lo}")
+    if not values:
+        raise ParameterError(f"{name}={show(value)} must list at least one {name}")
+    return [int(v) for v in values]
 
 
 def check_bool(value: Any, name: str) -> bool:
@@ -226,6 +273,86 @@ def check_choice(value: Any, name: str, choices: Collection[Any]) -> Any:
     if value not in choices:
         raise ParameterError(f"{name}={show(value)} must be one of {_listing(choices)}")
     return value
+
+
+def check_fs(fs: Any, name: str = "fs") -> float:
+    """``fs`` as a sample rate in Hz, inside ``SAMPLE_RATE_RANGE_HZ``.
+
+    Raises
+    ------
+    TypeError
+        If ``fs`` is not a real number (the string ``"100"``, None, a bool...).
+    ParameterError
+        If it is not finite or outside ``SAMPLE_RATE_RANGE_HZ`` (zero or negative included).
+    """
+    lo, hi = SAMPLE_RATE_RANGE_HZ
+    return check_real(fs, name, lo=lo, hi=hi, unit="Hz")
+
+
+def check_band(
+    band: Any, name: str = "band_hz", *, fs: float | None = None, below_nyquist: bool = False,
+) -> tuple[float, float]:
+    """``band`` as ``(lo, hi)`` in Hz with ``0 <= lo < hi`` (and ``hi <= fs/2``).
+
+    Parameters
+    ----------
+    band : pair of real numbers
+        The band's edges in Hz.
+    name : str, default "band_hz"
+        How the band is named in messages. A command-line option (a name starting with
+        ``-``, such as ``"--band"``) is shown as it was typed: ``--band 5 1``.
+    fs : float, optional
+        Sample rate in Hz; when given, ``hi`` must not exceed the Nyquist frequency ``fs/2``.
+    below_nyquist : bool, default False
+        Require ``hi < fs/2`` strictly (e.g. when a taper must fit between ``hi`` and fs/2).
+
+    Returns
+    -------
+    (float, float)
+
+    Raises
+    ------
+    TypeError
+        If ``band`` is not a pair, or an edge is not a real number.
+    ParameterError
+        If it does not have two edges, an edge is NaN or infinite, ``lo < 0``, ``lo >= hi``,
+        or ``hi`` is above fs/2 (at fs/2 too with ``below_nyquist``).
+
+    Examples
+    --------
+    >>> check_band((1, 20.5), fs=100.0)
+    (1.0, 20.5)
+    >>> check_band((5.0, 1.0), "--band")
+    Traceback (most recent call last):
+    ...
+    ehss.errors.ParameterError: --band 5 1 must satisfy 0 <= LO < HI
+    """
+    try:
+        if isinstance(band, (str, bytes)):
+            raise TypeError
+        edges = list(band)  # a 0-d array is Iterable yet cannot be iterated
+    except TypeError:
+        raise TypeError(f"{name}={show(band)} must be a pair (lo, hi) of numbers in Hz, "
+                        f"not {type(band).__name__}") from None
+    if len(edges) != 2:
+        raise ParameterError(f"{name}={show(band)} must be a pair (lo, hi) in Hz, "
+                             f"not {len(edges)} values")
+    lo, hi = (_real(v, f"{name}[{i}]") for i, v in enumerate(edges))
+    option = name.startswith("-")
+    shown = f"{name} {lo:g} {hi:g}" if option else f"{name}=({lo:g}, {hi:g})"
+    lo_name, hi_name = ("LO", "HI") if option else ("lo", "hi")
+    if not (0.0 <= lo < hi and math.isfinite(hi)):
+        finite = "" if math.isfinite(lo) and math.isfinite(hi) else ", both finite"
+        raise ParameterError(f"{shown} must satisfy 0 <= {lo_name} < {hi_name}{finite}")
+    if fs is not None:
+        nyquist = 0.5 * check_fs(fs)
+        if hi > nyquist or (below_nyquist and hi == nyquist):
+            where = "above" if hi > nyquist else "at"
+            below = "<" if below_nyquist else "<="
+            raise ParameterError(
+                f"{name} upper edge {hi:g} Hz is {where} fs/2 = {nyquist:g} Hz; {shown} "
+                f"must satisfy 0 <= {lo_name} < {hi_name} {below} fs/2")
+    return lo, hi
 
 
 def _listing(choices: Collection[Any]) -> str:

@@ -17,14 +17,13 @@ coherence says at which frequencies the output is linearly explained by the inpu
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import scipy.signal
 
-from ehss._checks import as_record
+from ehss._checks import as_record, check_band, check_fs, check_int, check_real
 from ehss.errors import DataError, ParameterError
 
 __all__ = [
@@ -36,8 +35,6 @@ __all__ = [
     "frf_estimate",
     "default_nperseg",
     "n_segments",
-    "check_fs",
-    "check_band",
 ]
 
 #: Accepted ``method`` of :func:`frf_estimate`.
@@ -129,10 +126,12 @@ class FrequencyResponse:
 
         Raises
         ------
+        TypeError
+            If an edge is not a real number.
         ParameterError
-            If ``lo_hz > hi_hz`` or either is negative/non-finite.
+            If ``lo_hz >= hi_hz`` or either is negative/non-finite.
         """
-        lo_hz, hi_hz = check_band((lo_hz, hi_hz))
+        lo_hz, hi_hz = check_band((lo_hz, hi_hz), "band")
         mask = (self.freq_hz >= lo_hz) & (self.freq_hz <= hi_hz)
         return FrequencyResponse(
             freq_hz=self.freq_hz[mask],
@@ -226,11 +225,9 @@ def default_nperseg(
     >>> default_nperseg(30_000, 1000.0, min_nperseg=6000)  # 6 averages, not 8
     8192
     """
-    n = operator.index(n_samples)
+    n = check_int(n_samples, "n_samples")
     fs = check_fs(fs)
-    min_averages = operator.index(min_averages)
-    if min_averages < 1:
-        raise ParameterError(f"{min_averages=} must be >= 1")
+    min_averages = check_int(min_averages, "min_averages", lo=1)
     floor = 16 if n >= 16 * (min_averages + 1) // 2 else 8
     nperseg = _longest_segment(n, min_averages, floor)
     if band_hz is not None:
@@ -336,7 +333,7 @@ def h1_estimate(
     if nperseg is None:
         nperseg = default_nperseg(n, fs, band_hz=band_hz, min_nperseg=min_nperseg)
     else:
-        nperseg = _as_int(nperseg, "nperseg")
+        nperseg = check_int(nperseg, "nperseg")
         if nperseg < 4:
             raise ParameterError(f"{nperseg=} must be >= 4")
         if nperseg > n:
@@ -344,7 +341,7 @@ def h1_estimate(
     if noverlap is None:
         noverlap = nperseg // 2
     else:
-        noverlap = _as_int(noverlap, "noverlap")
+        noverlap = check_int(noverlap, "noverlap")
         if not 0 <= noverlap < nperseg:
             raise ParameterError(f"{noverlap=} must satisfy 0 <= noverlap < nperseg={nperseg}")
     if detrend not in ("constant", "linear", False):
@@ -442,7 +439,7 @@ def dft_estimate(
     if n_average is None:
         n_average = max(MIN_AVERAGES, n // default_nperseg(n, fs, band_hz=band_hz))
     else:
-        n_average = _as_int(n_average, "n_average")
+        n_average = check_int(n_average, "n_average")
         if n_average < 2:
             raise ParameterError(f"{n_average=} must be >= 2")
     n_average = min(n_average, n_bins)
@@ -520,8 +517,7 @@ def frf_estimate(
     """
     if method not in FRF_METHODS:
         raise ParameterError(f"method={method!r} must be one of {', '.join(FRF_METHODS)}")
-    if not 0.0 <= float(min_coherence) <= 1.0:
-        raise ParameterError(f"{min_coherence=} must be in [0, 1]")
+    min_coherence = check_real(min_coherence, "min_coherence", lo=0.0, hi=1.0)
     welch = dft = None
     if method in ("auto", "welch"):
         welch = h1_estimate(u, y, fs, nperseg=nperseg, band_hz=band_hz,
@@ -531,7 +527,7 @@ def frf_estimate(
     n_average = None
     if nperseg is not None:
         n_u = np.shape(u)[0] if np.ndim(u) == 1 else 0
-        n_average = max(2, n_u // _as_int(nperseg, "nperseg")) if n_u else None
+        n_average = max(2, n_u // check_int(nperseg, "nperseg")) if n_u else None
     dft = dft_estimate(u, y, fs, n_average=n_average, band_hz=band_hz)
     if method == "dft":
         return dft
@@ -547,13 +543,6 @@ def frf_estimate(
 # ------------------------------------------------------------------------------- checks
 
 
-def _as_int(x, name: str) -> int:
-    try:
-        return operator.index(x)
-    except TypeError:
-        raise ParameterError(f"{name}={x!r} must be an integer") from None
-
-
 def _check_window(window: Any, nperseg: int) -> np.ndarray:
     """The window's nperseg samples: a name or (name, parameter) tuple that
     :func:`scipy.signal.get_window` knows; anything else is a ParameterError."""
@@ -567,25 +556,3 @@ def _check_window(window: Any, nperseg: int) -> np.ndarray:
     if not np.all(np.isfinite(w)) or not np.any(w > 0):
         raise ParameterError(f"window={window!r} gives no positive finite weights")
     return w
-
-
-def check_fs(fs) -> float:
-    """``fs`` as a positive finite sample rate in Hz, or a ParameterError."""
-    try:
-        fs = float(fs)
-    except (TypeError, ValueError):
-        raise ParameterError(f"fs={fs!r} must be a number (Hz)") from None
-    if not math.isfinite(fs) or fs <= 0:
-        raise ParameterError(f"{fs=} must be a positive finite sample rate in Hz")
-    return fs
-
-
-def check_band(band) -> tuple[float, float]:
-    """``band`` as ``(lo, hi)`` in Hz with 0 <= lo <= hi, or a ParameterError."""
-    try:
-        lo, hi = (float(v) for v in band)
-    except (TypeError, ValueError):
-        raise ParameterError(f"band={band!r} must be two numbers (lo_hz, hi_hz)") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0 or lo > hi:
-        raise ParameterError(f"band ({lo}, {hi}) Hz must satisfy 0 <= lo <= hi")
-    return lo, hi

@@ -30,6 +30,7 @@ import control as ct
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ehss._checks import check_band
 from ehss.errors import ParameterError
 from ehss.params import RigParams
 
@@ -559,8 +560,7 @@ def closed_loop_radius(params: RigParams, loop: str) -> float:
 
 def band_deviation_db(sys, f_lo_hz: float, f_hi_hz: float, *, n: int = 2000) -> tuple[float, float]:
     """(min, max) of 20 log10 |G| over [f_lo_hz, f_hi_hz] (a 0 Hz lower end uses 1 mHz)."""
-    if not 0 <= f_lo_hz < f_hi_hz:
-        raise ParameterError(f"band=({f_lo_hz!r}, {f_hi_hz!r}) must satisfy 0 <= f_lo < f_hi")
+    f_lo_hz, f_hi_hz = check_band((f_lo_hz, f_hi_hz), "band")
     f = np.linspace(max(f_lo_hz, 1e-3), f_hi_hz, n)
     db = 20.0 * np.log10(np.abs(response_at(sys, f)))
     return float(db.min()), float(db.max())

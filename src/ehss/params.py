@@ -595,12 +595,12 @@ class RigParams:
         for f in fields(self):
             if f.name == "name":
                 if not isinstance(self.name, str):
-                    raise ParameterError(f"RigParams.name={self.name!r} must be a string")
+                    raise TypeError(f"RigParams.name={self.name!r} must be a string")
                 continue
             expected = f.default_factory  # type: ignore[misc]
             value = getattr(self, f.name)
             if not isinstance(value, expected):  # type: ignore[arg-type]
-                raise ParameterError(
+                raise TypeError(
                     f"RigParams.{f.name} must be a {expected.__name__}, "  # type: ignore[union-attr]
                     f"got {type(value).__name__}"
                 )

@@ -17,13 +17,12 @@ estimator expects:
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
 
-from ehss._checks import as_record, as_signal
+from ehss._checks import as_record, as_signal, check_fs, check_int
 from ehss.errors import DataError, ParameterError
 
 __all__ = [
@@ -142,7 +141,9 @@ def decimate(u, y, factor: int) -> tuple[np.ndarray, np.ndarray]:
     free of filter transients for a record that is not at rest there.
     """
     u, y = as_record(u, y)
-    factor = _factor(factor)
+    factor = check_int(factor, "factor")
+    if factor < 1:
+        raise ParameterError(f"decimation factor {factor} must be >= 1")
     if factor == 1:
         return u.copy(), y.copy()
     if -(-u.size // factor) < _MIN_DECIMATED:
@@ -159,7 +160,7 @@ def content_edge_hz(x, fs: float, *, fraction: float = 0.99) -> float:
     (Hann, half overlap), so the edge is resolved to about 8 fs / n.
     """
     x = as_signal(x, "x")
-    fs = _fs(fs)
+    fs = check_fs(fs)
     if not 0.0 < fraction < 1.0:
         raise ParameterError(f"{fraction=} must be in (0, 1)")
     nperseg = max(8, min(x.size, 2 ** int(math.log2(max(8, x.size // 8)))))
@@ -221,7 +222,7 @@ def excitation_band(u, fs: float, *, level_db: float = EXCITATION_LEVEL_DB
     (1.7, 111.8)
     """
     x = as_signal(u, "u")
-    fs = _fs(fs)
+    fs = check_fs(fs)
     if not (math.isfinite(level_db) and level_db > 0):
         raise ParameterError(f"{level_db=} must be a positive number of dB")
     nperseg = max(8, min(x.size, 2 ** int(math.log2(max(8, x.size // 8)))))
@@ -277,7 +278,7 @@ def auto_decimation(
     50
     """
     u, y = as_record(u, y)
-    fs = _fs(fs)
+    fs = check_fs(fs)
     # where the record carries the loop's response: below the input's content edge (the
     # record says nothing above it) and the output's (the loop hardly moves above it)
     f_hi = min(content_edge_hz(u, fs), content_edge_hz(y, fs))
@@ -290,29 +291,6 @@ def auto_decimation(
     q = int(fs // (float(target) * f_hi))
     q = min(q, u.size // _MIN_DECIMATED)
     return max(1, q)
-
-
-# ------------------------------------------------------------------------------- checks
-
-
-def _factor(factor) -> int:
-    try:
-        q = operator.index(factor)
-    except TypeError:
-        raise ParameterError(f"decimation factor {factor!r} must be an integer") from None
-    if q < 1:
-        raise ParameterError(f"decimation factor {q} must be >= 1")
-    return q
-
-
-def _fs(fs) -> float:
-    try:
-        fs = float(fs)
-    except (TypeError, ValueError):
-        raise ParameterError(f"fs={fs!r} must be a number (Hz)") from None
-    if not (math.isfinite(fs) and fs > 0):
-        raise ParameterError(f"{fs=} must be a positive finite sample rate in Hz")
-    return fs
 
 
 #: Share of a measured output at one of its extreme values above which

@@ -14,7 +14,6 @@ The paper's tests (PAPER.md §6): band-limited random displacement 2–100 Hz
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,7 +21,7 @@ import numpy as np
 import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
-from ehss._checks import check_real
+from ehss._checks import check_band, check_fs, check_int, check_real
 from ehss.errors import ParameterError
 from ehss.params import GRAVITY_M_S2, RigParams
 
@@ -72,7 +71,7 @@ class Signal:
             raise ParameterError(f"values with shape {v.shape} must be a non-empty 1-D array")
         if not np.all(np.isfinite(v)):
             raise ParameterError("values must be finite")
-        _positive("fs", self.fs)
+        check_fs(self.fs)
         v.setflags(write=False)
         object.__setattr__(self, "values", v)
         object.__setattr__(self, "fs", float(self.fs))
@@ -112,7 +111,7 @@ MAX_SAMPLES = 20_000_000
 
 def _n_samples(duration_s: float, fs: float) -> int:
     _positive("duration_s", duration_s)
-    _positive("fs", fs)
+    check_fs(fs)
     n = int(round(duration_s * fs))
     if n < 2:
         raise ParameterError(f"duration_s={duration_s!r} must give at least 2 samples at fs={fs!r}")
@@ -122,18 +121,6 @@ def _n_samples(duration_s: float, fs: float) -> int:
             f"{MAX_SAMPLES} are allowed (split the test into shorter records)"
         )
     return n
-
-
-def _band(band_hz: Any, fs: float) -> tuple[float, float]:
-    try:
-        lo, hi = (float(b) for b in band_hz)
-    except (TypeError, ValueError):
-        raise ParameterError(f"band_hz={band_hz!r} must be a pair (f_lo, f_hi) in Hz") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi < fs / 2):
-        raise ParameterError(
-            f"band_hz={band_hz!r} must satisfy 0 <= f_lo < f_hi < fs/2 = {fs / 2!r}"
-        )
-    return lo, hi
 
 
 def _scale(x: NDArray[np.float64], rms: float | None, peak: float | None):
@@ -190,7 +177,7 @@ def with_fade(
         if fs is None:
             raise ParameterError("fs=None must be given for an array input")
         x = np.asarray(signal, dtype=np.float64)
-    _positive("fs", fs)
+    check_fs(fs)
     _finite("fade_in_s", fade_in_s)
     _finite("fade_out_s", fade_out_s)
     _finite("offset", offset)
@@ -278,7 +265,7 @@ def band_limited_random(
     signal over the record) and starts and ends at rest.
     """
     n = _n_samples(duration_s, fs)
-    lo, hi = _band(band_hz, fs)
+    lo, hi = check_band(band_hz, fs=fs, below_nyquist=True)
     fade = _finite("fade_s", fade_s)
     if not 0 <= 2 * fade <= duration_s:
         raise ParameterError(f"fade_s={fade_s!r} must be in [0, duration_s/2]")
@@ -342,7 +329,7 @@ def multisine(
     The tone frequencies are in ``settings["freq_hz"]``.
     """
     n = _n_samples(duration_s, fs)
-    lo, hi = _band(band_hz, fs)
+    lo, hi = check_band(band_hz, fs=fs, below_nyquist=True)
     f = np.fft.rfftfreq(n, 1.0 / fs)
     bins = np.nonzero((f >= lo) & (f <= hi) & (f > 0))[0]
     if bins.size == 0:
@@ -350,10 +337,7 @@ def multisine(
             f"band_hz={band_hz!r} holds no frequency of the grid fs/n = {fs / n!r} Hz"
         )
     if n_tones is not None:
-        if isinstance(n_tones, bool) or not isinstance(n_tones, (int, np.integer)) or not (
-            1 <= n_tones <= bins.size
-        ):
-            raise ParameterError(f"n_tones={n_tones!r} must be an integer in [1, {bins.size}]")
+        n_tones = check_int(n_tones, "n_tones", lo=1, hi=int(bins.size))
         bins = bins[np.unique(np.round(np.linspace(0, bins.size - 1, n_tones)).astype(int))]
     k_tones = bins.size
     idx = np.arange(1, k_tones + 1)
@@ -507,7 +491,7 @@ def check_feasible(
         x = np.asarray(values, dtype=np.float64)
     if fs is None:
         raise ParameterError("fs=None must be given for an array input")
-    _positive("fs", fs)
+    check_fs(fs)
     if x.ndim != 1 or x.size < 2 or not np.all(np.isfinite(x)):
         raise ParameterError("values must be a finite 1-D array of at least 2 samples")
     if not 0 < stroke_margin <= 1:

@@ -26,7 +26,6 @@ The model is any object with the :class:`~ehss.identification.model.ArmaxModel` 
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -34,9 +33,9 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from ehss._checks import as_record, as_signal
+from ehss._checks import as_record, as_signal, check_band, check_int, check_real
 from ehss.errors import DataError, ParameterError
-from ehss.frequency import FrequencyResponse, check_band, frf_estimate
+from ehss.frequency import FrequencyResponse, frf_estimate
 
 __all__ = [
     "FrfError",
@@ -190,8 +189,7 @@ def frf_error(
     averages it is already 0.7 dB and 4.8°.
     """
     lo, hi = check_band(band_hz)
-    if not 0.0 <= float(min_coherence) <= 1.0:
-        raise ParameterError(f"{min_coherence=} must be in [0, 1]")
+    min_coherence = check_real(min_coherence, "min_coherence", lo=0.0, hi=1.0)
     # in the band, excited by the input and coherent (FrequencyResponse.valid)
     mask = frf.valid((lo, hi), float(min_coherence))
     mask &= np.abs(frf.response) > 0
@@ -332,7 +330,7 @@ def simulation_fit(model: _Model, u, y, *, start: int = 0, initial: str = "zero"
     and scores ``-inf`` or far below :data:`DIVERGED_FIT_PCT`.
     """
     u, y = as_record(u, y)
-    start = _check_start(start, y.size)
+    start = check_int(start, "start", lo=0, hi=y.size - 1)
     yhat = free_run(model, u, y, initial=initial)
     return nrmse_fit(y[start:], yhat[start:])
 
@@ -369,8 +367,8 @@ def fit_text(v: float | None) -> str:
 def prediction_fit(model: _Model, u, y, horizon: int = 1, *, start: int = 0) -> float:
     """Fit (percent) of the ``horizon``-step-ahead ARMAX prediction of ``y``."""
     u, y = as_record(u, y)
-    start = _check_start(start, y.size)
-    horizon = _pos_int(horizon, "horizon")
+    start = check_int(start, "start", lo=0, hi=y.size - 1)
+    horizon = check_int(horizon, "horizon", lo=1)
     with np.errstate(over="ignore", invalid="ignore"):
         yhat = np.asarray(model.predict(u, y, horizon=horizon), dtype=np.float64)
     return nrmse_fit(y[start:], yhat[start:])
@@ -463,7 +461,7 @@ def ljung_box(x, max_lag: int) -> tuple[float, float]:
     :math:`x' = x - \\bar x`.
     """
     x = np.asarray(x, dtype=np.float64)
-    max_lag = _pos_int(max_lag, "max_lag")
+    max_lag = check_int(max_lag, "max_lag", lo=1)
     n = x.size
     if n <= max_lag + 1:
         raise DataError(f"{n} samples are too few for {max_lag} lags")
@@ -515,10 +513,9 @@ def residual_tests(
     :math:`2\\,\\text{max\\_lag}+1` lags keeps the test at level ``alpha``.
     """
     u, y = as_record(u, y)
-    max_lag = _pos_int(max_lag, "max_lag")
-    if not 0.0 < float(alpha) < 1.0:
-        raise ParameterError(f"{alpha=} must be in (0, 1)")
-    start = _check_start(start, y.size)
+    max_lag = check_int(max_lag, "max_lag", lo=1)
+    alpha = check_real(alpha, "alpha", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
+    start = check_int(start, "start", lo=0, hi=y.size - 1)
     with np.errstate(over="ignore", invalid="ignore"):
         yhat = np.asarray(model.predict(u, y, horizon=1), dtype=np.float64)
     e = y[start:] - yhat[start:]
@@ -774,9 +771,7 @@ def validate(
     if holdout is None or holdout == 0:
         start = 0
     else:
-        holdout = float(holdout)
-        if not 0.0 < holdout < 1.0:
-            raise ParameterError(f"{holdout=} must be in (0, 1)")
+        holdout = check_real(holdout, "holdout", lo=0.0, hi=1.0, lo_open=True, hi_open=True)
         start = int(round(y.size * (1.0 - holdout)))
     if initial is None:
         initial = "warm" if start else "estimate"
@@ -861,20 +856,3 @@ def _autocorr(x0: np.ndarray, max_lag: int) -> np.ndarray:
     mid = x0.size - 1
     r = full[mid : mid + max_lag + 1]
     return r / r[0]
-
-
-def _pos_int(x, name: str) -> int:
-    try:
-        v = operator.index(x)
-    except TypeError:
-        raise ParameterError(f"{name}={x!r} must be an integer") from None
-    if v < 1:
-        raise ParameterError(f"{name}={v} must be >= 1")
-    return v
-
-
-def _check_start(start, n: int) -> int:
-    start = operator.index(start)
-    if not 0 <= start < n:
-        raise ParameterError(f"{start=} must be in [0, {n})")
-    return start

@@ -37,9 +37,16 @@ from typing import Any
 import numpy as np
 
 from ehss import preprocess
-from ehss._checks import as_record, check_int
+from ehss._checks import (
+    as_record,
+    check_band,
+    check_fs,
+    check_int,
+    check_int_list,
+    check_real,
+)
 from ehss.errors import DataError, EhssWarning, ParameterError
-from ehss.frequency import FRF_METHODS, check_band, check_fs
+from ehss.frequency import FRF_METHODS
 from ehss.identification import INITS, METHODS, ArmaxModel, estimate
 from ehss.identification.delay import DelayScan, scan_delays
 from ehss.identification.order import OrderRow, OrderSelection, select_order
@@ -137,21 +144,12 @@ class Acceptance:
     uncertainty_sigmas: float = 2.0
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.min_coherence <= 1.0:
-            raise ParameterError(f"min_coherence={self.min_coherence!r} must be in [0, 1]")
+        check_real(self.min_coherence, "min_coherence", lo=0.0, hi=1.0)
         for name in ("max_magnitude_db", "max_phase_deg"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
-                raise ParameterError(f"{name}={v!r} must be a positive number")
-        if isinstance(self.min_frf_points, bool) or not isinstance(self.min_frf_points, int) \
-                or self.min_frf_points < 1:
-            raise ParameterError(f"min_frf_points={self.min_frf_points!r} must be an "
-                                 "integer >= 1")
-        k = self.uncertainty_sigmas
-        if not (isinstance(k, (int, float)) and 0 <= k and math.isfinite(k)):
-            raise ParameterError(f"uncertainty_sigmas={k!r} must be a number >= 0")
-        if not (isinstance(self.min_fit_pct, (int, float)) and self.min_fit_pct <= 100):
-            raise ParameterError(f"min_fit_pct={self.min_fit_pct!r} must be a number <= 100")
+            check_real(getattr(self, name), name, lo=0.0, lo_open=True)
+        check_int(self.min_frf_points, "min_frf_points", lo=1)
+        check_real(self.uncertainty_sigmas, "uncertainty_sigmas", lo=0.0)
+        check_real(self.min_fit_pct, "min_fit_pct", hi=100.0)
 
     def judge(self, report: ValidationReport) -> Verdict:
         """The verdict on a validation report (which must have a frequency-response error,
@@ -325,8 +323,10 @@ def prepare(
 
     Raises
     ------
+    TypeError
+        For a sample rate, band or decimation of the wrong type (the string ``"100"``).
     ParameterError
-        For a bad fraction, band, detrend or decimation.
+        For a bad fraction, band (``lo >= hi``, above fs/2), detrend or decimation.
     DataError
         For records too short to split or decimate.
     """
@@ -339,12 +339,7 @@ def prepare(
     if from_input and band_hz != "input":
         raise ParameterError(f"band_hz={band_hz!r} must be (lo, hi) in Hz, 'input' or None")
     if band_hz is not None and not from_input:
-        band_hz = check_band(band_hz)
-        if band_hz[1] > fs / 2:
-            raise ParameterError(f"band upper edge {band_hz[1]:g} Hz is above fs/2 = "
-                                 f"{fs / 2:g} Hz")
-        if band_hz[0] >= band_hz[1]:
-            raise ParameterError(f"band ({band_hz[0]:g}, {band_hz[1]:g}) Hz must have lo < hi")
+        band_hz = check_band(band_hz, fs=fs)
     holdout: float | None = None
     if isinstance(validation, tuple):
         if len(validation) != 2:
@@ -533,6 +528,8 @@ def identify(
 
     Raises
     ------
+    TypeError
+        For orders or settings of the wrong type (``na=1.5``).
     ParameterError
         For bad orders, method or settings.
     DataError
@@ -818,14 +815,13 @@ def select_orders(
     ------
     IdentificationError
         If no candidate is stable.
+    TypeError
+        For orders or settings of the wrong type (``na=[1.5]``).
     ParameterError, DataError
         For bad settings or records, as :func:`prepare`; DataError also for a grid whose
         largest candidate has more parameters than the estimation data support.
     """
-    tol = error_tolerance
-    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not (
-            math.isfinite(tol) and tol >= 0):
-        raise ParameterError(f"error_tolerance={tol!r} must be a number >= 0")
+    tol = check_real(error_tolerance, "error_tolerance", lo=0.0)
     if method not in METHODS:
         raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
     if initial not in ("estimate", "zero"):
@@ -833,12 +829,12 @@ def select_orders(
     acceptance = Acceptance() if acceptance is None else acceptance
     if not isinstance(acceptance, Acceptance):
         raise TypeError(f"acceptance must be an Acceptance, not {type(acceptance).__name__}")
-    delays = None if delay is None else _int_list("delay", delay, 0)
+    delays = None if delay is None else check_int_list(delay, "delay", lo=0)
     prep = prepare(u, y, fs=fs, validation=validation, band_hz=band_hz, detrend=detrend,
                    decimate=decimate)
     q = prep.decimation
-    na, nc = _int_list("na", na, 1), _int_list("nc", nc, 0)
-    nb = None if nb is None else _int_list("nb", nb, 0)
+    na, nc = check_int_list(na, "na", lo=1), check_int_list(nc, "nc", lo=0)
+    nb = None if nb is None else check_int_list(nb, "nb", lo=0)
     _check_grid_size(prep, na, nb or [0], [0] if method in ("arx", "oe") else nc)
     scan = None
     if delays is None:
@@ -906,16 +902,6 @@ def _simplest_near_best(sel: OrderSelection, verdicts, tolerance: float, prep: P
         model = estimate(prep.u, prep.y, method=method, na=pick.na, nb=pick.nb,
                          nc=pick.nc, delay=pick.delay, dt=1.0 / prep.fs_model, init=init)
     return dataclasses.replace(sel, best=pick, model=model)
-
-
-def _int_list(name: str, value, lo: int) -> list[int]:
-    vals = [value] if isinstance(value, (int, np.integer)) else list(value)
-    for v in vals:
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ParameterError(f"{name}={value!r} must hold integers >= {lo}")
-    if not vals:
-        raise ParameterError(f"{name}={value!r} must list at least one {name}")
-    return [int(v) for v in vals]
 
 
 def _check_grid_size(prep: Prepared, na: list[int], nb: list[int], nc: list[int]) -> None:
@@ -1027,8 +1013,6 @@ def _orders(orders) -> tuple[int, int, int, int]:
         vals = (*vals, 1)
     out = []
     for name, v, lo in zip(("na", "nb", "nc", "delay"), vals, (1, 0, 0, 0), strict=True):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ParameterError(f"{name}={v!r} must be an integer >= {lo}")
-        out.append(int(v))
+        out.append(check_int(v, name, lo=lo))
     return out[0], out[1], out[2], out[3]
 

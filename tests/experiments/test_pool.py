@@ -32,7 +32,7 @@ def test_one_job_is_this_process_and_bad_counts_are_refused():
         assert executor is None
     with pytest.raises(ParameterError, match="jobs=0 must be at least 1"), process_pool(0):
         pass
-    with pytest.raises(TypeError, match="jobs must be an int"), process_pool(2.0):
+    with pytest.raises(TypeError, match="jobs=2.0 must be an integer"), process_pool(2.0):
         pass
     assert 1 <= default_jobs() <= 2
 

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import check_band
 from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
 from ehss.cli._simulate import seed_argument
@@ -173,7 +174,7 @@ def _rig(args: argparse.Namespace) -> tuple[str | None, Any]:
 
 def _band(args: argparse.Namespace, model: Any) -> tuple[float, float]:
     if args.band is not None:
-        return float(args.band[0]), float(args.band[1])
+        return check_band(args.band, "--band")
     if model.band_hz is None:
         raise ParameterError(
             f"model {args.model!r} carries no validated band (band_hz): pass --band LO HI, "
@@ -389,7 +390,7 @@ def _state(path: str, table: Any, it: dict[str, Any], u0: float) -> Any:
                               correction=np.asarray(table["correction"], float),
                               gain=it["gain"], base_rms_error=it["base_rms_error"],
                               halvings=it.get("halvings", 0))
-    except (ParameterError, DataError) as exc:
+    except (TypeError, ParameterError, DataError) as exc:
         raise DataError(f"the previous drive file {path!r}: iteration {exc}") from None
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ehss._checks import check_band
 from ehss.cli._outputs import InputFile
 from ehss.errors import ParameterError
 
@@ -137,9 +138,8 @@ def load_validation(args: argparse.Namespace, rec: Record) -> Record | None:
         If it is sampled at another rate than DATA, or ``--band`` reaches above fs/2.
     """
     band = getattr(args, "band", None)
-    if band is not None and band[1] > rec.fs / 2:
-        raise ParameterError(f"--band upper edge {band[1]:g} Hz is above fs/2 = "
-                             f"{rec.fs / 2:g} Hz")
+    if band is not None:
+        check_band(band, "--band", fs=rec.fs)
     if args.validate is None:
         return None
     val = load_record(argparse.Namespace(**{**vars(args), "data": args.validate}))

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
+from ehss._checks import check_band
 from ehss.cli import command_help
 from ehss.cli._dataargs import add_record_arguments, load_record, write_outputs
 from ehss.cli._outputs import OutputFile, OutputTable
@@ -58,18 +58,12 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--nperseg {args.nperseg} must be >= 4")
     if not 0.0 <= args.min_coherence <= 1.0:
         raise ParameterError(f"--min-coherence {args.min_coherence} must be in [0, 1]")
-    band = None
-    if args.band is not None:
-        lo, hi = args.band
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
-            raise ParameterError(f"--band {lo:g} {hi:g} must satisfy 0 <= LO < HI")
-        band = (lo, hi)
+    band = None if args.band is None else check_band(args.band, "--band")
     if args.noverlap is not None and args.method != "welch":
         raise ParameterError("--noverlap applies to Welch averaging: add --method welch")
     rec = load_record(args)
-    if band is not None and band[1] > rec.fs / 2:
-        raise ParameterError(f"--band upper edge {band[1]:g} Hz is above fs/2 = "
-                             f"{rec.fs / 2:g} Hz")
+    if band is not None:
+        check_band(band, "--band", fs=rec.fs)
     if args.method == "welch":
         frf = h1_estimate(rec.u, rec.y, rec.fs, nperseg=args.nperseg, noverlap=args.noverlap,
                           band_hz=band)

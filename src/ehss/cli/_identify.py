@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import check_band
 from ehss.cli import command_help
 from ehss.cli._dataargs import (
     add_record_arguments,
@@ -143,12 +144,7 @@ def _check_args(args: argparse.Namespace) -> dict[str, Any]:
     if args.validate is None and not (math.isfinite(holdout) and 0.0 < holdout < 1.0):
         raise ParameterError(f"--holdout {holdout} must be in (0, 1): identify validates on "
                              "held-out data (or give --validate FILE)")
-    band = None
-    if args.band is not None:
-        lo, hi = args.band
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
-            raise ParameterError(f"--band {lo:g} {hi:g} must satisfy 0 <= LO < HI")
-        band = (lo, hi)
+    band = None if args.band is None else check_band(args.band, "--band")
     if not 0.0 <= args.min_coherence <= 1.0:
         raise ParameterError(f"--min-coherence {args.min_coherence} must be in [0, 1]")
     if args.nperseg is not None and args.nperseg < 8:

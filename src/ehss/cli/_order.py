@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ehss._checks import check_band
 from ehss.cli import command_help
 from ehss.cli._dataargs import (
     add_record_arguments,
@@ -122,12 +123,7 @@ def _check_args(args: argparse.Namespace) -> dict:
     if args.validate is None and not (math.isfinite(holdout) and 0.0 < holdout < 1.0):
         raise ParameterError(f"--holdout {holdout} must be in (0, 1): orders are compared "
                              "on held-out data (or give --validate FILE)")
-    band = None
-    if args.band is not None:
-        lo, hi = args.band
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
-            raise ParameterError(f"--band {lo:g} {hi:g} must satisfy 0 <= LO < HI")
-        band = (lo, hi)
+    band = None if args.band is None else check_band(args.band, "--band")
     for name in ("na", "nb", "nc", "delay"):
         low = 1 if name == "na" else 0
         bad = [v for v in getattr(args, name) or [] if v < low]

@@ -52,6 +52,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
+from ehss._checks import check_int
 from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_drive
 from ehss.compensation.inverse import InverseModel, design_inverse
 from ehss.errors import EhssError, ParameterError
@@ -262,8 +263,7 @@ def design_compensator(model: ArmaxModel, *, band_hz: tuple[float, float] | None
         raise TypeError(f"model must be an ArmaxModel, not {type(model).__name__}")
     if mode not in MODES:
         raise ParameterError(f"mode={mode!r} must be one of {MODES}")
-    if isinstance(n_taps, bool) or not isinstance(n_taps, int) or n_taps < 1:
-        raise ParameterError(f"n_taps={n_taps!r} must be an integer >= 1")
+    n_taps = check_int(n_taps, "n_taps", lo=1)
     preview = _check_preview(mode, preview, n_taps)
     band = band_hz if band_hz is not None else model.band_hz
     if band is None:
@@ -321,10 +321,7 @@ def _check_preview(mode: str, preview: Any, n_taps: int) -> int:
         return 0
     if preview is None:
         return n_taps // 2
-    if isinstance(preview, bool) or not isinstance(preview, (int, np.integer)) \
-            or not 0 <= preview < n_taps:
-        raise ParameterError(f"preview={preview!r} must be an integer in [0, n_taps)")
-    return int(preview)
+    return check_int(preview, "preview", lo=0, hi=n_taps - 1)
 
 
 def run_compensator(design: CompensatorDesign, reference: Any) -> np.ndarray:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import as_signal
+from ehss._checks import as_signal, check_fs
 from ehss.compensation.checks import (
     DEFAULT_MAX_GAIN,
     DEFAULT_MIN_GAIN,
@@ -64,11 +64,7 @@ def as_reference(reference: Any, fs: float | None) -> tuple[np.ndarray, float]:
     if fs is None:
         raise ParameterError("fs must be given with an array reference (or pass an "
                              "ehss.signals.Signal, which carries its rate)")
-    if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)):
-        raise TypeError(f"fs={fs!r} must be a number (Hz)")
-    if not (math.isfinite(fs) and fs > 0):
-        raise ParameterError(f"fs={fs!r} must be a finite number > 0 (Hz)")
-    return as_signal(reference, "reference"), float(fs)
+    return as_signal(reference, "reference"), check_fs(fs)
 
 
 def apply_inverse(

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import as_signal
+from ehss._checks import as_signal, check_fs, check_real
 from ehss.errors import ParameterError
 
 __all__ = [
@@ -70,13 +70,7 @@ LOOPS = ("position", "acceleration", "force", "valve")
 
 
 def _optional_positive(name: str, value: Any) -> float | None:
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name}={value!r} must be a number or None")
-    if not (math.isfinite(value) and value > 0):
-        raise ParameterError(f"{name}={value!r} must be a finite number > 0")
-    return float(value)
+    return None if value is None else check_real(value, name, lo=0.0, lo_open=True)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -194,9 +188,7 @@ def check_drive(
     r = as_signal(reference, "reference")
     if u.size != r.size:
         raise ParameterError(f"drive and reference differ in length ({u.size} != {r.size})")
-    if not (isinstance(fs, (int, float, np.integer, np.floating)) and math.isfinite(fs)
-            and fs > 0):
-        raise ParameterError(f"fs={fs!r} must be a finite number > 0")
+    fs = check_fs(fs)
     max_gain = _optional_positive("max_gain", max_gain)
     min_gain = _optional_positive("min_gain", min_gain)
     if limits is not None and not isinstance(limits, DriveLimits):

@@ -91,6 +91,7 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
+from ehss._checks import check_band, check_int, check_real
 from ehss.compensation.inverse_model import (
     InverseModel,
     _eval_ascending,
@@ -144,27 +145,20 @@ def _zero_damping(z: np.ndarray, ) -> np.ndarray:
     return zeta
 
 
-def _check_band(band_hz: Any, cutoff_hz: float | None, fs: float
-                ) -> tuple[tuple[float, float] | None, float | None]:
+def _band_and_cutoff(band_hz: Any, cutoff_hz: float | None, fs: float
+                     ) -> tuple[tuple[float, float] | None, float | None]:
+    """The band limit's pass band (below fs/2, leaving room for the taper) and the
+    frequency where its taper reaches zero (default ``min(1.5 hi, (hi + fs/2)/2)``)."""
     if band_hz is None:
         if cutoff_hz is not None:
             raise ParameterError("cutoff_hz needs band_hz")
         return None, None
-    try:
-        lo, hi = (float(v) for v in band_hz)
-    except (TypeError, ValueError):
-        raise ParameterError(f"band_hz={band_hz!r} must be a pair (lo, hi) in Hz") from None
+    lo, hi = check_band(band_hz, "band_hz", fs=fs, below_nyquist=True)
     nyq = 0.5 * fs
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi < nyq):
-        raise ParameterError(
-            f"band_hz=({lo:g}, {hi:g}) must satisfy 0 <= lo < hi < fs/2 = {nyq:g} Hz"
-        )
     if cutoff_hz is None:
         cutoff_hz = min(1.5 * hi, hi + 0.5 * (nyq - hi))
-    cutoff_hz = float(cutoff_hz)
-    if not hi < cutoff_hz <= nyq:
-        raise ParameterError(f"cutoff_hz={cutoff_hz:g} must be in (hi={hi:g}, fs/2={nyq:g}] Hz")
-    return (lo, hi), cutoff_hz
+    return (lo, hi), check_real(cutoff_hz, "cutoff_hz", lo=hi, hi=nyq, lo_open=True,
+                                unit="Hz")
 
 
 def design_inverse_tf(
@@ -238,10 +232,8 @@ def design_inverse_tf(
         a = np.atleast_1d(np.asarray(a, dtype=float)).ravel()
     except (TypeError, ValueError) as exc:
         raise ParameterError(f"model coefficients must be numbers: {exc}") from None
-    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
-        raise ParameterError(f"model dt={dt!r} must be a positive number of seconds")
-    if isinstance(delay, bool) or not isinstance(delay, (int, np.integer)) or delay < 0:
-        raise ParameterError(f"model delay={delay!r} must be a non-negative integer")
+    dt = check_real(dt, "model dt", lo=0.0, lo_open=True, unit="s")
+    delay = check_int(delay, "model delay", lo=0)
     if not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
         raise ParameterError("model coefficients must be finite (got NaN or inf in a or b)")
     if a.size == 0 or a[0] == 0.0:
@@ -250,7 +242,7 @@ def design_inverse_tf(
     scale = np.max(np.abs(b)) if b.size else 0.0
     if scale == 0.0:
         raise ParameterError("model b is all zero: the model has no input path to invert")
-    band, cutoff = _check_band(band_hz, cutoff_hz, 1.0 / dt)
+    band, cutoff = _band_and_cutoff(band_hz, cutoff_hz, 1.0 / dt)
 
     # Poles must be stable: A(q^-1) goes into the numerator of the inverse, but an
     # unstable model means the identification failed and its inverse is meaningless.

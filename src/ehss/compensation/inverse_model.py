@@ -18,7 +18,7 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from ehss._checks import as_signal
+from ehss._checks import as_signal, check_int
 from ehss.errors import ParameterError
 
 __all__ = ["InverseModel", "band_taper", "zpetc_magnitude", "zmetc_phase"]
@@ -237,9 +237,7 @@ class InverseModel:
         r = as_signal(reference, "reference")
         advance = self.preview
         if preview is not None:
-            if isinstance(preview, bool) or not isinstance(preview, (int, np.integer)) \
-                    or preview < 0:
-                raise ParameterError(f"preview={preview!r} must be a non-negative integer")
+            preview = check_int(preview, "preview", lo=0)
             if self.method == "stable" and preview < self.preview:
                 raise ParameterError(
                     f"preview={preview} is below the stable inverse's {self.preview} samples: "

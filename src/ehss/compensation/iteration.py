@@ -43,7 +43,7 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from ehss._checks import as_signal
+from ehss._checks import as_signal, check_int, check_real
 from ehss.compensation.apply import Compensation, apply_inverse, model_offsets
 from ehss.compensation.checks import check_at_rest, checked_drive, fade_to_rest
 from ehss.compensation.inverse import design_inverse
@@ -203,26 +203,14 @@ class IterationState:
     def __post_init__(self) -> None:
         # a state read back from a drive file's metadata may have been edited: refuse
         # what no update could have left
-        gain, base, halvings = self.gain, self.base_rms_error, self.halvings
-        if not (_is_real(gain) and 0.0 < gain < 2.0):
-            raise ParameterError(f"gain={gain!r} must be a number in (0, 2)")
-        if not (_is_real(base) and base >= 0.0):
-            raise ParameterError(f"base_rms_error={base!r} must be a finite number >= 0")
-        if isinstance(halvings, bool) or not isinstance(halvings, (int, np.integer)) or not (
-                0 <= halvings <= MAX_HALVINGS):
-            raise ParameterError(f"halvings={halvings!r} must be an integer in "
-                                 f"[0, {MAX_HALVINGS}]")
+        check_real(self.gain, "gain", lo=0.0, hi=2.0, lo_open=True, hi_open=True)
+        check_real(self.base_rms_error, "base_rms_error", lo=0.0)
+        check_int(self.halvings, "halvings", lo=0, hi=MAX_HALVINGS)
         b = as_signal(self.base_drive, "base_drive")
         c = as_signal(self.correction, "correction")
         if b.size != c.size:
             raise ParameterError(f"base_drive and correction differ in length ({b.size} != "
                                  f"{c.size})")
-
-
-def _is_real(x: Any) -> bool:
-    """A finite real number (bools refused)."""
-    return (not isinstance(x, bool) and isinstance(x, (int, float, np.integer, np.floating))
-            and math.isfinite(x))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -444,9 +432,9 @@ def update_drive(
         def operator(f: np.ndarray) -> np.ndarray:
             return inverse.frequency_response(f)
     else:
-        from ehss.compensation.inverse import _check_band
+        from ehss.compensation.inverse import _band_and_cutoff
 
-        band, cutoff = _check_band(band, None, fs)
+        band, cutoff = _band_and_cutoff(band, None, fs)
         operator = _frf_inverse(u, y, fs, band, cutoff)
         # Q·γ²/Ĥ applied like the band limit: zero-phase, by FFT over a padded record
         correction = _fft_band_limit(r - y, 1.0 / fs, band, cutoff, shape=operator)

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ehss import linear
+from ehss._checks import check_real
 from ehss.errors import ParameterError
 from ehss.params import ForcePidParams, PositionPidParams, RigParams, TvcParams
 
@@ -30,8 +31,7 @@ __all__ = ["tune_position", "tune_tvc", "tune_force", "tvc_pole_placement"]
 
 
 def _check_gm(gain_margin_db: float) -> None:
-    if not (isinstance(gain_margin_db, (int, float)) and 0 < gain_margin_db < 40):
-        raise ParameterError(f"gain_margin_db={gain_margin_db!r} must be in (0, 40)")
+    check_real(gain_margin_db, "gain_margin_db", lo=0.0, hi=40.0, lo_open=True, hi_open=True)
 
 
 def _scale_to_margin(params: RigParams, loop: str, target_db: float) -> float:

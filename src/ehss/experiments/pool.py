@@ -26,6 +26,7 @@ from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
+from ehss._checks import check_int
 from ehss.errors import ParameterError
 
 __all__ = ["PROGRAMME_STRANDS", "default_jobs", "process_pool", "submit", "collect"]
@@ -104,8 +105,7 @@ def process_pool(jobs: int) -> Iterator[Executor | None]:
         To pass as ``executor`` to :func:`ehss.experiments.run_programme` and
         :func:`ehss.report.write_report`.
     """
-    if isinstance(jobs, bool) or not isinstance(jobs, int):
-        raise TypeError(f"jobs must be an int, got {type(jobs).__name__}")
+    jobs = check_int(jobs, "jobs")
     if jobs < 1:
         raise ParameterError(f"jobs={jobs} must be at least 1")
     if jobs == 1:

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ehss import signals
+from ehss._checks import check_int
 from ehss.control.known import known_factors
 from ehss.errors import DataError, ParameterError
 from ehss.experiments.compensation_demo import CompensationDemo, demonstrate
@@ -118,8 +119,7 @@ class ProgrammeSettings:
     compensation_duration_s: float = 16.0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.seed, int) or self.seed < 0:
-            raise ParameterError(f"seed={self.seed!r} must be a non-negative integer")
+        check_int(self.seed, "seed", lo=0)
         if not (math.isfinite(self.duration_s) and self.duration_s >= 5.0):
             raise ParameterError(f"duration_s={self.duration_s!r} must be at least 5 s")
         if not 0.05 <= self.holdout <= 0.6:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import check_int
 from ehss.compensation import (
     DEFAULT_MAX_GAIN,
     InverseModel,
@@ -147,9 +148,7 @@ def refine(
     """
     from ehss.simulation import simulate
 
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
-            or iterations < 0:
-        raise ParameterError(f"iterations={iterations!r} must be an integer >= 0")
+    iterations = check_int(iterations, "iterations", lo=0)
     from ehss.signals import Signal
 
     if fs is None and not isinstance(reference, Signal):
