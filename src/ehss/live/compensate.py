@@ -304,7 +304,8 @@ class CompensationRecord:
         Every judgement per channel (:meth:`Decision.to_dict`).
     loads : list of dict
         Compensators sent to the target: ``t_s``, ``channel``, ``apply_index``,
-        ``crossfade``, ``accepted`` (by the target).
+        ``crossfade``, ``accepted`` (by the target), ``model`` (``"estimator"`` or
+        ``"tracker"``: whose model it inverts).
     events : list of dict
         Alarms and clears.
     settings : dict
@@ -431,7 +432,8 @@ class AdaptiveLoop:
             ad.busy_until = apply_index + crossfade
             load = {"kind": "compensator", "channel": name, "t_s": t_s,
                     "apply_index": int(apply_index), "crossfade": crossfade,
-                    "accepted": bool(ok), **d.figures, **design.errors()}
+                    "accepted": bool(ok), "model": ad.chosen, **d.figures,
+                    **design.errors()}
             self.loads.append(load)
             self._event(load)
 
