@@ -12,9 +12,20 @@ datagram to the last. The recording is compared with the record that was sent.
 Runs: the receiver alone (``--quiet``), and with the dashboard server (``--dashboard``,
 no browser attached: snapshots with one sliding H1 per snapshot are still built).
 
+``--adaptive``: adaptive compensation instead (:class:`ehss.live.compensate.AdaptiveLoop`
+in preview mode, 8 channels at 5 kHz, 0.5–20 Hz references, blocks of 50 ms, the
+simulated rig as the target). The rig's own simulation is not the host's work, so the
+time measured is the loop's alone for each block (the estimators fed, and the
+judgements, designs and loads when they fall due), against the block's 50 ms of stream
+time. Lag: that work queued behind the blocks as they would arrive in real time (a
+block arrives when its last sample is made; its work starts then or when the previous
+block's is done), from the block's arrival to the end of its work; a block whose work
+started more than the receive buffer's length after its arrival would be lost. Runs
+with the second estimator (the tracker) and without it, in the same process.
+
 Usage::
 
-    python benchmarks/bench_live.py [--duration 10] [--repeat 3]
+    python benchmarks/bench_live.py [--duration 10] [--repeat 3] [--adaptive]
 """
 
 from __future__ import annotations
@@ -85,12 +96,105 @@ def run_once(duration: float, extra: list[str], expected: np.ndarray) -> dict:
     return report
 
 
+class _TimedTarget:
+    """A target whose blocks are timed: the loop's work on a block is the wall time from
+    the block handed over to the next call (or the end of the run)."""
+
+    def __init__(self, rig) -> None:
+        self.rig = rig
+        self.work_s: list[float] = []
+        self._handed = None
+
+    def __getattr__(self, name):
+        return getattr(self.rig, name)
+
+    def load(self, channel, compensator, apply_index, crossfade):
+        return self.rig.load(channel, compensator, apply_index, crossfade)
+
+    def step(self, n):
+        if self._handed is not None:
+            self.work_s.append(time.perf_counter() - self._handed)
+        block = self.rig.step(n)
+        self._handed = time.perf_counter()
+        return block
+
+    def close(self) -> None:
+        if self._handed is not None:
+            self.work_s.append(time.perf_counter() - self._handed)
+            self._handed = None
+
+
+def _queue_lag(work_s: np.ndarray, block_s: float) -> np.ndarray:
+    """Lag of each block's end of work behind its arrival, blocks arriving every
+    ``block_s`` and worked on one after the other."""
+    lag = np.empty(work_s.size)
+    done = 0.0
+    for k, w in enumerate(work_s):
+        arrive = (k + 1) * block_s
+        done = max(done, arrive) + w
+        lag[k] = done - arrive
+    return lag
+
+
+def run_adaptive(duration: float, tracker: bool, *, fs: float = 5000.0,
+                 n_channels: int = 8, block_s: float = 0.05) -> dict:
+    import ehss
+    from ehss.live.compensate import AdaptiveLoop, CompensationSettings
+    from ehss.live.rig import SteppingRig
+
+    band = (0.5, 20.0)
+    desired = np.vstack([
+        ehss.signals.band_limited_random(band_hz=band, rms=5e-4, duration_s=duration,
+                                         fs=fs, seed=seed, fade_s=0.2).values
+        for seed in range(1, n_channels + 1)])
+    rig = _TimedTarget(SteppingRig("position", desired, fs=fs, preview=128, seed=0))
+    settings = CompensationSettings(band_hz=band,
+                                    tracker_trace_bound=1e12 if tracker else None)
+    loop = AdaptiveLoop(rig, settings, loop="position", params=ehss.preset("default"))
+    rec = loop.run(block_s=block_s)
+    rig.close()
+    work = np.array(rig.work_s)
+    lag = _queue_lag(work, block_s)
+    n_block = int(round(block_s * fs))
+    return {"blocks": work.size, "samples": int(rec.feedback.shape[1]),
+            "expected": desired.shape[1], "work_p50_ms": 1e3 * np.percentile(work, 50),
+            "work_p99_ms": 1e3 * np.percentile(work, 99), "work_max_ms": 1e3 * work.max(),
+            "real_time_ratio": float(work.sum() / (work.size * block_s)),
+            "lag_p99_ms": 1e3 * np.percentile(lag, 99), "lag_max_ms": 1e3 * lag.max(),
+            "loads": len(rec.loads), "block_samples": n_block,
+            "tracking_um": 1e6 * float(np.sqrt(np.mean(rec.tracking_rms(
+                duration / 2, duration) ** 2)))}
+
+
+def main_adaptive(args) -> None:
+    print(f"Adaptive compensation, 8 channels × 5 kHz, {args.duration:g} s, blocks of "
+          f"50 ms (250 samples per channel), {args.repeat} runs each\n")
+    print("| estimators | samples per channel (of) | blocks | work p50 (ms) | work p99 (ms) "
+          "| work max (ms) | work / real time | lag p99 (ms) | lag max (ms) | loads "
+          "| tracking RMS 2nd half (µm) |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for _ in range(args.repeat):
+        for name, tracker in (("one (no tracker)", False), ("two (with tracker)", True)):
+            r = run_adaptive(args.duration, tracker)
+            print(f"| {name} | {r['samples']} ({r['expected']}) | {r['blocks']} | "
+                  f"{r['work_p50_ms']:.2f} | {r['work_p99_ms']:.1f} | "
+                  f"{r['work_max_ms']:.1f} | {r['real_time_ratio']:.3f} | "
+                  f"{r['lag_p99_ms']:.1f} | {r['lag_max_ms']:.1f} | {r['loads']} | "
+                  f"{r['tracking_um']:.1f} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--adaptive", action="store_true",
+                    help="adaptive compensation in process instead of the UDP receiver")
     args = ap.parse_args()
     sys.path.insert(0, SRC)
+    if args.adaptive:
+        main_adaptive(args)
+        _machine(args)
+        return
     from ehss.live import rig_record
 
     _, expected, _ = rig_record("position", n_channels=8, duration_s=args.duration,
@@ -108,12 +212,16 @@ def main() -> None:
             print(f"| {name} | {c['samples']} | {c['lost_samples']} | {lag['p50']:.2f} | "
                   f"{lag['p99']:.2f} | {lag['max']:.1f} | {r['setup_ms']:.0f} | "
                   f"{100 * r['cpu_share']:.1f} % | {'yes' if r['recording_equal'] else 'NO'} |")
+    _machine(args)
+
+
+def _machine(args) -> None:
     load = os.getloadavg()
     print(f"\n- Machine: {os.cpu_count()} cores, {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}; load average during the runs "
           f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1/5/15 min).")
     print(f"- Command: `python benchmarks/bench_live.py --duration {args.duration:g} "
-          f"--repeat {args.repeat}`")
+          f"--repeat {args.repeat}{' --adaptive' if args.adaptive else ''}`")
 
 
 if __name__ == "__main__":

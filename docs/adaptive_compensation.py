@@ -71,6 +71,14 @@ def main() -> dict:
         "frozen_over_adapted_ch1": round(float(frozen.tracking_rms(22.0, T_S)[0]
                                                / after[0]), 2),
         "loads": len(adapted.loads),
+        # channel 1 in 2-s stretches from 2 s after the change, over its level before
+        "after_over_before_ch1_2s": [
+            round(float(adapted.tracking_rms(t, t + 2.0)[0] / before[0]), 2)
+            for t in np.arange(22.0, T_S, 2.0)],
+        "frozen_over_adapted_ch1_2s": [
+            round(float(frozen.tracking_rms(t, t + 2.0)[0]
+                        / adapted.tracking_rms(t, t + 2.0)[0]), 2)
+            for t in np.arange(22.0, T_S, 2.0)],
     }
 
     # causal mode, channel 1 without the change

@@ -9,6 +9,7 @@ from ehss.compensation.adaptive import (
     AdaptiveCompensator,
     UpdateGuard,
     design_compensator,
+    free_run_fit,
     run_compensator,
 )
 from ehss.compensation.checks import DriveLimits
@@ -144,3 +145,25 @@ def test_updates_are_rate_limited():
     assert comp.due(0.0)
     comp.propose(0.0, m, h1, r)
     assert not comp.due(0.5) and comp.due(1.0)
+
+
+def test_free_run_fit_against_its_definition():
+    import scipy.signal
+
+    m = _loop()
+    u = band_limited_random(band_hz=BAND, rms=1.0, duration_s=2.0, fs=FS, seed=3).values
+    y = scipy.signal.lfilter(np.r_[0.0, m.b], m.a, u)
+    # the model's own output: a perfect fit (rounding only)
+    assert free_run_fit(m, u, y, 500) == pytest.approx(100.0, abs=1e-9)
+    # 10 % of the latest samples' spread added as an error: 100 (1 - 0.1) = 90 %
+    tail = y[-500:] - np.mean(y[-500:])
+    noise = np.random.default_rng(0).standard_normal(500)
+    noise *= 0.1 * np.linalg.norm(tail) / np.linalg.norm(noise)
+    y2 = y.copy()
+    y2[-500:] += noise
+    assert free_run_fit(m, u, y2, 500) == pytest.approx(
+        100.0 * (1.0 - np.linalg.norm(noise) / np.linalg.norm(y2[-500:] - y2[-500:].mean())))
+    # nothing to judge: an unstable model, or samples that do not vary
+    unstable = ArmaxModel(a=[1.0, -1.5], b=[1.0], delay=1, dt=1.0 / FS)
+    assert free_run_fit(unstable, u, y, 500) == -np.inf
+    assert free_run_fit(m, u, np.ones_like(y), 500) == -np.inf

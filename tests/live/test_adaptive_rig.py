@@ -1,6 +1,6 @@
 """Adaptive compensation on the simulated rig, run block by block through the target's
 filter: two position channels, a 0.5–20 Hz random reference known ahead, +40 % payload
-on channel 1 at t = 20 s."""
+on channel 1 at t = 20 s (and −30 % with other references)."""
 
 from __future__ import annotations
 
@@ -17,11 +17,11 @@ BAND = (0.5, 20.0)
 RMS_M = 5e-4  # 0.5 mm: the drive's velocity stays within the rig's 0.2 m/s
 
 
-def _desired(duration_s: float) -> np.ndarray:
+def _desired(duration_s: float, seeds: tuple[int, int] = (1, 2)) -> np.ndarray:
     return np.vstack([
         ehss.signals.band_limited_random(band_hz=BAND, rms=RMS_M, duration_s=duration_s,
                                          fs=FS, seed=seed, fade_s=0.2).values
-        for seed in (1, 2)])
+        for seed in seeds])
 
 
 def _run(desired, *, events=(), faults=(), adapt_until_s=np.inf):
@@ -31,14 +31,21 @@ def _run(desired, *, events=(), faults=(), adapt_until_s=np.inf):
     return AdaptiveLoop(rig, settings, loop="position", params=ehss.preset("default")).run()
 
 
+#: Stretches after the change judged one by one: 2 s each, from 2 s after it to the end.
+_WINDOWS_S = [(t, t + 2.0) for t in np.arange(22.0, 40.0, 2.0)]
+
+
 @pytest.mark.slow
-def test_adaptation_follows_a_payload_change():
-    desired = _desired(40.0)
-    heavier = (RigEvent(20.0, "load.mass_kg", 1.4 * ehss.preset("default").load.mass_kg,
-                        "1"),)
-    adapted = _run(desired, events=heavier)
-    frozen = _run(desired, events=heavier, adapt_until_s=19.9)  # the inverse of before
-    rig = SteppingRig("position", desired, fs=FS, events=heavier, preview=128, seed=0)
+@pytest.mark.parametrize(("seeds", "factor", "first_bound"),
+                         [((1, 2), 1.4, 2.5), ((3, 4), 0.7, 1.5)],
+                         ids=["+40%", "-30%, other references"])
+def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
+    desired = _desired(40.0, seeds)
+    change = (RigEvent(20.0, "load.mass_kg", factor * ehss.preset("default").load.mass_kg,
+                       "1"),)
+    adapted = _run(desired, events=change)
+    frozen = _run(desired, events=change, adapt_until_s=19.9)  # the inverse of before
+    rig = SteppingRig("position", desired, fs=FS, events=change, preview=128, seed=0)
     plain = rig.step(desired.shape[1])                            # no compensation
     err = plain.desired - plain.feedback
     uncompensated = np.sqrt(np.mean(err[:, 10_000:20_000] ** 2, axis=1))
@@ -47,14 +54,25 @@ def test_adaptation_follows_a_payload_change():
     # steady state: the loop lags and attenuates its 0.5-20 Hz reference (~100 % error);
     # the online inverse brings it to a few percent, at least 20 times less
     assert np.all(before <= uncompensated / 20.0)
-    after = adapted.tracking_rms(22.0, 40.0)
-    # channel 1, from 2 s after the change: back within 1.5 times its level before
-    assert after[0] <= 1.5 * before[0]
-    # while the inverse built before the change, not adapted, stays at least 2x worse
-    assert frozen.tracking_rms(22.0, 40.0)[0] >= 2.0 * after[0]
+    after = [adapted.tracking_rms(*w) for w in _WINDOWS_S]
+    # channel 1 over [22, 24) s: the aim is 1.5x its level before. Reached after -30 %
+    # (0.8x); after +40 % 2.0x, so 2.5x bounds what is reached there: the heavier loop's
+    # own level is 1.4x, and the model that follows the change within its 0.3 s memory
+    # scatters too much at the heavier mass (README, "Adaptive compensation")
+    assert after[0][0] <= first_bound * before[0]
+    # from 4 s after the change on, every 2-s stretch within 2x: the heavier loop's own
+    # level, adapted from the start, is 1.4x the lighter one's, and a 2-s stretch of an
+    # unchanged channel scatters up to 1.6x around its mean (channel 2 here)
+    assert all(a[0] <= 2.0 * before[0] for a in after[1:])
+    # and over [22, 40) s as a whole within 1.5x
+    assert adapted.tracking_rms(22.0, 40.0)[0] <= 1.5 * before[0]
+    # while the inverse built before the change, not adapted, stays at least 2x worse in
+    # every stretch from 2 s after the change
+    for w, a in zip(_WINDOWS_S, after, strict=True):
+        assert frozen.tracking_rms(*w)[0] >= 2.0 * a[0], w
     # channel 2 does not change: its level after within the scatter of 1-s stretches
     # before (+-30 %)
-    assert after[1] <= 1.3 * before[1]
+    assert adapted.tracking_rms(22.0, 40.0)[1] <= 1.3 * before[1]
     # every compensator loaded was taken up and faded in by the target's filter
     assert adapted.loads and all(load["accepted"] for load in adapted.loads)
     for k in range(2):

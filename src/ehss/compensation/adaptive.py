@@ -68,6 +68,7 @@ __all__ = [
     "AdaptiveCompensator",
     "design_compensator",
     "run_compensator",
+    "free_run_fit",
 ]
 
 #: Reference modes: known ahead (a drive file streamed) or made online.
@@ -346,6 +347,39 @@ def run_compensator(design: CompensatorDesign, reference: Any) -> np.ndarray:
     return scipy.signal.lfilter(design.taps, [1.0], v)
 
 
+def free_run_fit(model: ArmaxModel, u: Any, y: Any, n_fit: int) -> float:
+    """Fit (%) of ``model`` simulated in free run on the drive ``u`` to the latest
+    ``n_fit`` samples of the feedback ``y``: 100 (1 − |y − ŷ| / |y − mean y|), as
+    :mod:`ehss.validation` computes it (−inf when those samples do not vary, or the
+    model is unstable or its simulation overflows: nothing to judge).
+
+    Parameters
+    ----------
+    model : ArmaxModel
+    u, y : array_like, shape (n,)
+    n_fit : int
+        Samples at the end of the record judged (the simulation runs over all of it,
+        so that its start-up has died out).
+
+    Returns
+    -------
+    float
+    """
+    u = np.asarray(u, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if not model.is_stable():
+        return -math.inf
+    b = np.concatenate([np.zeros(model.delay), model.b])
+    with np.errstate(over="ignore", invalid="ignore"):
+        y_hat = scipy.signal.lfilter(b, model.a, u)[-n_fit:]
+        y_new = y[-n_fit:]
+        spread = float(np.linalg.norm(y_new - np.mean(y_new)))
+        miss = float(np.linalg.norm(y_new - y_hat))
+    if not (spread > 0.0 and math.isfinite(miss)):
+        return -math.inf
+    return 100.0 * (1.0 - miss / spread)
+
+
 # --------------------------------------------------------------------------- guard
 @dataclass(frozen=True, kw_only=True)
 class UpdateGuard:
@@ -520,13 +554,7 @@ class AdaptiveCompensator:
         """
         acc = self.guard.acceptance
         n_fit = max(1, min(int(round(self.guard.fit_s * self.fs_hz)), u.size // 2))
-        b = np.concatenate([np.zeros(model.delay), model.b])
-        y_hat = scipy.signal.lfilter(b, model.a, u)[-n_fit:]
-        y_new = y[-n_fit:]
-        spread = float(np.linalg.norm(y_new - np.mean(y_new)))
-        # fit = 100 (1 - |y - ŷ| / |y - mean y|), as ehss.validation computes it
-        fit = 100.0 * (1.0 - float(np.linalg.norm(y_new - y_hat)) / spread) \
-            if spread > 0 else -math.inf
+        fit = free_run_fit(model, u, y, n_fit)
         figures = {**decision.figures, "fresh_fit_pct": fit}
         if fit < acc.min_fit_pct:
             return Decision(decision.t_s, False, f"the model fits the latest "

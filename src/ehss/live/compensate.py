@@ -31,7 +31,13 @@ from typing import Any, Protocol
 import numpy as np
 
 import ehss
-from ehss.compensation.adaptive import MODES, AdaptiveCompensator, Decision, UpdateGuard
+from ehss.compensation.adaptive import (
+    MODES,
+    AdaptiveCompensator,
+    Decision,
+    UpdateGuard,
+    free_run_fit,
+)
 from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
 
@@ -79,9 +85,20 @@ class CompensationSettings:
         Memory of its forgetting, λ = 1 − 1/(memory_s fs): how fast the model follows
         the rig, against how much it scatters.
     p0 : float
-        α of P(0) = α I, which also bounds tr P: large, so that the bound does not hold
-        the tracking speed below what the forgetting asks for (as
-        :class:`ehss.live.EstimatorSettings`).
+        α of P(0) = α I, which also bounds tr P of the first estimator. Under a
+        band-limited drive the directions of θ̂ that the drive does not excite wind P up
+        to that bound within seconds, and from then on the bound's scaling holds every
+        sample, which cancels the forgetting in the excited directions: that estimator
+        scatters little but follows a change of the rig only in 2–2.5 s.
+    tracker_trace_bound : float or None
+        Bound of tr P of a second estimator of the same structure and memory (None: no
+        second one): far above the equilibrium that its forgetting sets (tr P of
+        about 3·10¹⁰ in the estimator's scaled units on the simulated rig), so that its
+        forgetting acts and it follows a change within about its memory, with more
+        scatter; bounded only so that P cannot overflow (its diagonal floor, 8 n eps
+        tr P, stays below 0.03). Each judgement takes the model of the two that fits
+        the latest ``guard.fit_s`` of feedback better in free run
+        (:func:`ehss.compensation.adaptive.free_run_fit`).
     h1_window_s : float
         Length of the sliding H1 estimate that must confirm a model (and of the recent
         reference the drive checks run on). A change of the rig shows in full in it
@@ -111,6 +128,7 @@ class CompensationSettings:
     method: str = "rels"
     memory_s: float = 0.3
     p0: float = 1e6
+    tracker_trace_bound: float | None = 1e12
     average_s: float = 0.3
     h1_window_s: float = 1.5
     update_s: float = 0.25
@@ -192,6 +210,9 @@ class ChannelAdapter:
         self.settings = s
         self._scale = scale
         self.estimator = self._new_estimator(None)
+        # the tracker: the same estimator with its forgetting not held by the trace bound
+        self.tracker = None if s.tracker_trace_bound is None \
+            else self._new_estimator(None, trace_bound=s.tracker_trace_bound)
 
         self.window = _Ring(3, max(64, int(round(s.h1_window_s * self.fs))))
         self.compensator = AdaptiveCompensator(
@@ -204,37 +225,60 @@ class ChannelAdapter:
         self._n = 0
         self._n_average = int(round(s.average_s * self.fs))
         self._thetas: collections.deque = collections.deque()
+        self.chosen = "estimator"
 
-    def _new_estimator(self, theta0: np.ndarray | None) -> ehss.RelsEstimator:
+    def _new_estimator(self, theta0: np.ndarray | None, *,
+                       trace_bound: float | None = None) -> ehss.RelsEstimator:
         s = self.settings
         return ehss.RelsEstimator(
             na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, method=s.method, theta0=theta0, p0=s.p0,
-            forgetting=1.0 - 1.0 / (s.memory_s * self.fs), dt=1.0 / self.fs,
+            trace_bound=trace_bound, forgetting=1.0 - 1.0 / (s.memory_s * self.fs),
+            dt=1.0 / self.fs,
             u_scale=self._scale, y_scale=self._scale)
 
     def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> None:
         """Consecutive samples of the drive (model input), feedback and desired reference."""
         self.estimator.update_many(drive, feedback)
+        if self.tracker is not None:
+            self.tracker.update_many(drive, feedback)
         self.window.push(np.vstack([drive, feedback, desired]))
         self._n += drive.size
-        self._thetas.append((self._n, self.estimator.theta))
+        thetas = [self.estimator.theta]
+        if self.tracker is not None:
+            thetas.append(self.tracker.theta)
+        self._thetas.append((self._n, np.array(thetas)))
         while self._thetas and self._thetas[0][0] < self._n - self._n_average:
             self._thetas.popleft()
 
-    def model(self) -> ehss.ArmaxModel:
-        """The model judged: θ̂ averaged over the last ``average_s`` (one estimate per
-        block fed), which halves its scatter at the cost of that much more lag."""
+    def models(self) -> list[ehss.ArmaxModel]:
+        """The estimator's model, and the tracker's if there is one: θ̂ averaged over
+        the last ``average_s`` (one estimate per block fed), which halves its scatter at
+        the cost of that much more lag."""
         s = self.settings
-        th = np.mean([t for _, t in self._thetas], axis=0)
-        return ehss.ArmaxModel(a=np.r_[1.0, th[:s.na]], b=th[s.na:s.na + s.nb + 1],
-                               c=np.r_[1.0, th[s.na + s.nb + 1:]], delay=s.delay,
-                               dt=1.0 / self.fs)
+        mean = np.mean([t for _, t in self._thetas], axis=0)
+        return [ehss.ArmaxModel(a=np.r_[1.0, th[:s.na]], b=th[s.na:s.na + s.nb + 1],
+                                c=np.r_[1.0, th[s.na + s.nb + 1:]], delay=s.delay,
+                                dt=1.0 / self.fs) for th in mean]
+
+    def model(self, u: np.ndarray | None = None, y: np.ndarray | None = None
+              ) -> ehss.ArmaxModel:
+        """The model judged: of :meth:`models`, the one whose free-run simulation on
+        the drive ``u`` fits the latest ``guard.fit_s`` of the feedback ``y`` better
+        (the estimator's when no window is given)."""
+        models = self.models()
+        if u is None or y is None or len(models) == 1:
+            return models[0]
+        n_fit = max(1, min(int(round(self.settings.guard.fit_s * self.fs)), u.size // 2))
+        fits = [free_run_fit(m, u, y, n_fit) for m in models]
+        best = int(np.argmax(fits))
+        self.chosen = ("estimator", "tracker")[best]
+        return models[best]
 
     def judge(self, t_s: float) -> Decision:
         """The decision on the current model at stream time ``t_s``."""
         u, y, r = self.window.latest()
         try:
-            model = self.model()
+            model = self.model(u, y)
             # segments of a third of the window (a power of two): 4 averages with half
             # overlap, and as long as the loop's memory asks (short ones leak and lose
             # their coherence)
@@ -260,7 +304,8 @@ class CompensationRecord:
         Every judgement per channel (:meth:`Decision.to_dict`).
     loads : list of dict
         Compensators sent to the target: ``t_s``, ``channel``, ``apply_index``,
-        ``crossfade``, ``accepted`` (by the target).
+        ``crossfade``, ``accepted`` (by the target), ``model`` (``"estimator"`` or
+        ``"tracker"``: whose model it inverts).
     events : list of dict
         Alarms and clears.
     settings : dict
@@ -387,7 +432,8 @@ class AdaptiveLoop:
             ad.busy_until = apply_index + crossfade
             load = {"kind": "compensator", "channel": name, "t_s": t_s,
                     "apply_index": int(apply_index), "crossfade": crossfade,
-                    "accepted": bool(ok), **d.figures, **design.errors()}
+                    "accepted": bool(ok), "model": ad.chosen, **d.figures,
+                    **design.errors()}
             self.loads.append(load)
             self._event(load)
 
