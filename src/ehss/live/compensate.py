@@ -104,7 +104,8 @@ class CompensationSettings:
         reference the drive checks run on). A change of the rig shows in full in it
         after this long.
     update_s : float
-        Period of the judgements (stream time).
+        Period of each channel's judgements (stream time); the channels take their
+        turns spread evenly over it.
     start_s : float
         First judgement (the estimator and the window need data first).
     adapt_until_s : float
@@ -388,11 +389,12 @@ class AdaptiveLoop:
         if self._log is not None:
             self._log(record)
 
-    def _update(self, t_s: float) -> None:
+    def _update(self, t_s: float, channels: list[int]) -> None:
         from ehss.target.filter import Compensator
 
         s = self.settings
-        for k, ad in enumerate(self.adapters):
+        for k in channels:
+            ad = self.adapters[k]
             # one compensator at a time: the last one sent must be in before the next
             if not ad.compensator.due(t_s) or self.target.index < ad.busy_until:
                 continue
@@ -446,7 +448,12 @@ class AdaptiveLoop:
         wall0 = time.monotonic()
         n_block = max(1, int(round(block_s * self.fs)))
         limit = math.inf if duration_s is None else int(round(duration_s * self.fs))
-        next_update = max(s.start_s, s.update_s)
+        # the channels take their turns spread over the update period, so that their
+        # judgements (a design each, tens of ms) do not all fall in one block and hold
+        # the stream up by their sum
+        n_ch = max(1, len(self.adapters))
+        first = max(s.start_s, s.update_s)
+        next_update = [first + k * s.update_s / n_ch for k in range(n_ch)]
         parts: list[Any] = []
         while not self.target.finished and self.target.index < limit:
             if stop is not None and stop.is_set():
@@ -461,10 +468,11 @@ class AdaptiveLoop:
             for k, ad in enumerate(self.adapters):
                 ad.feed(block.drive[k], block.feedback[k], block.desired[k])
             t_s = self.target.index / self.fs
-            if t_s + 1e-12 >= next_update:
-                if t_s <= s.adapt_until_s:
-                    self._update(t_s)
-                next_update += s.update_s
+            turn = [k for k in range(n_ch) if t_s + 1e-12 >= next_update[k]]
+            if turn and t_s <= s.adapt_until_s:
+                self._update(t_s, turn)
+            for k in turn:
+                next_update[k] += s.update_s
         cat = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
                for name in ("desired", "drive", "feedback")}
         return CompensationRecord(
