@@ -3,13 +3,16 @@
 Each candidate is fitted with :func:`~ehss.identification.estimate`, the estimator that
 identification uses (one ``method`` vocabulary: arx, armax, oe, rels, rml), so the pick
 carries over: refitting it with the same method on the same data gives the same model
-(every estimator is deterministic). Given a ``score`` (a model's fit on validation data,
-higher is better) the candidates are ranked by it, and AIC, FPE and MDL are extra columns;
-an unstable candidate is never recommended. :func:`ehss.workflow.select_orders` is the
-search on a measured record: it prepares the record as ``ehss identify`` does and scores
-each candidate with the validation ``ehss identify`` reports. The one-step prediction
-errors ε on the estimation data give the loss V = mean(ε²), and with p free parameters
-and N samples
+(every estimator is deterministic) — with one exception: an ARMAX candidate is also
+started from its best smaller neighbour in the grid, which a refit of that structure
+alone does not have, so where that start won (the model's ``meta["start"]`` is
+"theta0") the refit ends at the best optimum of its own starts, whose loss is higher.
+Given a ``score`` (a model's fit on validation data, higher is better) the candidates
+are ranked by it, and AIC, FPE and MDL are extra columns; an unstable candidate is
+never recommended. :func:`ehss.workflow.select_orders` is the search on a measured
+record: it prepares the record as ``ehss identify`` does and scores each candidate
+with the validation ``ehss identify`` reports. The one-step prediction errors ε on the
+estimation data give the loss V = mean(ε²), and with p free parameters and N samples
 
 .. math::
 

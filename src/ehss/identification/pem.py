@@ -22,6 +22,12 @@ Output error, y = q^-d B/F u + e, θ = [f1..f_nf, b0..b_nb]:
     \\frac{\\partial\\varepsilon}{\\partial f_i} = \\frac{\\hat y(k-i)}{F},\\quad
     \\frac{\\partial\\varepsilon}{\\partial b_j} = -\\frac{u(k-d-j)}{F}.
 
+The prediction errors and the Jacobians are compiled
+(:mod:`ehss.identification._pem_kernels`, GIL released): since filtering commutes with a
+delay, each Jacobian filters y, u and ε (ARMAX) or ŷ and u (OE) once and takes its
+columns as delayed copies; the errors of the last trial point are reused for its
+Jacobian.
+
 An OE model is returned as an :class:`~ehss.identification.ArmaxModel` with a = c = F:
 A y = B u + A e is exactly y = B/F u + e, so one model type serves both.
 
@@ -37,7 +43,8 @@ Safeguards:
   the loss counts the samples from max(na, nb + d, nc) on;
 * several cheap starts are tried (ARMAX: extended least squares, ARX with C = 1 and,
   when nc ≥ na, the output-error fit with C = F; OE: ARX and Steiglitz–McBride
-  iterations) and the lowest loss wins;
+  iterations), and for ARMAX any start the caller gives (``theta0``: the order search
+  passes a smaller neighbour's estimate, padded with zeros), and the lowest loss wins;
 * an ARMAX estimate whose A is unstable is flagged (``meta["stable"] = False``) and warned
   about, never returned silently.
 """
