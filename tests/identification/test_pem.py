@@ -281,3 +281,20 @@ def test_theta0_of_the_wrong_size_is_refused(rng):
     u = rng.standard_normal(500)
     with pytest.raises(ParameterError, match="theta0 must hold 4 finite coefficients"):
         armax_pem(u, u, na=1, nb=1, nc=1, theta0=[0.1, 0.2])
+
+
+def test_the_smaller_c_start_is_the_one_the_order_search_hands_over(rng):
+    """armax_pem(smaller_c=True) fits nc − 1 first and starts from it; the order search
+    passes that fit as theta0 instead: both must give the same model to the last bit,
+    or a refit of the search's pick would not reproduce it."""
+    from ehss.identification._grid import padded_theta
+
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=25.0)
+    kw = {"na": 2, "nb": 1, "delay": 1, "dt": DT_S}
+    one = armax_pem(u, y, nc=1, **kw)
+    handed = armax_pem(u, y, nc=2, theta0=padded_theta(one, 2, 1, 2), **kw)
+    itself = armax_pem(u, y, nc=2, smaller_c=True, **kw)
+    assert np.array_equal(handed.theta, itself.theta)
+    assert handed.meta["starts"] == itself.meta["starts"]
+    assert "theta0" in itself.meta["starts"]

@@ -6,13 +6,15 @@ fit spends most of its time in compiled kernels that release the GIL
 BLAS is held to one thread each meanwhile, since a multi-threaded BLAS on a loaded machine
 spends more time synchronising than computing on these tall, thin least-squares problems.
 
-A candidate waits for its smaller neighbours in the grid — one order less of A, of B or of
-C, same delay — and its ARMAX fit is also started from the best of them (lowest noise
-variance), θ padded with zeros: the zero-padded model is the neighbour itself, so the
-candidate's loss can only be lower than its neighbour's, never worse than its other
-starts (they win ties). Which neighbours a candidate waits for depends only on the grid,
-and each fit only on its data and starts, so the results do not depend on the number of
-threads or on which finishes first; they are handed back in grid order.
+A candidate with nc ≥ 2 waits for its neighbour with one order less of C (same na, nb,
+delay) when the grid has it, and its ARMAX fit is also started from that neighbour's
+θ padded with a zero — the start :func:`~ehss.identification.pem.armax_pem` makes
+itself with ``smaller_c`` (fitting the neighbour first), so a refit of any candidate
+alone gives the same model. The zero-padded neighbour is the neighbour itself, so the
+candidate's loss can only be lower than its neighbour's; its other starts win ties.
+Which neighbour a candidate waits for depends only on the grid, and each fit only on its
+data and starts, so the results do not depend on the number of threads or on which
+finishes first; they are handed back in grid order.
 """
 
 from __future__ import annotations
@@ -58,22 +60,19 @@ def padded_theta(model: ArmaxModel, na: int, nb: int, nc: int) -> np.ndarray:
 
 
 def _smaller_neighbours(grid: list[Candidate]) -> list[list[int]]:
-    """For each candidate, the grid positions of its neighbours one order smaller."""
+    """For each candidate with nc ≥ 2, the grid position of (na, nb, nc − 1, delay)."""
     index = {c: i for i, c in enumerate(grid)}
     out = []
     for na, nb, nc, d in grid:
-        near = ((na - 1, nb, nc, d), (na, nb - 1, nc, d), (na, nb, nc - 1, d))
-        out.append([index[c] for c in near if c in index])
+        near = (na, nb, nc - 1, d)
+        out.append([index[near]] if nc >= 2 and near in index else [])
     return out
 
 
 def _start_from(candidate: Candidate, neighbours: list[ArmaxModel | None]) -> np.ndarray | None:
-    """The padded θ of the neighbour with the lowest noise variance (None if none)."""
-    fitted = [m for m in neighbours if m is not None and np.isfinite(m.noise_variance)]
-    if not fitted:
-        return None
-    best = min(fitted, key=lambda m: m.noise_variance)
-    return padded_theta(best, *candidate[:3])
+    """The neighbour's θ padded to the candidate's orders (None if it was not fitted)."""
+    fitted = [m for m in neighbours if m is not None]
+    return padded_theta(fitted[0], *candidate[:3]) if fitted else None
 
 
 def fit_grid(
@@ -87,9 +86,10 @@ def fit_grid(
     grid order.
 
     ``fit(candidate, theta0)`` returns the fitted model, or None for a candidate that
-    cannot be fitted; ``theta0`` is the padded θ of the best smaller neighbour (with
-    ``neighbours``) or None. The unstable-model warning of the fits is silenced while
-    the grid runs (the table lists each candidate's stability); other warnings pass.
+    cannot be fitted; ``theta0`` is the padded θ of its neighbour with one order less
+    of C (with ``neighbours``, when the grid has it) or None. The unstable-model
+    warning of the fits is silenced while the grid runs (the table lists each
+    candidate's stability); other warnings pass.
     """
     deps = _smaller_neighbours(grid) if neighbours else [[] for _ in grid]
     models: list[ArmaxModel | None] = [None] * len(grid)

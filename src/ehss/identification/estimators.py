@@ -107,7 +107,8 @@ def estimate(
     theta0 : array_like, optional
         One more start of the ARMAX prediction-error fit ("armax", and the batch start
         of "rels"/"rml"), in physical units (:func:`~ehss.identification.pem.armax_pem`);
-        ignored by the other methods.
+        ignored by the other methods. For "armax" it replaces the fit with one order
+        less of C that is otherwise made first (the order search passes the one it has).
 
     Raises
     ------
@@ -135,7 +136,8 @@ def estimate(
         model.meta["stable"] = model.check(warn=True)  # an unstable fit is never silent
         return model
     if method == "armax":
-        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt, theta0=theta0)
+        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt, theta0=theta0,
+                         smaller_c=True)
     if method == "oe":
         return oe_pem(u, y, nf=na, nb=nb, delay=delay, dt=dt)
     kw = {"na": na, "nb": nb, "nc": nc, "delay": delay, "dt": dt, "forgetting": forgetting,

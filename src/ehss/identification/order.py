@@ -3,10 +3,8 @@
 Each candidate is fitted with :func:`~ehss.identification.estimate`, the estimator that
 identification uses (one ``method`` vocabulary: arx, armax, oe, rels, rml), so the pick
 carries over: refitting it with the same method on the same data gives the same model
-(every estimator is deterministic) — with one exception: an ARMAX candidate is also
-started from its best smaller neighbour in the grid, which a refit of that structure
-alone does not have, so where that start won (the model's ``meta["start"]`` is
-"theta0") the refit ends at the best optimum of its own starts, whose loss is higher.
+(every estimator is deterministic; an ARMAX candidate with nc ≥ 2 is also started from
+the fit with one order less of C, which the grid hands it and a refit makes itself).
 Given a ``score`` (a model's fit on validation data, higher is better) the candidates
 are ranked by it, and AIC, FPE and MDL are extra columns; an unstable candidate is
 never recommended. :func:`ehss.workflow.select_orders` is the search on a measured
@@ -116,11 +114,12 @@ def select_order(
 ) -> OrderSelection:
     """Fit every (na, nb, nc, delay) of the grid and pick the best stable one.
 
-    The candidates are fitted on ``jobs`` threads. With ``method="armax"`` each
-    candidate's prediction-error fit is also started from its best smaller neighbour in
-    the grid (one order less of A, B or C, same delay; θ padded with zeros), besides
-    its own starts, and keeps the better end: a larger structure never fits the
-    estimation data worse than its neighbour. The result does not depend on ``jobs``.
+    The candidates are fitted on ``jobs`` threads. With ``method="armax"`` a candidate
+    with nc ≥ 2 waits for its neighbour with one order less of C when the grid has it
+    and is also started from it (θ padded with a zero; the fit does the same by itself
+    otherwise, :func:`~ehss.identification.pem.armax_pem` ``smaller_c``), keeping the
+    better end: it never fits the estimation data worse than that neighbour. The result
+    does not depend on ``jobs``.
 
     Parameters
     ----------

@@ -167,6 +167,7 @@ def armax_pem(
     max_nfev: int = 200,
     tol: float = 1e-10,
     theta0: Any = None,
+    smaller_c: bool = False,
 ) -> ArmaxModel:
     """ARMAX model A y = q^-d B u + C e by prediction-error minimisation.
 
@@ -191,6 +192,12 @@ def armax_pem(
         structure padded with zeros (what the order search passes), so that the fit
         cannot end worse than that. Tried after the cheap starts, which win ties;
         ignored for nc = 0, where least squares is the optimum.
+    smaller_c : bool
+        With nc ≥ 2 and no ``theta0``: start also from the fit of the same structure with
+        one order less of C (itself fitted so), padded with a zero — the neighbour
+        start of the order search, which passes that fit as ``theta0`` instead of
+        fitting it again, so that a refit of a pick gives the same model. (For nc = 1
+        the neighbour, C = 1, is the ARX start.)
 
     Returns
     -------
@@ -220,6 +227,25 @@ def armax_pem(
     radius = radius_arg("radius", radius)
     max_nfev = order_arg("max_nfev", max_nfev, 1)
     tol = real_arg("tol", tol)
+    if theta0 is None and smaller_c and nc >= 2:
+        theta0 = _smaller_c_theta(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol)
+    model = _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0)
+    if not model.meta["stable"]:
+        model.check(warn=True)  # EhssWarning: an unstable model is never silent
+    return model
+
+
+def _smaller_c_theta(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol) -> np.ndarray:
+    """θ of the fit with nc − 1 (started so itself, down to nc = 1), a zero appended."""
+    theta0 = None
+    for k in range(1, nc):
+        m = _armax_fit(u, y, na, nb, k, delay, dt, radius, max_nfev, tol, theta0)
+        theta0 = np.append(m.theta, 0.0)
+    return theta0
+
+
+def _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0) -> ArmaxModel:
+    """:func:`armax_pem` on checked arguments, without its warning."""
     su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
     dvec = theta_scale(na, nb, nc, su, sy)
@@ -241,7 +267,7 @@ def armax_pem(
         "y_scale": sy,
     }
     return _finish(theta * dvec, cov_s * np.outer(dvec, dvec), nv_s * sy * sy, na, nb, nc,
-                   delay, dt, meta, k0)
+                   delay, dt, meta, k0, warn=False)
 
 
 def _armax_starts(us, ys, na, nb, nc, delay, radius, max_nfev, tol):
@@ -422,7 +448,7 @@ def oe_pem(
 
 
 # ------------------------------------------------------------------------------ shared
-def _finish(theta, cov, nv, na, nb, nc, delay, dt, meta, k0) -> ArmaxModel:
+def _finish(theta, cov, nv, na, nb, nc, delay, dt, meta, k0, warn=True) -> ArmaxModel:
     if not np.all(np.isfinite(theta)):
         raise IdentificationError("the estimate does not fit float64 in physical units")
     radius = _radius(theta[:na])
@@ -431,6 +457,6 @@ def _finish(theta, cov, nv, na, nb, nc, delay, dt, meta, k0) -> ArmaxModel:
         meta={**meta, "first_sample": int(k0), "stable": radius < 1.0,
               "max_pole_radius": radius},
     )
-    if radius >= 1.0:
+    if radius >= 1.0 and warn:
         model.check(warn=True)  # EhssWarning: an unstable model is never silent
     return model
