@@ -260,3 +260,25 @@ def test_utf8_byte_order_mark_is_accepted(tmp_path):
     path = tmp_path / "m.json"
     path.write_bytes(b"\xef\xbb\xbf" + json.dumps(_GOOD).encode())
     assert ArmaxModel.load_json(path).delay == 1
+
+
+def test_from_theta_is_the_inverse_of_theta(rng):
+    theta = rng.standard_normal(2 + 3 + 1)
+    cov = np.eye(6)
+    m = ArmaxModel.from_theta(theta, na=2, nb=2, nc=1, delay=3, dt=1e-3,
+                              noise_variance=0.5, covariance=cov, meta={"method": "x"})
+    assert np.array_equal(m.theta, theta)
+    assert (m.na, m.nb, m.nc, m.delay) == (2, 2, 1, 3)
+    assert np.array_equal(m.a, np.r_[1.0, theta[:2]]) and np.array_equal(m.b, theta[2:5])
+    assert m.noise_variance == 0.5 and np.array_equal(m.covariance, cov)
+    assert m.meta == {"method": "x"}
+
+
+def test_from_theta_keeps_an_estimator_result_valid():
+    bad = np.full((2, 2), np.inf)
+    m = ArmaxModel.from_theta([0.5, 1.0], na=1, nb=0, nc=0, delay=1, dt=1.0,
+                              noise_variance=np.inf, covariance=bad)
+    # an overflowed variance is unknown, an overflowed covariance absent
+    assert np.isnan(m.noise_variance) and m.covariance is None
+    with pytest.raises(ParameterError, match="theta has 2 coefficients"):
+        ArmaxModel.from_theta([0.5, 1.0], na=1, nb=1, nc=0, delay=1, dt=1.0)

@@ -165,3 +165,136 @@ def test_oversampled_records_identify_within_half_a_db(kind, order, oversampling
     assert np.max(np.abs(20 * np.log10(np.abs(r)))) < 0.5
     assert np.max(np.abs(np.angle(r, deg=True))) < 3.0
     assert m.is_stable()
+
+
+# ------------------------------------------------------- compiled residuals and Jacobians
+def _reference_armax_errors(theta, u, y, na, nb, nc, d):
+    """ε = (A y − q^-d B u)/C with scipy's lfilter (direct form II transposed), at rest."""
+    a = np.concatenate([[1.0], theta[:na]])
+    bd = np.concatenate([np.zeros(d), theta[na : na + nb + 1]])
+    c = np.concatenate([[1.0], theta[na + nb + 1 :]])
+    return lfilter([1.0], c, lfilter(a, [1.0], y) - lfilter(bd, [1.0], u))
+
+
+def _reference_oe_output(theta, u, nf, nb, d):
+    return lfilter(np.concatenate([np.zeros(d), theta[nf:]]),
+                   np.concatenate([[1.0], theta[:nf]]), u)
+
+
+def _stable_monic(rng, n, radius):
+    """Coefficients [p1..pn] of a monic polynomial with roots of modulus < radius."""
+    roots = []
+    while len(roots) < n:
+        r, w = rng.uniform(0.2, radius), rng.uniform(0.1, 3.0)
+        if n - len(roots) >= 2:
+            roots += [r * np.exp(1j * w), r * np.exp(-1j * w)]
+        else:
+            roots.append(r * rng.choice([-1.0, 1.0]))
+    return np.real(np.poly(roots))[1:]
+
+
+def _central_differences(fun, theta, h_rel=1e-6):
+    cols = []
+    for i in range(theta.size):
+        h = h_rel * max(1.0, abs(theta[i]))
+        tp, tm = theta.copy(), theta.copy()
+        tp[i] += h
+        tm[i] -= h
+        cols.append((fun(tp) - fun(tm)) / (2 * h))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize("na,nb,nc,d", [(1, 0, 1, 0), (2, 1, 1, 1), (4, 3, 2, 3), (2, 2, 4, 2)])
+def test_compiled_armax_residuals_and_jacobian_match_a_plain_reference(rng, na, nb, nc, d):
+    from ehss.identification import _pem_kernels as pk
+
+    n = 3000
+    u, y = rng.standard_normal(n), rng.standard_normal(n)
+    theta = np.concatenate([_stable_monic(rng, na, 0.95), rng.standard_normal(nb + 1),
+                            _stable_monic(rng, nc, 0.9)])
+    k0 = max(na, nb + d, nc)
+    eps = pk.armax_errors(theta, u, y, na, nb, nc, d)
+    ref = _reference_armax_errors(theta, u, y, na, nb, nc, d)
+    # two orderings of the same sums: rounding differences of a few ulp, amplified by
+    # 1/C (roots within 0.9: at most ~1/(1-0.9)^nc = 100x): 1e-11 of the signal's size
+    assert_allclose(eps, ref, rtol=0, atol=1e-11 * np.max(np.abs(ref)))
+    J = pk.armax_jacobian(theta, u, y, eps, na, nb, nc, d, k0)
+    Jfd = _central_differences(
+        lambda th: _reference_armax_errors(th, u, y, na, nb, nc, d)[k0:], theta)
+    # central differences with h = 1e-6: truncation O(h²) ~ 1e-12 times the third
+    # derivative (ε is polynomial in a, b; 1/C's derivatives grow by ~1/(1-0.9) per
+    # order), rounding O(ulp·|ε|/h) ~ 1e-10 of |ε|: agreement to 1e-6 of the column
+    # scale is far above both, and far below any wrong term (those are O(1))
+    scale = np.max(np.abs(Jfd), axis=0)
+    assert np.all(np.abs(J - Jfd) <= 1e-6 * scale)
+
+
+@pytest.mark.parametrize("nf,nb,d", [(1, 0, 0), (2, 1, 1), (4, 3, 2)])
+def test_compiled_oe_output_and_jacobian_match_a_plain_reference(rng, nf, nb, d):
+    from ehss.identification import _pem_kernels as pk
+
+    n = 3000
+    u, y = rng.standard_normal(n), rng.standard_normal(n)
+    theta = np.concatenate([_stable_monic(rng, nf, 0.95), rng.standard_normal(nb + 1)])
+    k0 = max(nf, nb + d)
+    yhat = pk.oe_simulate(theta, u, nf, nb, d)
+    ref = _reference_oe_output(theta, u, nf, nb, d)
+    # as for ARMAX: a few ulp through 1/F with roots within 0.95 (≤ 20x per order)
+    assert_allclose(yhat, ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)))
+    J = pk.oe_jacobian(theta, u, yhat, nf, nb, d, k0)
+    Jfd = _central_differences(lambda th: (y - _reference_oe_output(th, u, nf, nb, d))[k0:],
+                               theta)
+    scale = np.max(np.abs(Jfd), axis=0)
+    assert np.all(np.abs(J - Jfd) <= 1e-6 * scale)  # as for ARMAX
+
+
+def test_a_neighbour_start_can_only_lower_the_loss(rng):
+    from ehss.identification._grid import padded_theta
+
+    a, b, c = system(4)
+    u, y, _ = armax_data(rng, a, b, c, 6000, snr_db=25.0)
+    small = armax_pem(u, y, na=2, nb=1, nc=1, dt=DT_S)
+    theta0 = padded_theta(small, 3, 1, 1)
+    padded = ArmaxModel.from_theta(theta0, na=3, nb=1, nc=1, delay=1, dt=DT_S)
+    # zero-padding writes the same model: the same predictions to the last bit but for
+    # the order of the sums (a few ulp)
+    assert_allclose(padded.predict(u, y), small.predict(u, y), rtol=0,
+                    atol=1e-12 * np.max(np.abs(y)))
+    plain = armax_pem(u, y, na=3, nb=1, nc=1, dt=DT_S)
+    started = armax_pem(u, y, na=3, nb=1, nc=1, dt=DT_S, theta0=theta0)
+    assert set(started.meta["starts"]) == set(plain.meta["starts"]) | {"theta0"}
+    best = min(started.meta["starts"].values())
+    # the winner is the best start: no worse than without the start, no worse than the
+    # neighbour (which the start reproduces, and LM only accepts steps that lower the loss)
+    loss = started.meta["starts"][started.meta["start"]]
+    assert loss == best
+    assert loss <= min(plain.meta["starts"].values())
+    # the neighbour's loss is a mean over k ≥ 2, this one's over k ≥ 3: the sum over
+    # fewer samples is no larger, the mean at most (N − 2)/(N − 3) times (+ rounding)
+    n_small = u.size - small.meta["first_sample"]
+    n_big = u.size - started.meta["first_sample"]
+    small_loss = small.meta["starts"][small.meta["start"]]
+    assert loss <= started.meta["starts"]["theta0"] <= small_loss * n_small / n_big * (1 + 1e-9)
+
+
+def test_theta0_of_the_wrong_size_is_refused(rng):
+    u = rng.standard_normal(500)
+    with pytest.raises(ParameterError, match="theta0 must hold 4 finite coefficients"):
+        armax_pem(u, u, na=1, nb=1, nc=1, theta0=[0.1, 0.2])
+
+
+def test_the_smaller_c_start_is_the_one_the_order_search_hands_over(rng):
+    """armax_pem(smaller_c=True) fits nc − 1 first and starts from it; the order search
+    passes that fit as theta0 instead: both must give the same model to the last bit,
+    or a refit of the search's pick would not reproduce it."""
+    from ehss.identification._grid import padded_theta
+
+    a, b, c = system(2)
+    u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=25.0)
+    kw = {"na": 2, "nb": 1, "delay": 1, "dt": DT_S}
+    one = armax_pem(u, y, nc=1, **kw)
+    handed = armax_pem(u, y, nc=2, theta0=padded_theta(one, 2, 1, 2), **kw)
+    itself = armax_pem(u, y, nc=2, smaller_c=True, **kw)
+    assert np.array_equal(handed.theta, itself.theta)
+    assert handed.meta["starts"] == itself.meta["starts"]
+    assert "theta0" in itself.meta["starts"]

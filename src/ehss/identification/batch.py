@@ -1,60 +1,32 @@
-"""Batch references for RELS: ARX least squares and ARMAX extended least squares / PEM.
+"""Batch references for RELS: ARX least squares and ARMAX extended least squares.
 
 These are the slow-but-sure estimators RELS is checked against (with λ = 1 and a large
-P(0), RELS approaches :func:`arx_ls` on ARX data) and the workhorse of order selection.
+P(0), RELS approaches :func:`arx_ls` on ARX data); the extended least squares estimate is
+also the first start of the prediction-error fit (:func:`~ehss.identification.pem.
+armax_pem`), the default ARMAX estimator.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
-from ehss.errors import DataError, IdentificationError
+from ehss.errors import IdentificationError
+from ehss.identification._common import (
+    check_batch,
+    first_sample,
+    order_arg,
+    prediction_errors,
+    real_arg,
+    regression_matrix,
+    rms_scale,
+    stabilise,
+    theta_scale,
+)
 from ehss.identification.model import ArmaxModel
-from ehss.identification.rels import _check_settings, _order, _real, check_record
 
 __all__ = ["arx_ls", "armax_els", "els_theta", "regression_matrix"]
-
-
-def regression_matrix(
-    u: np.ndarray, y: np.ndarray, e: np.ndarray | None, na: int, nb: int, nc: int, delay: int
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Rows ψ(k)ᵀ = [−y(k−1)..−y(k−na), u(k−d)..u(k−d−nb), e(k−1)..e(k−nc)], k ≥ k0.
-
-    Returns (Phi, target y[k0:], k0) with k0 = max(na, nb + delay, nc) so that every
-    regressor uses measured samples only.
-    """
-    N = y.size
-    k0 = max(na, nb + delay, nc)
-    cols = [-y[k0 - i : N - i] for i in range(1, na + 1)]
-    cols += [u[k0 - delay - i : N - delay - i] for i in range(nb + 1)]
-    if nc:
-        cols += [e[k0 - i : N - i] for i in range(1, nc + 1)]
-    return np.column_stack(cols), y[k0:], k0
-
-
-def _validate(u: Any, y: Any, na: Any, nb: Any, nc: Any, delay: Any, dt: Any):
-    na, nb, nc, delay, _, _, dt = _check_settings(na, nb, nc, delay, 1.0, 1.0, dt)
-    u, y = check_record(u, y)
-    n = na + nb + 1 + nc
-    need = max(na, nb + delay, nc) + n + 1
-    if u.size < need:
-        raise DataError(
-            f"{u.size} samples are too few for na={na}, nb={nb}, nc={nc}, delay={delay}: "
-            f"need at least {need}"
-        )
-    return u, y, na, nb, nc, delay, dt
-
-
-def _model(theta, na, nb, nc, delay, dt, nv, cov, meta) -> ArmaxModel:
-    return ArmaxModel(
-        a=np.concatenate([[1.0], theta[:na]]), b=theta[na : na + nb + 1],
-        c=np.concatenate([[1.0], theta[na + nb + 1 :]]), delay=delay, dt=dt,
-        noise_variance=nv, covariance=cov, meta=meta,
-    )
 
 
 def arx_ls(u: Any, y: Any, *, na: int, nb: int, delay: int = 1, dt: float = 1.0) -> ArmaxModel:
@@ -63,7 +35,7 @@ def arx_ls(u: Any, y: Any, *, na: int, nb: int, delay: int = 1, dt: float = 1.0)
     The first max(na, nb + d) samples only feed regressors. ``covariance`` is
     σ² (ΦᵀΦ)⁻¹ with σ² the residual variance (dof-corrected).
     """
-    u, y, na, nb, _, delay, dt = _validate(u, y, na, nb, 0, delay, dt)
+    u, y, na, nb, _, delay, dt = check_batch(u, y, na, nb, 0, delay, dt)
     phi, t, _ = regression_matrix(u, y, None, na, nb, 0, delay)
     theta, *_ = np.linalg.lstsq(phi, t, rcond=None)
     res = t - phi @ theta
@@ -71,30 +43,8 @@ def arx_ls(u: Any, y: Any, *, na: int, nb: int, delay: int = 1, dt: float = 1.0)
     nv = float(res @ res / dof)
     cov = nv * np.linalg.pinv(phi.T @ phi)
     meta = {"method": "arx_ls", "n_samples": int(u.size)}
-    return _model(theta, na, nb, 0, delay, dt, nv, cov, meta)
-
-
-def _stabilise(c: np.ndarray, radius: float = 0.99) -> np.ndarray:
-    """Reflect/shrink the roots of [1, c...] inside ``radius`` (as in RELS)."""
-    if c.size == 0:
-        return c
-    r = np.roots(np.concatenate([[1.0], c]))
-    if r.size == 0 or np.max(np.abs(r)) < radius:
-        return c
-    out = np.abs(r) > 1
-    r[out] = 1 / np.conj(r[out])
-    big = np.abs(r) > radius
-    r[big] *= radius / np.abs(r[big])
-    return np.real(np.poly(r))[1:]
-
-
-def _pred_errors(theta, u, y, na, nb, nc, delay) -> np.ndarray:
-    """ε = (A y − q^-d B u) / C (one-step prediction errors, zero initial conditions)."""
-    a = np.concatenate([[1.0], theta[:na]])
-    bd = np.concatenate([np.zeros(delay), theta[na : na + nb + 1]])
-    c = np.concatenate([[1.0], theta[na + nb + 1 :]])
-    v = lfilter(a, [1.0], y) - lfilter(bd, [1.0], u)
-    return lfilter([1.0], c, v)
+    return ArmaxModel.from_theta(theta, na=na, nb=nb, nc=0, delay=delay, dt=dt,
+                                 noise_variance=nv, covariance=cov, meta=meta)
 
 
 def els_theta(
@@ -118,10 +68,10 @@ def _els(us, ys, na, nb, nc, delay, max_iter, tol) -> tuple[np.ndarray, int]:
     iters = 0
     if nc:
         for iters in range(1, max_iter + 1):  # noqa: B007 - reported in meta
-            e = _pred_errors(theta, us, ys, na, nb, nc, delay)
+            e = prediction_errors(theta, us, ys, na, nb, nc, delay)
             phi, t, _ = regression_matrix(us, ys, e, na, nb, nc, delay)
             new = np.linalg.lstsq(phi, t, rcond=None)[0]
-            new[na + nb + 1 :] = _stabilise(new[na + nb + 1 :])
+            new[na + nb + 1 :] = stabilise(new[na + nb + 1 :])
             change = np.linalg.norm(new - theta) / max(np.linalg.norm(new), 1e-300)
             theta = new
             if change < tol:
@@ -140,45 +90,55 @@ def armax_els(
     dt: float = 1.0,
     max_iter: int = 50,
     tol: float = 1e-10,
-    refine: bool = True,
 ) -> ArmaxModel:
-    """ARMAX by extended least squares, optionally refined by prediction-error minimisation.
+    """ARMAX model A y = q^-d B u + C e by extended least squares (ELS).
 
-    ELS: start from ARX least squares, then repeat LS with the previous iteration's
-    prediction errors ε = (A y − q^-d B u)/C as the c-regressors until the relative
-    change of θ is below ``tol`` (or ``max_iter``). With ``refine`` (and nc ≥ 1) the
-    result is :func:`~ehss.identification.pem.armax_pem`, which starts from this ELS
-    estimate (and from ARX) and minimises Σε² with C kept stable. Data are RMS-scaled
-    internally, as in :func:`~ehss.identification.rels`.
+    Start from ARX least squares, then repeat LS with the previous iteration's
+    prediction errors ε = (A y − q^-d B u)/C as the c-regressors (the batch form of the
+    paper's eq. 19) until the relative change of θ is below ``tol`` (or ``max_iter``
+    iterations), C kept inside radius 0.99. Data are RMS-scaled internally, as in
+    :func:`~ehss.identification.rels`. ELS is not the prediction-error optimum (its fixed
+    point is biased where 1/C − 1/2 is not positive real); :func:`~ehss.identification.
+    pem.armax_pem` starts from it and minimises Σε².
+
+    Returns
+    -------
+    ArmaxModel
+        ``covariance`` is σ² (ΦᵀΦ)⁻¹ of the linearised regression at the solution;
+        ``meta`` holds method ("armax_els"), n_samples, els_iterations, u_scale, y_scale.
 
     Raises
     ------
     IdentificationError
         If the estimate is not finite.
-    """
-    u, y, na, nb, nc, delay, dt = _validate(u, y, na, nb, nc, delay, dt)
-    max_iter = _order("max_iter", max_iter, 1)
-    tol = _real("tol", tol)
-    if refine and nc:
-        from ehss.identification.pem import armax_pem
 
-        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt)
-    su = float(np.sqrt(np.mean(u * u))) or 1.0
-    sy = float(np.sqrt(np.mean(y * y))) or 1.0
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.signal import lfilter
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal(5000)
+    >>> e = 0.1 * rng.standard_normal(5000)
+    >>> y = lfilter([0, 0.5], [1, -0.8], u) + lfilter([1, 0.5], [1, -0.8], e)
+    >>> m = armax_els(u, y, na=1, nb=0, nc=1)
+    >>> m.meta["method"], bool(abs(m.a[1] + 0.8) < 0.01)
+    ('armax_els', True)
+    """
+    u, y, na, nb, nc, delay, dt = check_batch(u, y, na, nb, nc, delay, dt)
+    max_iter = order_arg("max_iter", max_iter, 1)
+    tol = real_arg("tol", tol)
+    su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
     n = na + nb + 1 + nc
     theta, iters = _els(us, ys, na, nb, nc, delay, max_iter, tol)
     if not np.all(np.isfinite(theta)):
         raise IdentificationError("extended least squares diverged (non-finite θ)")
-    k0 = max(na, nb + delay, nc)
-    eps = _pred_errors(theta, us, ys, na, nb, nc, delay)[k0:]
+    e_full = prediction_errors(theta, us, ys, na, nb, nc, delay)
+    eps = e_full[first_sample(na, nb, nc, delay):]
     nv_s = float(eps @ eps / max(eps.size - n, 1))
     # covariance from the linearised regression at the solution: σ² (ΦᵀΦ)⁻¹
-    e_full = _pred_errors(theta, us, ys, na, nb, nc, delay)
     phi, _, _ = regression_matrix(us, ys, e_full, na, nb, nc, delay)
-    dvec = np.ones(n)
-    dvec[na : na + nb + 1] = sy / su
-    theta = theta * dvec
+    dvec = theta_scale(na, nb, nc, su, sy)
     cov = nv_s * np.linalg.pinv(phi.T @ phi) * dvec[:, None] * dvec[None, :]
     meta = {
         "method": "armax_els",
@@ -187,6 +147,5 @@ def armax_els(
         "u_scale": su,
         "y_scale": sy,
     }
-    nv = nv_s * sy * sy
-    return _model(theta, na, nb, nc, delay, dt, nv if math.isfinite(nv) else math.nan, cov,
-                  meta)
+    return ArmaxModel.from_theta(theta * dvec, na=na, nb=nb, nc=nc, delay=delay, dt=dt,
+                                 noise_variance=nv_s * sy * sy, covariance=cov, meta=meta)

@@ -41,17 +41,20 @@ from scipy.signal import lfilter
 
 from ehss.errors import ParameterError
 from ehss.identification import _kernels as _k
-from ehss.identification.batch import arx_ls, regression_matrix
+from ehss.identification._common import (
+    check_settings,
+    regression_matrix,
+    rms_scale,
+    theta_scale,
+)
+from ehss.identification.batch import arx_ls
 from ehss.identification.model import ArmaxModel
 from ehss.identification.pem import armax_pem, oe_pem
 from ehss.identification.rels import (
-    _check_settings,
     _counters,
     _model_from_state,
     _new_state,
-    _rms_scale,
     _settings,
-    _theta_scale,
     check_record,
     rels,
 )
@@ -77,6 +80,7 @@ def estimate(
     forgetting: float = 1.0,
     p0: float = 1e6,
     p0_c: float | None = None,
+    theta0: Any = None,
 ) -> ArmaxModel:
     """Fit an ARMAX-family model of orders (na, nb, nc) and delay to one record.
 
@@ -100,6 +104,11 @@ def estimate(
     forgetting, p0, p0_c : float
         λ, α and α_c of :func:`~ehss.identification.rels` ("rels"/"rml" only; ``p0``
         and ``p0_c`` only with ``init="zero"``).
+    theta0 : array_like, optional
+        One more start of the ARMAX prediction-error fit ("armax", and the batch start
+        of "rels"/"rml"), in physical units (:func:`~ehss.identification.pem.armax_pem`);
+        ignored by the other methods. For "armax" it replaces the fit with one order
+        less of C that is otherwise made first (the order search passes the one it has).
 
     Raises
     ------
@@ -127,16 +136,17 @@ def estimate(
         model.meta["stable"] = model.check(warn=True)  # an unstable fit is never silent
         return model
     if method == "armax":
-        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt)
+        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt, theta0=theta0,
+                         smaller_c=True)
     if method == "oe":
         return oe_pem(u, y, nf=na, nb=nb, delay=delay, dt=dt)
     kw = {"na": na, "nb": nb, "nc": nc, "delay": delay, "dt": dt, "forgetting": forgetting,
           "method": method}
     if init == "zero":
         return rels(u, y, p0=p0, p0_c=p0_c, **kw)
-    na, nb, nc, delay, forgetting, _, dt = _check_settings(na, nb, nc, delay, forgetting,
+    na, nb, nc, delay, forgetting, _, dt = check_settings(na, nb, nc, delay, forgetting,
                                                            p0, dt)
-    start = armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt) if nc else \
+    start = armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt, theta0=theta0) if nc else \
         arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
     u, y = check_record(u, y)
     return _recursion_from(start, u, y, method=method, forgetting=forgetting)
@@ -154,10 +164,10 @@ def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: 
     """
     na, nb, nc, d = start.na, start.nb, start.nc, start.delay
     n = na + nb + 1 + nc
-    su, sy = _rms_scale(u), _rms_scale(y)
+    su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
     P0 = _start_information(u, y, start, filtered=(method == "rml"))
-    theta_s = start.theta / _theta_scale(na, nb, nc, su, sy)
+    theta_s = start.theta / theta_scale(na, nb, nc, su, sy)
     alpha = float(np.mean(np.diag(P0)))  # what a reset of P returns to (α I)
     settings = _settings(na, nb, nc, d, forgetting, alpha, alpha, float(np.trace(P0)),
                          _C_RADIUS, method)
@@ -195,9 +205,9 @@ def _start_information(u: np.ndarray, y: np.ndarray, start: ArmaxModel, *,
     dependent (an output-error start has C = A).
     """
     na, nb, nc, d = start.na, start.nb, start.nc, start.delay
-    su, sy = _rms_scale(u), _rms_scale(y)
+    su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
-    theta_s = start.theta / _theta_scale(na, nb, nc, su, sy)
+    theta_s = start.theta / theta_scale(na, nb, nc, su, sy)
     a = np.concatenate([[1.0], theta_s[:na]])
     bd = np.concatenate([np.zeros(d), theta_s[na : na + nb + 1]])
     c = np.concatenate([[1.0], theta_s[na + nb + 1 :]])

@@ -209,6 +209,39 @@ class ArmaxModel:
         """θ = [a1..a_na, b0..b_nb, c1..c_nc] (eq 18)."""
         return np.concatenate([self.a[1:], self.b, self.c[1:]])
 
+    @classmethod
+    def from_theta(
+        cls, theta: Any, *, na: int, nb: int, nc: int, delay: int, dt: float,
+        noise_variance: float = math.nan, covariance: Any = None, meta: dict | None = None,
+    ) -> ArmaxModel:
+        """The model of θ = [a1..a_na, b0..b_nb, c1..c_nc] (eq 18), the inverse of
+        :attr:`theta`.
+
+        A non-finite ``noise_variance`` is stored as NaN (unknown) and a ``covariance``
+        with a non-finite entry as None, so that an estimator's result is always a valid
+        model; θ itself must be finite (ParameterError otherwise).
+
+        Examples
+        --------
+        >>> m = ArmaxModel.from_theta([-0.5, 0.5, 0.2], na=1, nb=0, nc=1, delay=1, dt=1e-3)
+        >>> m.a.tolist(), m.b.tolist(), m.c.tolist()
+        ([1.0, -0.5], [0.5], [1.0, 0.2])
+        """
+        theta = np.asarray(theta, dtype=np.float64).reshape(-1)
+        n = na + nb + 1 + nc
+        if theta.size != n:
+            raise ParameterError(f"theta has {theta.size} coefficients, must have "
+                                 f"na + nb + 1 + nc = {n}")
+        nv = float(noise_variance)
+        if covariance is not None and not np.all(np.isfinite(covariance)):
+            covariance = None
+        return cls(
+            a=np.concatenate([[1.0], theta[:na]]), b=theta[na : na + nb + 1],
+            c=np.concatenate([[1.0], theta[na + nb + 1 :]]), delay=delay, dt=dt,
+            noise_variance=nv if math.isfinite(nv) else math.nan, covariance=covariance,
+            meta={} if meta is None else meta,
+        )
+
     # ------------------------------------------------------------------ forms
     def paper_form(self) -> tuple[np.ndarray, np.ndarray]:
         """(num, den) in descending powers of z with G(z) = num(z)/den(z), equal lengths.

@@ -3,13 +3,14 @@
 Each candidate is fitted with :func:`~ehss.identification.estimate`, the estimator that
 identification uses (one ``method`` vocabulary: arx, armax, oe, rels, rml), so the pick
 carries over: refitting it with the same method on the same data gives the same model
-(every estimator is deterministic). Given a ``score`` (a model's fit on validation data,
-higher is better) the candidates are ranked by it, and AIC, FPE and MDL are extra columns;
-an unstable candidate is never recommended. :func:`ehss.workflow.select_orders` is the
-search on a measured record: it prepares the record as ``ehss identify`` does and scores
-each candidate with the validation ``ehss identify`` reports. The one-step prediction
-errors ε on the estimation data give the loss V = mean(ε²), and with p free parameters
-and N samples
+(every estimator is deterministic; an ARMAX candidate with nc ≥ 2 is also started from
+the fit with one order less of C, which the grid hands it and a refit makes itself).
+Given a ``score`` (a model's fit on validation data, higher is better) the candidates
+are ranked by it, and AIC, FPE and MDL are extra columns; an unstable candidate is
+never recommended. :func:`ehss.workflow.select_orders` is the search on a measured
+record: it prepares the record as ``ehss identify`` does and scores each candidate
+with the validation ``ehss identify`` reports. The one-step prediction errors ε on the
+estimation data give the loss V = mean(ε²), and with p free parameters and N samples
 
 .. math::
 
@@ -22,14 +23,14 @@ from __future__ import annotations
 
 import itertools
 import math
-import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ehss.errors import DataError, EhssWarning, IdentificationError, ParameterError
+from ehss.errors import DataError, IdentificationError, ParameterError
+from ehss.identification._grid import check_jobs, fit_grid
 from ehss.identification.estimators import INITS, METHODS, estimate
 from ehss.identification.model import ArmaxModel
 from ehss.identification.rels import check_record
@@ -109,8 +110,16 @@ def select_order(
     forgetting: float = 1.0,
     fit_tolerance: float = 0.1,
     admissible: Callable[[ArmaxModel], bool] | None = None,
+    jobs: int | None = None,
 ) -> OrderSelection:
     """Fit every (na, nb, nc, delay) of the grid and pick the best stable one.
+
+    The candidates are fitted on ``jobs`` threads. With ``method="armax"`` a candidate
+    with nc ≥ 2 waits for its neighbour with one order less of C when the grid has it
+    and is also started from it (θ padded with a zero; the fit does the same by itself
+    otherwise, :func:`~ehss.identification.pem.armax_pem` ``smaller_c``), keeping the
+    better end: it never fits the estimation data worse than that neighbour. The result
+    does not depend on ``jobs``.
 
     Parameters
     ----------
@@ -144,6 +153,10 @@ def select_order(
         is admissible, the pick is made among those only (:func:`ehss.workflow.
         select_orders` passes its acceptance, so that a model that fails it is not
         recommended over one that meets it); when none is, among all stable ones.
+    jobs : int, optional
+        Threads fitting candidates side by side (default: the cores this process may
+        use, ``os.sched_getaffinity``). ``score`` and ``admissible`` are called on the
+        calling thread, in grid order.
 
     Returns
     -------
@@ -181,23 +194,20 @@ def select_order(
         _candidates("na", na, 1), _candidates("nb", nb, 0), ncs,
         _candidates("delay", delay, 0),
     ))
+    jobs = check_jobs(jobs)
+
+    def fit(c: tuple[int, int, int, int], theta0: np.ndarray | None) -> ArmaxModel | None:
+        try:
+            return estimate(u, y, method=method, na=c[0], nb=c[1], nc=c[2], delay=c[3],
+                            dt=dt, init=init, p0=p0, p0_c=p0_c, forgetting=forgetting,
+                            theta0=theta0)
+        except IdentificationError:  # a candidate that cannot be fitted is listed as failed
+            return None
+
     rows: list[OrderRow] = []
     models: list[ArmaxModel | None] = []
-    for a_, b_, c_, d_ in grid:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", EhssWarning)  # unstable ones are scored
-                m = estimate(u, y, method=method, na=a_, nb=b_, nc=c_, delay=d_, dt=dt,
-                             init=init, p0=p0, p0_c=p0_c, forgetting=forgetting)
-        except IdentificationError:  # a candidate that cannot be fitted is listed as failed
-            p = a_ + b_ + 1 + c_
-            rows.append(OrderRow(na=a_, nb=b_, nc=c_, delay=d_, n_params=p, loss=math.inf,
-                                 aic=math.inf, fpe=math.inf, mdl=math.inf,
-                                 fit=-math.inf if score is not None else math.nan,
-                                 stable=False, max_pole_radius=math.inf))
-            models.append(None)
-            continue
-        rows.append(_score(m, u, y, score))
+    for i, m in fit_grid(grid, fit, jobs=jobs, neighbours=(method == "armax")):
+        rows.append(_failed(grid[i], score) if m is None else _score(m, u, y, score))
         models.append(m)
     if not rows:  # pragma: no cover - _candidates forbids empty grids
         raise DataError(f"no candidate orders for {u.size} samples")
@@ -217,6 +227,16 @@ def select_order(
         i = min(near, key=lambda j: (rows[j].n_params, j))
     return OrderSelection(table=tuple(rows), best=rows[i], criterion=criterion,
                           model=models[i], method=method)
+
+
+def _failed(c: tuple[int, int, int, int],
+            score: Callable[[ArmaxModel], float] | None) -> OrderRow:
+    """The row of a candidate that could not be fitted."""
+    na, nb, nc, d = c
+    return OrderRow(na=na, nb=nb, nc=nc, delay=d, n_params=na + nb + 1 + nc, loss=math.inf,
+                    aic=math.inf, fpe=math.inf, mdl=math.inf,
+                    fit=-math.inf if score is not None else math.nan, stable=False,
+                    max_pole_radius=math.inf)
 
 
 def _score(m: ArmaxModel, u: np.ndarray, y: np.ndarray,

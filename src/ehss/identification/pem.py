@@ -22,6 +22,12 @@ Output error, y = q^-d B/F u + e, θ = [f1..f_nf, b0..b_nb]:
     \\frac{\\partial\\varepsilon}{\\partial f_i} = \\frac{\\hat y(k-i)}{F},\\quad
     \\frac{\\partial\\varepsilon}{\\partial b_j} = -\\frac{u(k-d-j)}{F}.
 
+The prediction errors and the Jacobians are compiled
+(:mod:`ehss.identification._pem_kernels`, GIL released): since filtering commutes with a
+delay, each Jacobian filters y, u and ε (ARMAX) or ŷ and u (OE) once and takes its
+columns as delayed copies; the errors of the last trial point are reused for its
+Jacobian.
+
 An OE model is returned as an :class:`~ehss.identification.ArmaxModel` with a = c = F:
 A y = B u + A e is exactly y = B/F u + e, so one model type serves both.
 
@@ -37,24 +43,34 @@ Safeguards:
   the loss counts the samples from max(na, nb + d, nc) on;
 * several cheap starts are tried (ARMAX: extended least squares, ARX with C = 1 and,
   when nc ≥ na, the output-error fit with C = F; OE: ARX and Steiglitz–McBride
-  iterations) and the lowest loss wins;
+  iterations), and for ARMAX any start the caller gives (``theta0``: the order search
+  passes a smaller neighbour's estimate, padded with zeros), and the lowest loss wins;
 * an ARMAX estimate whose A is unstable is flagged (``meta["stable"] = False``) and warned
   about, never returned silently.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from ehss.errors import IdentificationError
-from ehss.identification.batch import _stabilise, _validate, els_theta, regression_matrix
+from ehss.errors import IdentificationError, ParameterError
+from ehss.identification import _pem_kernels as _pk
+from ehss.identification._common import (
+    check_batch,
+    order_arg,
+    radius_arg,
+    real_arg,
+    regression_matrix,
+    rms_scale,
+    stabilise,
+    theta_scale,
+)
+from ehss.identification.batch import els_theta
 from ehss.identification.model import ArmaxModel
-from ehss.identification.rels import _order, _real, _rms_scale
 
 __all__ = ["armax_pem", "oe_pem"]
 
@@ -69,20 +85,8 @@ def _radius(p: np.ndarray) -> float:
 
 
 def _inside(p: np.ndarray, radius: float) -> bool:
-    """True if every root of [1, p...] lies strictly inside ``radius`` (Schur–Cohn).
-
-    The roots of z^n + p1 z^(n−1) + … scaled by 1/radius are those of
-    [1, p1/r, p2/r², …]; the step-down (Levinson) recursion on that polynomial finds
-    its reflection coefficients k, and all |k| < 1 iff all its roots are inside the unit
-    circle. O(n²), much cheaper than np.roots inside the optimiser's loop.
-    """
-    a = np.concatenate([[1.0], p / radius ** np.arange(1, p.size + 1)])
-    while a.size > 1:
-        k = a[-1] / a[0]
-        if not abs(k) < 1.0:
-            return False
-        a = (a - k * a[::-1])[:-1] / (1.0 - k * k)
-    return True
+    """True if every root of [1, p...] lies strictly inside ``radius`` (Schur–Cohn)."""
+    return bool(_pk.roots_inside(np.ascontiguousarray(p, dtype=np.float64), float(radius)))
 
 
 def _solve(fun, jac, x0: np.ndarray, max_nfev: int, tol: float):
@@ -98,40 +102,58 @@ def _covariance(J: np.ndarray, eps: np.ndarray, n_free: int) -> tuple[float, np.
     return nv, nv * np.linalg.pinv(J.T @ J)
 
 
+class _Predictor:
+    """Residuals ε(k ≥ k0) and Jacobian of one model structure on one scaled record.
+
+    ``least_squares`` asks for the Jacobian at the point whose residuals it has just
+    had: the last θ and its full error sequence are kept, so that the Jacobian does not
+    filter the record once more for them. A θ whose predictor polynomial (C for ARMAX,
+    F for OE) has a root at or beyond ``radius`` gets the constant residual ``_BARRIER``
+    (the step is rejected, the damping raised).
+    """
+
+    def __init__(self, us, ys, na, nb, nc, delay, k0, radius, *, oe=False):
+        self.us, self.ys = us, ys
+        self.na, self.nb, self.nc, self.delay, self.k0 = na, nb, nc, delay, k0
+        self.radius, self.oe = radius, oe
+        self._theta = None
+        self._signal = None
+
+    def _guard(self, theta: np.ndarray) -> np.ndarray:
+        return theta[: self.na] if self.oe else theta[self.na + self.nb + 1 :]
+
+    def _signal_at(self, theta: np.ndarray) -> np.ndarray:
+        """ε (ARMAX) or ŷ (OE) over the whole record at θ, from the cache if there."""
+        if self._theta is None or not np.array_equal(theta, self._theta):
+            th = np.ascontiguousarray(theta, dtype=np.float64)
+            if self.oe:
+                sig = _pk.oe_simulate(th, self.us, self.na, self.nb, self.delay)
+            else:
+                sig = _pk.armax_errors(th, self.us, self.ys, self.na, self.nb, self.nc,
+                                       self.delay)
+            self._theta, self._signal = th.copy(), sig
+        return self._signal
+
+    def residual(self, theta: np.ndarray) -> np.ndarray:
+        if not _inside(self._guard(theta), self.radius):
+            return np.full(self.ys.size - self.k0, _BARRIER)
+        sig = self._signal_at(theta)
+        return (self.ys - sig)[self.k0 :] if self.oe else sig[self.k0 :]
+
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        sig = self._signal_at(theta)
+        th = self._theta
+        if self.oe:
+            return _pk.oe_jacobian(th, self.us, sig, self.na, self.nb, self.delay, self.k0)
+        return _pk.armax_jacobian(th, self.us, self.ys, sig, self.na, self.nb, self.nc,
+                                  self.delay, self.k0)
+
+    def fit(self, x0: np.ndarray, max_nfev: int, tol: float):
+        """Levenberg–Marquardt from ``x0``: (θ, cost, nfev)."""
+        return _solve(self.residual, self.jacobian, x0, max_nfev, tol)
+
+
 # ------------------------------------------------------------------------------ ARMAX
-def _lag(x: np.ndarray, i: int) -> np.ndarray:
-    """x(k − i) with zeros before the record (the system at rest before k = 0)."""
-    return np.concatenate([np.zeros(i), x[: x.size - i]]) if i else x
-
-
-def _padded_regressors(us, ys, na, nb, delay) -> np.ndarray:
-    """Rows [−y(k−1)..−y(k−na), u(k−d)..u(k−d−nb)] for every k, zero before the record."""
-    cols = [-_lag(ys, i) for i in range(1, na + 1)]
-    cols += [_lag(us, delay + j) for j in range(nb + 1)]
-    return np.column_stack(cols)
-
-
-def _armax_errors(theta, phi, ys, na, nb, radius):
-    """ε = (A y − q^-d B u)/C for every k, zero initial conditions; None if C unstable."""
-    c = theta[na + nb + 1 :]
-    if not _inside(c, radius):
-        return None
-    return lfilter([1.0], np.concatenate([[1.0], c]), ys - phi @ theta[: na + nb + 1])
-
-
-def _armax_residual(theta, phi, ys, na, nb, nc, k0, radius):
-    eps = _armax_errors(theta, phi, ys, na, nb, radius)
-    return np.full(ys.size - k0, _BARRIER) if eps is None else eps[k0:]
-
-
-def _armax_jacobian(theta, phi, ys, na, nb, nc, k0, radius):
-    cpoly = np.concatenate([[1.0], theta[na + nb + 1 :]])
-    eps = _armax_errors(theta, phi, ys, na, nb, radius)
-    # ∂ε/∂θ_ab = −φ/C (φ holds −y(k−i) and u(k−d−j)); ∂ε/∂c_i = −ε(k−i)/C
-    cols = [-phi] + [-_lag(eps, i)[:, None] for i in range(1, nc + 1)]
-    return lfilter([1.0], cpoly, np.hstack(cols), axis=0)[k0:]
-
-
 def armax_pem(
     u: Any,
     y: Any,
@@ -144,6 +166,8 @@ def armax_pem(
     radius: float = 0.999,
     max_nfev: int = 200,
     tol: float = 1e-10,
+    theta0: Any = None,
+    smaller_c: bool = False,
 ) -> ArmaxModel:
     """ARMAX model A y = q^-d B u + C e by prediction-error minimisation.
 
@@ -163,13 +187,24 @@ def armax_pem(
         Evaluation budget of each start's Levenberg–Marquardt run.
     tol : float
         ``xtol``, ``ftol`` and ``gtol`` of ``least_squares``.
+    theta0 : array_like, shape (na + nb + 1 + nc,), optional
+        One more start, in physical units: e.g. the estimate of a neighbouring smaller
+        structure padded with zeros (what the order search passes), so that the fit
+        cannot end worse than that. Tried after the cheap starts, which win ties;
+        ignored for nc = 0, where least squares is the optimum.
+    smaller_c : bool
+        With nc ≥ 2 and no ``theta0``: start also from the fit of the same structure with
+        one order less of C (itself fitted so), padded with a zero — the neighbour
+        start of the order search, which passes that fit as ``theta0`` instead of
+        fitting it again, so that a refit of a pick gives the same model. (For nc = 1
+        the neighbour, C = 1, is the ARX start.)
 
     Returns
     -------
     ArmaxModel
         ``covariance`` is σ² (JᵀJ)⁻¹ at the optimum; ``meta`` holds method
-        ("armax_pem"), n_samples, start (which start won), starts (their losses), nfev,
-        stable, u_scale, y_scale.
+        ("armax_pem"), n_samples, start (which start won: "els", "arx", "oe" or
+        "theta0"), starts (their losses), nfev, stable, u_scale, y_scale.
 
     Warns
     -----
@@ -188,53 +223,39 @@ def armax_pem(
     >>> bool(abs(m.a[1] + 0.8) < 0.01 and abs(m.c[1] - 0.5) < 0.05)
     True
     """
-    u, y, na, nb, nc, delay, dt = _validate(u, y, na, nb, nc, delay, dt)
-    radius = _radius_setting(radius)
-    max_nfev = _order("max_nfev", max_nfev, 1)
-    tol = _real("tol", tol)
-    su, sy = _rms_scale(u), _rms_scale(y)
+    u, y, na, nb, nc, delay, dt = check_batch(u, y, na, nb, nc, delay, dt)
+    radius = radius_arg("radius", radius)
+    max_nfev = order_arg("max_nfev", max_nfev, 1)
+    tol = real_arg("tol", tol)
+    if theta0 is None and smaller_c and nc >= 2:
+        theta0 = _smaller_c_theta(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol)
+    model = _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0)
+    if not model.meta["stable"]:
+        model.check(warn=True)  # EhssWarning: an unstable model is never silent
+    return model
+
+
+def _smaller_c_theta(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol) -> np.ndarray:
+    """θ of the fit with nc − 1 (started so itself, down to nc = 1), a zero appended."""
+    theta0 = None
+    for k in range(1, nc):
+        m = _armax_fit(u, y, na, nb, k, delay, dt, radius, max_nfev, tol, theta0)
+        theta0 = np.append(m.theta, 0.0)
+    return theta0
+
+
+def _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0) -> ArmaxModel:
+    """:func:`armax_pem` on checked arguments, without its warning."""
+    su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
-    phi, t, k0 = regression_matrix(us, ys, None, na, nb, 0, delay)
-    k0 = max(k0, nc)
-    n_ab = na + nb + 1
-    starts: dict[str, np.ndarray] = {}
-    arx = np.zeros(n_ab + nc)
-    arx[:n_ab] = np.linalg.lstsq(phi, t, rcond=None)[0]
-    if nc:
-        els = els_theta(us, ys, na, nb, nc, delay)
-        els[n_ab:] = _stabilise(els[n_ab:], 0.95 * radius)
-        starts["els"] = els
-    starts["arx"] = arx
-    if nc >= na:  # output-error start: C = F (white noise at the output)
-        oe = _oe_fit(us, ys, na, nb, delay, radius, max_nfev, tol)[0]
-        starts["oe"] = np.concatenate([oe, oe[:na], np.zeros(nc - na)])
-    args = (_padded_regressors(us, ys, na, nb, delay), ys, na, nb, nc, k0, radius)
-    best = None
-    losses = {}
-    nfev_total = 0
-    for name, x0 in starts.items():
-        if nc:
-            x, cost, nfev = _solve(lambda th: _armax_residual(th, *args),
-                                   lambda th: _armax_jacobian(th, *args), x0, max_nfev, tol)
-        else:  # ARX: the loss is quadratic, least squares is the optimum
-            x, cost, nfev = x0, 0.5 * float(np.sum(_armax_residual(x0, *args) ** 2)), 0
-        nfev_total += nfev
-        losses[name] = 2.0 * cost / (ys.size - k0)
-        if not np.all(np.isfinite(x)):
-            continue
-        # a stable A beats any unstable one: a lower loss bought with a pole outside the
-        # unit circle is over-fitting (a near pole-zero-noise cancellation), not a model
-        key = (_radius(x[:na]) >= 1.0, cost)
-        if best is None or key < best[1]:
-            best = (name, key, x)
-    if best is None:
-        raise IdentificationError("prediction-error minimisation diverged (non-finite θ)")
-    name, _, theta = best
-    eps = _armax_residual(theta, *args)
-    J = _armax_jacobian(theta, *args)
-    nv_s, cov_s = _covariance(J, eps, theta.size)
-    dvec = np.ones(theta.size)
-    dvec[na:n_ab] = sy / su
+    dvec = theta_scale(na, nb, nc, su, sy)
+    starts, k0 = _armax_starts(us, ys, na, nb, nc, delay, radius, max_nfev, tol)
+    if theta0 is not None and nc:
+        starts["theta0"] = _given_start(theta0, dvec, na, nb, nc, 0.95 * radius)
+    problem = _Predictor(us, ys, na, nb, nc, delay, k0, radius)
+    name, theta, losses, nfev_total = _best_start(problem, starts, max_nfev, tol)
+    eps = problem.residual(theta)
+    nv_s, cov_s = _covariance(problem.jacobian(theta), eps, theta.size)
     meta = {
         "method": "armax_pem",
         "n_samples": int(u.size),
@@ -246,33 +267,74 @@ def armax_pem(
         "y_scale": sy,
     }
     return _finish(theta * dvec, cov_s * np.outer(dvec, dvec), nv_s * sy * sy, na, nb, nc,
-                   delay, dt, meta, k0)
+                   delay, dt, meta, k0, warn=False)
+
+
+def _armax_starts(us, ys, na, nb, nc, delay, radius, max_nfev, tol):
+    """The cheap starts on scaled data, by name, and the first sample of the loss.
+
+    Extended least squares (C kept inside 0.95 radius), ARX with C = 1 and, when
+    nc ≥ na, the output-error fit with C = F (white noise at the output).
+    """
+    phi, t, k0 = regression_matrix(us, ys, None, na, nb, 0, delay)
+    k0 = max(k0, nc)
+    n_ab = na + nb + 1
+    starts: dict[str, np.ndarray] = {}
+    arx = np.zeros(n_ab + nc)
+    arx[:n_ab] = np.linalg.lstsq(phi, t, rcond=None)[0]
+    if nc:
+        els = els_theta(us, ys, na, nb, nc, delay)
+        els[n_ab:] = stabilise(els[n_ab:], 0.95 * radius)
+        starts["els"] = els
+    starts["arx"] = arx
+    if nc >= na:
+        oe = _oe_fit(us, ys, na, nb, delay, radius, max_nfev, tol)[0]
+        starts["oe"] = np.concatenate([oe, oe[:na], np.zeros(nc - na)])
+    return starts, k0
+
+
+def _given_start(theta0: Any, dvec: np.ndarray, na: int, nb: int, nc: int,
+                 radius: float) -> np.ndarray:
+    """``theta0`` (physical units) on the scaled data, its C stabilised inside radius."""
+    t = np.array(theta0, dtype=np.float64).reshape(-1)
+    if t.size != dvec.size or not np.all(np.isfinite(t)):
+        raise ParameterError(f"theta0 must hold {dvec.size} finite coefficients "
+                             f"(na + nb + 1 + nc), got {np.asarray(theta0).size}")
+    t = t / dvec
+    n_ab = na + nb + 1
+    t[n_ab:] = stabilise(t[n_ab:], radius)
+    return t
+
+
+def _best_start(problem: _Predictor, starts: dict[str, np.ndarray], max_nfev: int,
+                tol: float):
+    """Fit from every start; the stable-A fit of lowest loss wins (earlier on a tie).
+
+    A stable A beats any unstable one: a lower loss bought with a pole outside the unit
+    circle is over-fitting (a near pole-zero-noise cancellation), not a model. For
+    nc = 0 the loss is quadratic and the ARX start is already the optimum.
+    """
+    best = None
+    losses = {}
+    nfev_total = 0
+    for name, x0 in starts.items():
+        if problem.nc:
+            x, cost, nfev = problem.fit(x0, max_nfev, tol)
+        else:
+            x, cost, nfev = x0, 0.5 * float(np.sum(problem.residual(x0) ** 2)), 0
+        nfev_total += nfev
+        losses[name] = 2.0 * cost / (problem.ys.size - problem.k0)
+        if not np.all(np.isfinite(x)):
+            continue
+        key = (_radius(x[: problem.na]) >= 1.0, cost)
+        if best is None or key < best[1]:
+            best = (name, key, x)
+    if best is None:
+        raise IdentificationError("prediction-error minimisation diverged (non-finite θ)")
+    return best[0], best[2], losses, nfev_total
 
 
 # ------------------------------------------------------------------------------ OE
-def _oe_simulate(theta, us, nf, nb, delay):
-    f = np.concatenate([[1.0], theta[:nf]])
-    bd = np.concatenate([np.zeros(delay), theta[nf:]])
-    return lfilter(bd, f, us), f
-
-
-def _oe_residual(theta, us, ys, nf, nb, delay, k0, radius):
-    if not _inside(theta[:nf], radius):
-        return np.full(ys.size - k0, _BARRIER)
-    yhat, _ = _oe_simulate(theta, us, nf, nb, delay)
-    return (ys - yhat)[k0:]
-
-
-def _oe_jacobian(theta, us, ys, nf, nb, delay, k0, radius):
-    yhat, f = _oe_simulate(theta, us, nf, nb, delay)
-    N = us.size
-    # ∂ε/∂f_i = ŷ(k−i)/F ; ∂ε/∂b_j = −u(k−d−j)/F
-    cols = [np.concatenate([np.zeros(i), yhat[: N - i]]) for i in range(1, nf + 1)]
-    cols += [-np.concatenate([np.zeros(delay + j), us[: N - delay - j]])
-             for j in range(nb + 1)]
-    return lfilter([1.0], f, np.column_stack(cols), axis=0)[k0:]
-
-
 def _steiglitz_mcbride(us, ys, nf, nb, delay, theta, radius, iterations=8):
     """Refilter u, y by 1/F and refit ARX (Steiglitz & McBride 1965): an OE start."""
     for _ in range(iterations):
@@ -280,7 +342,7 @@ def _steiglitz_mcbride(us, ys, nf, nb, delay, theta, radius, iterations=8):
         uf, yf = lfilter([1.0], f, us), lfilter([1.0], f, ys)
         phi, t, _ = regression_matrix(uf, yf, None, nf, nb, 0, delay)
         new = np.linalg.lstsq(phi, t, rcond=None)[0]
-        new[:nf] = _stabilise(new[:nf], 0.95 * radius)
+        new[:nf] = stabilise(new[:nf], 0.95 * radius)
         if not np.all(np.isfinite(new)):
             break
         theta = new
@@ -291,16 +353,15 @@ def _oe_fit(us, ys, nf, nb, delay, radius, max_nfev, tol):
     """OE PEM on scaled data from the ARX and Steiglitz–McBride starts; best wins."""
     phi, t, k0 = regression_matrix(us, ys, None, nf, nb, 0, delay)
     arx = np.linalg.lstsq(phi, t, rcond=None)[0]
-    arx[:nf] = _stabilise(arx[:nf], 0.95 * radius)
+    arx[:nf] = stabilise(arx[:nf], 0.95 * radius)
     starts = {"arx": arx, "steiglitz_mcbride": _steiglitz_mcbride(us, ys, nf, nb, delay,
                                                                    arx.copy(), radius)}
-    args = (us, ys, nf, nb, delay, k0, radius)
+    problem = _Predictor(us, ys, nf, nb, 0, delay, k0, radius, oe=True)
     best = None
     losses = {}
     nfev_total = 0
     for name, x0 in starts.items():
-        x, cost, nfev = _solve(lambda th: _oe_residual(th, *args),
-                               lambda th: _oe_jacobian(th, *args), x0, max_nfev, tol)
+        x, cost, nfev = problem.fit(x0, max_nfev, tol)
         nfev_total += nfev
         losses[name] = 2.0 * cost / (ys.size - k0)
         if np.all(np.isfinite(x)) and (best is None or cost < best[1]):
@@ -357,17 +418,15 @@ def oe_pem(
     >>> bool(abs(m.a[1] + 0.8) < 0.01) and bool(np.array_equal(m.a, m.c))
     True
     """
-    u, y, nf, nb, _, delay, dt = _validate(u, y, nf, nb, 0, delay, dt)
-    radius = _radius_setting(radius)
-    max_nfev = _order("max_nfev", max_nfev, 1)
-    tol = _real("tol", tol)
-    su, sy = _rms_scale(u), _rms_scale(y)
+    u, y, nf, nb, _, delay, dt = check_batch(u, y, nf, nb, 0, delay, dt)
+    radius = radius_arg("radius", radius)
+    max_nfev = order_arg("max_nfev", max_nfev, 1)
+    tol = real_arg("tol", tol)
+    su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
     theta, name, losses, nfev_total, k0 = _oe_fit(us, ys, nf, nb, delay, radius, max_nfev, tol)
-    args = (us, ys, nf, nb, delay, k0, radius)
-    eps = _oe_residual(theta, *args)
-    J = _oe_jacobian(theta, *args)
-    nv_s, cov_s = _covariance(J, eps, theta.size)
+    problem = _Predictor(us, ys, nf, nb, 0, delay, k0, radius, oe=True)
+    nv_s, cov_s = _covariance(problem.jacobian(theta), problem.residual(theta), theta.size)
     dvec = np.ones(theta.size)
     dvec[nf:] = sy / su
     theta = theta * dvec
@@ -389,27 +448,15 @@ def oe_pem(
 
 
 # ------------------------------------------------------------------------------ shared
-def _radius_setting(radius: Any) -> float:
-    from ehss.errors import ParameterError
-
-    r = _real("radius", radius)
-    if not 0.0 < r < 1.0:
-        raise ParameterError(f"radius={radius!r} must be in (0, 1)")
-    return r
-
-
-def _finish(theta, cov, nv, na, nb, nc, delay, dt, meta, k0) -> ArmaxModel:
+def _finish(theta, cov, nv, na, nb, nc, delay, dt, meta, k0, warn=True) -> ArmaxModel:
     if not np.all(np.isfinite(theta)):
         raise IdentificationError("the estimate does not fit float64 in physical units")
-    a = np.concatenate([[1.0], theta[:na]])
-    radius = _radius(a[1:])
-    model = ArmaxModel(
-        a=a, b=theta[na : na + nb + 1], c=np.concatenate([[1.0], theta[na + nb + 1 :]]),
-        delay=delay, dt=dt, noise_variance=nv if math.isfinite(nv) else math.nan,
-        covariance=cov if np.all(np.isfinite(cov)) else None,
+    radius = _radius(theta[:na])
+    model = ArmaxModel.from_theta(
+        theta, na=na, nb=nb, nc=nc, delay=delay, dt=dt, noise_variance=nv, covariance=cov,
         meta={**meta, "first_sample": int(k0), "stable": radius < 1.0,
               "max_pole_radius": radius},
     )
-    if radius >= 1.0:
+    if radius >= 1.0 and warn:
         model.check(warn=True)  # EhssWarning: an unstable model is never silent
     return model

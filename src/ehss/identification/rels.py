@@ -45,7 +45,6 @@ to RML as well (a reset of P also restarts the filter 1/Ĉ from rest).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -53,6 +52,11 @@ import numpy as np
 from ehss._checks import as_record
 from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification import _kernels as _k
+from ehss.identification._common import check_settings as _check_settings
+from ehss.identification._common import order_arg as _order
+from ehss.identification._common import real_arg as _real
+from ehss.identification._common import rms_scale as _rms_scale
+from ehss.identification._common import theta_scale as _theta_scale
 from ehss.identification.model import ArmaxModel
 
 __all__ = ["rels", "RelsEstimator"]
@@ -61,42 +65,6 @@ _METHODS = ("rels", "rml")
 
 
 # ---------------------------------------------------------------- validation helpers
-def _order(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ParameterError(f"{name}={value!r} must be an integer >= {minimum}")
-    if value < minimum:
-        raise ParameterError(f"{name}={value!r} must be an integer >= {minimum}")
-    return int(value)
-
-
-def _real(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ParameterError(f"{name}={value!r} must be a real number")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ParameterError(f"{name}={value!r} must be finite")
-    return value
-
-
-def _check_settings(
-    na: Any, nb: Any, nc: Any, delay: Any, forgetting: Any, p0: Any, dt: Any
-) -> tuple[int, int, int, int, float, float, float]:
-    na = _order("na", na, 1)
-    nb = _order("nb", nb, 0)
-    nc = _order("nc", nc, 0)
-    delay = _order("delay", delay, 0)
-    lam = _real("forgetting", forgetting)
-    if not 0.0 < lam <= 1.0:
-        raise ParameterError(f"forgetting={forgetting!r} must be in (0, 1]")
-    alpha = _real("p0", p0)
-    if alpha <= 0:
-        raise ParameterError(f"p0={p0!r} must be > 0")
-    dt = _real("dt", dt)
-    if dt <= 0:
-        raise ParameterError(f"dt={dt!r} must be > 0 (seconds)")
-    return na, nb, nc, delay, lam, alpha, dt
-
-
 def _check_method(method: Any) -> str:
     if not isinstance(method, str) or method not in _METHODS:
         raise ParameterError(f"method={method!r} must be 'rels' or 'rml'")
@@ -126,23 +94,6 @@ def _check_theta0(theta0: Any, n: int) -> np.ndarray:
 def check_record(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
     """Validate an input/output record: 1-D, equal length, finite; contiguous float64."""
     return as_record(u, y)
-
-
-def _rms_scale(x: np.ndarray) -> float:
-    """RMS of x, formed as max|x| · RMS(x / max|x|) so that it neither overflows nor
-    underflows for data of any float64 magnitude (1 for an all-zero record)."""
-    peak = float(np.max(np.abs(x))) if x.size else 0.0
-    if not (peak > 0.0 and math.isfinite(peak)):
-        return 1.0
-    return peak * float(np.sqrt(np.mean(np.square(x / peak))))
-
-
-def _theta_scale(na: int, nb: int, nc: int, u_scale: float, y_scale: float) -> np.ndarray:
-    """Factor D with θ_physical = D θ_scaled (only the b-part changes: b = b_s s_y/s_u)."""
-    dvec = np.ones(na + nb + 1 + nc)
-    with np.errstate(over="ignore", under="ignore"):  # checked by _model_from_state
-        dvec[na : na + nb + 1] = y_scale / u_scale
-    return dvec
 
 
 def _settings(
@@ -201,14 +152,8 @@ def _model_from_state(
             f"y scale {y_scale:.3g}: b = b_scaled·{y_scale:.3g}/{u_scale:.3g}); rescale "
             "u and y to closer magnitudes"
         )
-    return ArmaxModel(
-        a=np.concatenate([[1.0], theta[:na]]),
-        b=theta[na : na + nb + 1],
-        c=np.concatenate([[1.0], theta[na + nb + 1 :]]),
-        delay=delay, dt=dt,
-        noise_variance=nv if math.isfinite(nv) else math.nan,
-        covariance=cov, meta=meta,
-    )
+    return ArmaxModel.from_theta(theta, na=na, nb=nb, nc=nc, delay=delay, dt=dt,
+                                 noise_variance=nv, covariance=cov, meta=meta)
 
 
 def _sample(name: str, value: Any) -> float:

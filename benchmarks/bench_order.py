@@ -1,0 +1,74 @@
+"""``ehss order`` end to end on a record, against another checkout of ehss, in one run.
+
+Run from the project root, with a baseline tree (e.g. ``git archive 3b7a2e5 src | tar -x
+-C /tmp/order-base``) and a record (``ehss reproduce --out /tmp/report`` writes the
+report's position record)::
+
+    python benchmarks/bench_order.py /tmp/report/data/position.csv \\
+        --against /tmp/order-base/src --rounds 2
+
+Each round runs the command once with this tree's ``src`` and once with the baseline's
+(alternating which goes first), each as a fresh process on its own ``PYTHONPATH`` with
+its own ``NUMBA_CACHE_DIR``, after one untimed warm-up run of each (numba compiles and
+caches its kernels there). Wall-clock seconds of the whole command are printed per run,
+then the median of each side and their ratio, and whether both recommended the same
+orders (the ``best by ...`` line, up to its fit figures).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+ARGS = ["--input", "reference", "--output", "output", "--band", "2", "100"]
+
+
+def _run(src: Path, record: Path, cache: Path) -> tuple[float, str]:
+    """(wall seconds, the recommended orders) of one ``ehss order`` process."""
+    env = {**os.environ, "PYTHONPATH": str(src), "NUMBA_CACHE_DIR": str(cache)}
+    t0 = time.perf_counter()
+    out = subprocess.run([sys.executable, "-m", "ehss", "order", str(record), *ARGS],
+                         env=env, capture_output=True, text=True, check=True).stdout
+    wall = time.perf_counter() - t0
+    best = next(line for line in out.splitlines() if line.startswith("best by"))
+    return wall, re.sub(r"\(method.*", "", best).strip()
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("record", type=Path)
+    p.add_argument("--against", type=Path, required=True, help="the baseline's src folder")
+    p.add_argument("--rounds", type=int, default=2)
+    a = p.parse_args()
+    sides = {"this tree": ROOT / "src", "baseline": a.against.resolve()}
+    with tempfile.TemporaryDirectory() as tmp:
+        caches = {name: Path(tmp) / f"cache{i}" for i, name in enumerate(sides)}
+        picks = {name: _run(src, a.record, caches[name])[1] for name, src in sides.items()}
+        times: dict[str, list[float]] = {name: [] for name in sides}
+        for r in range(a.rounds):
+            order = list(sides) if r % 2 == 0 else list(sides)[::-1]
+            for name in order:
+                wall, pick = _run(sides[name], a.record, caches[name])
+                times[name].append(wall)
+                picks[name] = pick
+                print(f"round {r + 1}  {name:9s}  {wall:7.1f} s   {pick}", flush=True)
+    med = {name: statistics.median(v) for name, v in times.items()}
+    print(f"\n{platform.node()} · {os.cpu_count()} cores · Python {platform.python_version()}")
+    print(f"load average at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    for name, m in med.items():
+        print(f"median {name:9s} {m:7.1f} s")
+    print(f"speed-up (baseline / this tree): {med['baseline'] / med['this tree']:.2f}x")
+    print(f"same recommendation: {picks['baseline'] == picks['this tree']}")
+
+
+if __name__ == "__main__":
+    main()
