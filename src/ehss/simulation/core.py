@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import as_signal
+from ehss._checks import as_signal, check_int, check_real
 from ehss.control.discrete import pid_coefficients, tvc_coefficients
 from ehss.control.kernels import PidSettings, TvcSettings
 from ehss.errors import ParameterError
@@ -272,9 +272,7 @@ def _sensor_settings(params: RigParams) -> SK.SensorSettings:
 def _new_seed(seed: int | None) -> int:
     if seed is None:
         return int(np.random.SeedSequence().entropy)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ParameterError(f"seed={seed!r} must be a non-negative integer or None")
-    return int(seed)
+    return check_int(seed, "seed", lo=0)
 
 
 def _check_initial_state(initial_state: Any) -> Mapping[str, float] | None:
@@ -298,16 +296,7 @@ def _check_initial_state(initial_state: Any) -> Mapping[str, float] | None:
     for name, value in initial_state.items():
         if not isinstance(name, str):
             raise TypeError(f"initial_state key {name!r} must be a state name (str)")
-        if isinstance(value, bool) or not isinstance(
-            value, (int, float, np.integer, np.floating)
-        ):
-            raise TypeError(
-                f"initial_state[{name!r}]={value!r} must be a real number, not "
-                f"{type(value).__name__}"
-            )
-        if not math.isfinite(float(value)):
-            raise ParameterError(f"initial_state[{name!r}]={value!r} must be finite")
-        checked[name] = float(value)
+        checked[name] = check_real(value, f"initial_state[{name!r}]")
     return checked
 
 
