@@ -109,14 +109,15 @@ def _run_bank(blocks, rec, settle, na, nb, nc, delay):
             st = _views_with(block, na, nb, nc, delay)
             u = rec[0, k, c] * (1.0 / s.u_scale)
             y = rec[1, k, c] * (1.0 / s.y_scale)
-            e, xi, pending = _sample(s, block, counters, st, block[PENDING] != 0.0, u, y)
+            e, xi, pending = _sample(s, block, counters, st, block[PENDING] != 0.0, u, y,
+                                     True)
             block[PENDING] = 1.0 if pending else 0.0
             rec[2, k, c] = e * s.y_scale
             rec[3, k, c] = xi * s.y_scale
         n_run += 1
     if settle:
         for c in range(blocks.shape[0]):
-            _settle(blocks[c], na, nb, nc, delay)
+            _settle(blocks[c], na, nb, nc, delay, True)
     return n_run
 
 

@@ -461,7 +461,7 @@ def _project_c(c, radius, work):
 
 
 # ---------------------------------------------------------------- eqs (21)–(22)
-@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _gain(P, r, g, n):
     """g = P r for symmetric P, as g += P[j, :] r_j (row axpys, which vectorise)."""
     for i in range(n):
@@ -546,7 +546,7 @@ def _restart(s, counters, P, psi_f, psi, theta, r, g):
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending):
+def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed):
     """Apply the pending (22), if any, with its guards, and form g = P(k−1) r(k).
 
     Guards after (22): with λ < 1, the diagonal floor δ = 8 n eps tr P: the rank-1
@@ -565,8 +565,8 @@ def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending):
     if not pending:
         _gain(P, r, g, n)
         return
-    if s.lam == 1.0:  # P_ij · 1 is P_ij: a copy of the pass without the multiply
-        tr, dmin = _update_P_and_gain(P, w, 1.0, r, g, n)
+    if fixed and s.lam == 1.0:  # P_ij · 1 is P_ij: a copy of the pass without the
+        tr, dmin = _update_P_and_gain(P, w, 1.0, r, g, n)  # multiply (specialised)
     else:
         tr, dmin = _update_P_and_gain(P, w, 1.0 / s.lam, r, g, n)
     if s.lam < 1.0:
@@ -643,7 +643,7 @@ def _update_theta(s, counters, theta, g, w, psi, c_work, y, e, den):
 
 # ---------------------------------------------------------------- one sample
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _sample(s, block, counters, st, pending, u, y):
+def _sample(s, block, counters, st, pending, u, y, fixed):
     """One RELS or RML sample with every safeguard; returns (e(k), ξ̂(k), pending).
 
     ``u``, ``y`` are scaled and finite (checked by the callers). e(k) = y(k) −
@@ -660,7 +660,7 @@ def _sample(s, block, counters, st, pending, u, y):
     if s.rml:
         _filter_regressor(psi_f, psi, theta, s.na + s.nb + 1, n, s.nc)
     r = psi_f[:n] if s.rml else psi
-    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
+    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
     moved = False
     xi = e  # ξ̂(k) = e(k) whenever θ̂ is not updated (frozen or skipped)
     if s.enabled and np.isfinite(e):
@@ -690,11 +690,11 @@ def rels_run(block, rec, hist, hist_every, settle):
     arguments and results are those of :func:`_run`.
     """
     return _run(block, rec, hist, hist_every, settle,
-                int(block[0]), int(block[1]), int(block[2]), int(block[3]))
+                int(block[0]), int(block[1]), int(block[2]), int(block[3]), False)
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _run(block, rec, hist, hist_every, settle, na, nb, nc, delay):
+def _run(block, rec, hist, hist_every, settle, na, nb, nc, delay, fixed):
     """Run the estimator in ``block`` over a record, or one streaming sample.
 
     Parameters
@@ -715,6 +715,10 @@ def _run(block, rec, hist, hist_every, settle, na, nb, nc, delay):
     na, nb, nc, delay : int
         The block's orders: read from it (:func:`rels_run`), or constants of a
         specialised kernel (:func:`specialised`).
+    fixed : bool
+        True in a specialised kernel: it also carries a copy of the P pass for λ = 1
+        without the multiply by 1/λ (the same results: P_ij · 1 is P_ij), which the
+        generic kernel leaves out to keep its compile short.
 
     Returns
     -------
@@ -737,7 +741,7 @@ def _run(block, rec, hist, hist_every, settle, na, nb, nc, delay):
         u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
         if not (np.isfinite(u) and np.isfinite(y)):
             break
-        e, xi, pending = _sample(s, block, counters, st, pending, u, y)
+        e, xi, pending = _sample(s, block, counters, st, pending, u, y, fixed)
         rec[2, k] = e * s.y_scale
         rec[3, k] = xi * s.y_scale
         n_run += 1
@@ -750,12 +754,12 @@ def _run(block, rec, hist, hist_every, settle, na, nb, nc, delay):
                 row += 1
     block[PENDING] = 1.0 if pending else 0.0
     if settle:  # the last pending (22): the block holds P(k)
-        _settle(block, na, nb, nc, delay)
+        _settle(block, na, nb, nc, delay, fixed)
     return n_run
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _settle(block, na, nb, nc, delay):
+def _settle(block, na, nb, nc, delay, fixed):
     """Apply the pending (22) of the estimator in ``block``, if any, so that it holds
     P(k) (:func:`_run` with ``settle``)."""
     if block[PENDING] == 0.0:
@@ -764,7 +768,7 @@ def _settle(block, na, nb, nc, delay):
     counters = block[N_SETTINGS:NOISE_VAR]
     theta, P, psi, g, w, u_line, c_work, psi_f, io = _views_with(block, na, nb, nc, delay)
     r = psi_f[: na + nb + 1 + nc] if s.rml else psi
-    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, True)
+    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, True, fixed)
     block[PENDING] = 0.0
 
 
@@ -840,6 +844,6 @@ def _specialise(na_: int, nb_: int, nc_: int, delay_: int):
     """A new dispatcher of :func:`_run` with the orders fixed (see :func:`specialised`)."""
 
     def rels_run_fixed(block, rec, hist, hist_every, settle):
-        return _run(block, rec, hist, hist_every, settle, na_, nb_, nc_, delay_)
+        return _run(block, rec, hist, hist_every, settle, na_, nb_, nc_, delay_, True)
 
     return njit(cache=True, error_model="numpy", _nrt=False)(rels_run_fixed)
