@@ -1,9 +1,11 @@
 """Numba kernels of recursive extended least squares (RELS), eqs (19)–(22), and RML.
 
-One loop, :func:`rels_run`, runs the estimator over a record; the streaming estimator
-calls the same compiled loop with a record of one sample. So the per-sample code
-exists once, and is compiled once. The kernels do no validation:
-:mod:`ehss.identification.rels` does.
+One loop, :func:`_run`, runs the estimator over a record; the streaming estimator
+calls the same compiled loop with a record of one sample, and a bank of channels
+(:mod:`._bank_kernels`) runs its per-sample step on each channel. So the per-sample
+code exists once; it is compiled for any orders (:func:`rels_run`) or for one set of
+orders as constants (:func:`specialised`; "Orders: generic and specialised" below).
+The kernels do no validation: :mod:`ehss.identification.rels` does.
 
 Two estimators share the loop, selected by ``RelsSettings.rml``:
 
@@ -77,14 +79,31 @@ caller for the duration of a call, and a sample no longer pays the atomic increm
 and decrements that every array crossing a call costs (about fifty a sample before,
 a third of its time). The per-sample path (:func:`_sample` and the three steps it
 calls) is inlined by numba into the loop (``inline="always"``); the small leaf
-helpers are compiled once and inlined by LLVM where they are called
+helpers and the P pass are compiled once and inlined by LLVM where they are called
 (``forceinline=True``: a call passes every array as a struct of seven words, which
-cost more than the helpers' work; inlining them through numba instead cost 3–5 s of
-cold compile); the P pass and the rare paths (:func:`_restart`, :func:`_project_c`)
-stay calls. There is one entry point, so the per-sample path is compiled once (a
-second entry calling it would link and optimise it again). No complex arithmetic
-(slow to compile), no fastmath (measured: no gain). Literal constants are never
-passed to a kernel: numba would compile the callee once more for each literal.
+cost more than the helpers' work, and hides the constant orders of a specialised
+loop from the pass; inlining them through numba instead cost 3–5 s of cold compile);
+the rare paths (:func:`_gain` of P(0), :func:`_restart`, :func:`_project_c`) stay
+calls. No complex arithmetic (slow to compile), no fastmath (measured: no gain).
+Literal constants are never passed to a kernel from Python: numba would compile the
+callee once more for each literal.
+
+Orders: generic and specialised
+-------------------------------
+The loop, :func:`_run`, takes the orders as arguments. :func:`rels_run`, the generic
+entry point, passes the block's; :func:`specialised` compiles, once per orders and
+into numba's disk cache, an entry point that passes them as constants (a closure over
+them: numba's cache keys a closure by the values it holds), so that LLVM sees every
+loop bound and offset as a number. Loop bounds are therefore taken from the orders,
+never from array shapes (a slice's length is clamped at run time, which would hide
+the constant), and P and the RML rows are flat arrays (numba's ``reshape`` goes
+through a C helper that hides the row length). Both run the same operations in the
+same order: the results are equal bit for bit. :func:`kernel_for` picks one: the
+specialised loop once it has been compiled (in this process, or found in the disk
+cache), else the generic one; compiling a specialised loop is asked for by
+:func:`ehss.identification.rels.specialise_rels`. Each entry point is one
+compiled signature (:data:`RELS_RUN_SIGNATURE`), called through the entry point
+``Dispatcher.compile`` returns, so that a call does not pay numba's typing.
 BENCHMARKS.md has the measurements.
 """
 
