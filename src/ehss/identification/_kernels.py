@@ -818,7 +818,10 @@ def kernel_for(na: int, nb: int, nc: int, delay: int, *, compile_now: bool = Fal
     entry = _ENTRIES.get(key)
     if entry is None:
         run = specialised(*key)
-        if not (compile_now or _cached_on_disk(run, RELS_RUN_SIGNATURE)):
+        # the disk is looked at once per orders and process
+        if not (compile_now or (key not in _NOT_ON_DISK
+                                and _cached_on_disk(run, RELS_RUN_SIGNATURE))):
+            _NOT_ON_DISK.add(key)
             return rels_run.compile(RELS_RUN_SIGNATURE)
         entry = _ENTRIES[key] = run.compile(RELS_RUN_SIGNATURE)
     return entry
@@ -835,6 +838,7 @@ def _cached_on_disk(dispatcher, signature) -> bool:
 
 
 _ENTRIES: dict = {}
+_NOT_ON_DISK: set = set()
 
 
 def specialised(na: int, nb: int, nc: int, delay: int):
