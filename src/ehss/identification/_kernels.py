@@ -325,12 +325,14 @@ def _filter_regressor(psi_f, psi, theta, o, n, nc):
     Ĉ = Ĉ(k−1), kept inside c_radius, so the filter 1/Ĉ is stable. Runs on every
     sample (frozen or skipped ones too) so that its history stays that of the data.
     """
+    f0 = psi_f[:n]
     for i in range(n):
-        psi_f[i] = psi[i]
+        f0[i] = psi[i]
     for j in range(1, nc + 1):
         cj = theta[o + j - 1]
+        fj = psi_f[j * n : (j + 1) * n]
         for i in range(n):
-            psi_f[i] -= cj * psi_f[j * n + i]
+            f0[i] -= cj * fj[i]
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
@@ -348,8 +350,9 @@ def _shift_regressors(psi, psi_f, n, na, nc, rml, y, xi):
     if not rml:
         return
     for j in range(nc, 0, -1):
+        later, earlier = psi_f[j * n : (j + 1) * n], psi_f[(j - 1) * n : j * n]
         for i in range(n):
-            psi_f[j * n + i] = psi_f[(j - 1) * n + i]
+            later[i] = earlier[i]
 
 
 # ---------------------------------------------------------------- the C check
