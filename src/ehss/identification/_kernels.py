@@ -349,10 +349,9 @@ def _shift_regressors(psi, psi_f, n, na, nc, rml, y, xi):
         psi[o] = xi
     if not rml:
         return
-    for j in range(nc, 0, -1):
-        later, earlier = psi_f[j * n : (j + 1) * n], psi_f[(j - 1) * n : j * n]
-        for i in range(n):
-            later[i] = earlier[i]
+    later, earlier = psi_f[n : (nc + 1) * n], psi_f[: nc * n]
+    for i in range(nc * n - 1, -1, -1):  # backwards: the two overlap
+        later[i] = earlier[i]
 
 
 # ---------------------------------------------------------------- the C check
@@ -702,88 +701,92 @@ def _sample(s, block, counters, st, pending, u, y, fixed):
     return (e if np.isfinite(e) else 0.0), xi, moved
 
 
-# ---------------------------------------------------------------- the entry point
-@njit(cache=True, error_model="numpy", _nrt=False)
-def rels_run(block, rec, hist, hist_every, settle):
-    """Run the estimator in ``block`` over a record, or one streaming sample: the
-    generic kernel, for any orders (read from the block at run time).
+# ---------------------------------------------------------------- the entry points
+def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool):
+    """A dispatcher of the loop: the generic kernel (``fixed`` False: the orders are
+    read from the block at run time, ``na_`` … ``delay_`` unused) or the one
+    specialised to the orders ``na_`` … ``delay_`` (``fixed`` True; :func:`specialised`).
 
-    :func:`specialised` gives the same loop compiled for one set of orders; the
-    arguments and results are those of :func:`_run`.
+    One source for both, a closure (numba's cache tells closures apart by the values
+    they hold). Each order is ``na_ if fixed else int(block[0])``: a choice on a
+    constant, which LLVM folds before it optimises the loop, so that in a specialised
+    kernel every loop bound is a number. (The loop was a function inlined by numba into
+    each entry point; that extra level of inlining cost ~0.8 s of cold compile.)
     """
-    return _run(block, rec, hist, hist_every, settle,
-                int(block[0]), int(block[1]), int(block[2]), int(block[3]), False)
+
+    def rels_run(block, rec, hist, hist_every, settle):
+        """Run the estimator in ``block`` over a record, or one streaming sample.
+
+        Parameters
+        ----------
+        block : float64 block of an estimator (:func:`new_block`), updated in place
+        rec : float64 (4, N), C-contiguous
+            Rows u(k) and y(k) in; the step sees u/u_scale and y/y_scale (the
+            settings' scales). Rows e(k), the a-priori prediction error, and ξ̂(k), the
+            residual of eq (19), out, times y_scale. The streaming estimator passes its
+            block's own ``io`` as a (4, 1) record.
+        hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
+            (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
+        hist_every : int ≥ 1
+        settle : bool
+            Apply the last sample's pending (22) at the end, so that the block holds
+            P(k) (True for every caller but the streaming step; a run of no samples
+            with ``settle`` only does that).
+
+        Returns
+        -------
+        int
+            The number of samples run: N, or k if u(k)/u_scale or y(k)/y_scale is not
+            finite (the run stops before sample k; the callers check the records, so
+            this only happens for a streaming sample or a scale that overflows).
+        """
+        na = na_ if fixed else int(block[0])
+        nb = nb_ if fixed else int(block[1])
+        nc = nc_ if fixed else int(block[2])
+        delay = delay_ if fixed else int(block[3])
+        s = _settings_with(block, na, nb, nc, delay)
+        counters = block[N_SETTINGS:NOISE_VAR]
+        st = _views_with(block, na, nb, nc, delay)
+        theta, P, psi, g, w, u_line, c_work, psi_f, io = st
+        inv_us, inv_ys = 1.0 / s.u_scale, 1.0 / s.y_scale
+        # (22) of the previous sample not yet applied (w holds it)
+        pending = block[PENDING] != 0.0
+        countdown = hist_every
+        row = 0
+        n_run = 0
+        for k in range(rec.shape[1]):
+            u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
+            if not (np.isfinite(u) and np.isfinite(y)):
+                break
+            e, xi, pending = _sample(s, block, counters, st, pending, u, y, fixed)
+            rec[2, k] = e * s.y_scale
+            rec[3, k] = xi * s.y_scale
+            n_run += 1
+            countdown -= 1
+            if countdown == 0:
+                countdown = hist_every
+                if row < hist.shape[0]:
+                    for i in range(hist.shape[1]):
+                        hist[row, i] = theta[i]
+                    row += 1
+        if settle and pending:  # the last pending (22): the block holds P(k)
+            r = psi_f[: na + nb + 1 + nc] if s.rml else psi
+            _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, True, fixed)
+            pending = False
+        block[PENDING] = 1.0 if pending else 0.0
+        return n_run
+
+    return njit(cache=True, error_model="numpy", _nrt=False)(rels_run)
 
 
-@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _run(block, rec, hist, hist_every, settle, na, nb, nc, delay, fixed):
-    """Run the estimator in ``block`` over a record, or one streaming sample.
-
-    Parameters
-    ----------
-    block : float64 block of an estimator (:func:`new_block`), updated in place
-    rec : float64 (4, N), C-contiguous
-        Rows u(k) and y(k) in; the step sees u/u_scale and y/y_scale (the settings'
-        scales). Rows e(k), the a-priori prediction error, and ξ̂(k), the residual of
-        eq (19), out, times y_scale. The streaming estimator passes its block's own
-        ``io`` as a (4, 1) record.
-    hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
-        (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
-    hist_every : int ≥ 1
-    settle : bool
-        Apply the last sample's pending (22) at the end, so that the block holds
-        P(k) (True for every caller but the streaming step; a run of no samples with
-        ``settle`` only does that).
-    na, nb, nc, delay : int
-        The block's orders: read from it (:func:`rels_run`), or constants of a
-        specialised kernel (:func:`specialised`).
-    fixed : bool
-        True in a specialised kernel: it also carries a copy of the P pass for λ = 1
-        without the multiply by 1/λ (the same results: P_ij · 1 is P_ij), which the
-        generic kernel leaves out to keep its compile short.
-
-    Returns
-    -------
-    int
-        The number of samples run: N, or k if u(k)/u_scale or y(k)/y_scale is not
-        finite (the run stops before sample k; the callers check the records, so
-        this only happens for a streaming sample or a scale that overflows).
-    """
-    s = _settings_with(block, na, nb, nc, delay)
-    counters = block[N_SETTINGS:NOISE_VAR]
-    st = _views_with(block, na, nb, nc, delay)
-    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
-    inv_us, inv_ys = 1.0 / s.u_scale, 1.0 / s.y_scale
-    # (22) of the previous sample not yet applied (w holds it)
-    pending = block[PENDING] != 0.0
-    countdown = hist_every
-    row = 0
-    n_run = 0
-    for k in range(rec.shape[1]):
-        u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
-        if not (np.isfinite(u) and np.isfinite(y)):
-            break
-        e, xi, pending = _sample(s, block, counters, st, pending, u, y, fixed)
-        rec[2, k] = e * s.y_scale
-        rec[3, k] = xi * s.y_scale
-        n_run += 1
-        countdown -= 1
-        if countdown == 0:
-            countdown = hist_every
-            if row < hist.shape[0]:
-                for i in range(hist.shape[1]):
-                    hist[row, i] = theta[i]
-                row += 1
-    block[PENDING] = 1.0 if pending else 0.0
-    if settle:  # the last pending (22): the block holds P(k)
-        _settle(block, na, nb, nc, delay, fixed)
-    return n_run
+#: the generic kernel, for any orders: :func:`_entry`'s ``rels_run``
+rels_run = _entry(0, 0, 0, 0, False)
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
 def _settle(block, na, nb, nc, delay, fixed):
     """Apply the pending (22) of the estimator in ``block``, if any, so that it holds
-    P(k) (:func:`_run` with ``settle``)."""
+    P(k) (what :func:`rels_run` does with ``settle``, for a bank's channel)."""
     if block[PENDING] == 0.0:
         return
     s = _settings_with(block, na, nb, nc, delay)
@@ -866,10 +869,6 @@ def specialised(na: int, nb: int, nc: int, delay: int):
 _SPECIALISED: dict = {}
 
 
-def _specialise(na_: int, nb_: int, nc_: int, delay_: int):
-    """A new dispatcher of :func:`_run` with the orders fixed (see :func:`specialised`)."""
-
-    def rels_run_fixed(block, rec, hist, hist_every, settle):
-        return _run(block, rec, hist, hist_every, settle, na_, nb_, nc_, delay_, True)
-
-    return njit(cache=True, error_model="numpy", _nrt=False)(rels_run_fixed)
+def _specialise(na: int, nb: int, nc: int, delay: int):
+    """A new dispatcher of the loop with the orders fixed (see :func:`specialised`)."""
+    return _entry(na, nb, nc, delay, True)
