@@ -86,9 +86,9 @@ def _run_bank(blocks, rec, settle, na, nb, nc, delay):
     blocks : float64 (C, stride), one estimator block a row (:func:`new_blocks`)
     rec : float64 (4, N, C), C-contiguous
         Rows u(k), y(k) in (each channel's step sees u/u_scale, y/y_scale of its own
-        settings); e(k) and ξ̂(k) out, times y_scale, as :func:`._kernels._run`.
+        settings); e(k) and ξ̂(k) out, times y_scale, as :func:`._kernels.rels_run`.
     settle : bool
-        Apply each channel's last pending (22) at the end (see :func:`._kernels._run`).
+        Apply each channel's last pending (22) at the end (see :func:`._kernels.rels_run`).
     na, nb, nc, delay : int
         The orders, constants of the compiled kernel.
 

@@ -1,6 +1,6 @@
 """Numba kernels of recursive extended least squares (RELS), eqs (19)–(22), and RML.
 
-One loop, :func:`_run`, runs the estimator over a record; the streaming estimator
+One loop, :func:`rels_run`, runs the estimator over a record; the streaming estimator
 calls the same compiled loop with a record of one sample, and a bank of channels
 (:mod:`._bank_kernels`) runs its per-sample step on each channel. So the per-sample
 code exists once; it is compiled for any orders (:func:`rels_run`) or for one set of
@@ -90,15 +90,20 @@ callee once more for each literal.
 
 Orders: generic and specialised
 -------------------------------
-The loop, :func:`_run`, takes the orders as arguments. :func:`rels_run`, the generic
-entry point, passes the block's; :func:`specialised` compiles, once per orders and
-into numba's disk cache, an entry point that passes them as constants (a closure over
-them: numba's cache keys a closure by the values it holds), so that LLVM sees every
-loop bound and offset as a number. Loop bounds are therefore taken from the orders,
-never from array shapes (a slice's length is clamped at run time, which would hide
-the constant), and P and the RML rows are flat arrays (numba's ``reshape`` goes
-through a C helper that hides the row length). Both run the same operations in the
-same order: the results are equal bit for bit. :func:`kernel_for` picks one: the
+The loop is written once, as the body of a closure (:func:`_entry`) over the orders:
+:func:`rels_run`, the generic entry point, reads them from the block;
+:func:`specialised` compiles, once per orders and into numba's disk cache, an entry
+point that has them as constants (numba's cache keys a closure by the values it
+holds), so that LLVM sees every loop bound and offset as a number. (The loop as a
+function that each entry point inlined through numba cost ~0.8 s more cold compile.)
+Loop bounds are therefore taken from the orders, never from array shapes (a slice's
+length is clamped at run time, which would hide the constant), and P and the RML rows
+are flat arrays (numba's ``reshape`` goes through a C helper that hides the row
+length). Both run the same operations in the same order: the results are equal bit
+for bit. The RML rows are read and shifted through slices of ψ_f, not as
+ψ_f[j·n + i]: with a run-time n numba cannot prove such an index non-negative, keeps
+its negative-index wrap-around in the loop, and LLVM does not vectorise it (the
+generic RML loop spent ~100 ns a sample there). :func:`kernel_for` picks one: the
 specialised loop once it has been compiled (in this process, or found in the disk
 cache), else the generic one; compiling a specialised loop is asked for by
 :func:`ehss.identification.rels.specialise_rels`. Each entry point is one
@@ -850,8 +855,8 @@ _NOT_ON_DISK: set = set()
 def specialised(na: int, nb: int, nc: int, delay: int):
     """:func:`rels_run` for these orders, as compile-time constants (a dispatcher).
 
-    The loop is :func:`_run` again (the same source), called with the orders as
-    constants instead of the block's values: every loop bound, offset into the block
+    The loop is :func:`rels_run`'s again (the same source, :func:`_entry`), with the
+    orders as constants instead of the block's values: every loop bound, offset into the block
     and row length is then a constant, which LLVM folds into the addressing and the
     loop control, vectorises without run-time trip counts and, at λ = 1, lets the P
     pass drop its multiply by 1/λ. The results are the generic kernel's, bit for bit
