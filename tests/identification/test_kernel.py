@@ -33,14 +33,14 @@ EPS = np.finfo(float).eps
 
 
 def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=0.99,
-                alpha_c=None, method="rels"):
+                alpha_c=None, method="rels", loop=K.rels_run):
     n = na + nb + 1 + nc
     ac = alpha if alpha_c is None else alpha_c
     tb = (na + nb + 1) * alpha + nc * ac if trace_bound is None else trace_bound
     settings = _settings(na, nb, nc, delay, lam, alpha, ac, tb, c_radius, method)
     block, views = _new_state(settings, np.zeros(n))
     rec = K.record(u, y)
-    assert K.rels_run(block, rec, np.empty((0, n)), 1, True) == u.size
+    assert loop(block, rec, np.empty((0, n)), 1, True) == u.size
     return views.theta.copy(), views.P.copy(), rec[2], rec[3], _counters(block), views
 
 
@@ -93,7 +93,8 @@ def test_rml_kernel_matches_reference(rng, orders, lam, alpha, trace_bound, alph
                          "band-limited")
 
 
-def _check_against_naive(rng, orders, lam, alpha, trace_bound, alpha_c, method, kind):
+def _check_against_naive(rng, orders, lam, alpha, trace_bound, alpha_c, method, kind,
+                         loop=K.rels_run):
     na, nb, nc, d = orders
     u, y = _record(rng, kind)
     kw = dict(na=na, nb=nb, nc=nc, delay=d, lam=lam, alpha=alpha, trace_bound=trace_bound,
@@ -102,7 +103,7 @@ def _check_against_naive(rng, orders, lam, alpha, trace_bound, alpha_c, method, 
     exact = naive_rels(u, y, **kw, dtype=np.longdouble)
     theta, P, err, xi, counters, _ = _run_kernel(u, y, na, nb, nc, d, lam, alpha,
                                                  trace_bound, alpha_c=alpha_c,
-                                                 method=method)
+                                                 method=method, loop=loop)
     for got, i, name in ((theta, 0, "theta"), (P, 1, "P"), (err, 2, "e"), (xi, 3, "xi")):
         _assert_close_to_exact(got, ref[i], exact[i], name)
     for key in ("resets", "c_projections", "trace_scalings"):
@@ -256,3 +257,52 @@ def test_poly_roots_match_numpy(rng):
                 assert np.min(np.abs(got - z)) <= 1e-12 * scale
     double = roots(np.array([-1.8, 0.81]))  # (z − 0.9)²
     assert_allclose(double, [0.9, 0.9], atol=1e-7)
+
+
+# ---------------------------------------------------------------- specialised loops
+#: the orders of the specialised-loop tests: one set, so one compile (seconds)
+SPECIALISED = (4, 2, 2, 1)
+SPECIALISED_CASES = [  # (λ, α, trace bound, α_c, method, kind)
+    (0.995, 1e3, None, None, "rels", "band-limited"),  # forgetting: floor and 1/λ
+    (1.0, 1e10, None, 1e2, "rels", "white"),  # λ = 1: the pass without the multiply
+    (0.98, 1e2, 50.0, None, "rels", "white"),  # trace bound active
+    (1.0, 1e10, None, 1e2, "rml", "band-limited"),
+    (0.99, 1e3, None, None, "rml", "band-limited"),
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("lam", "alpha", "trace_bound", "alpha_c", "method", "kind"),
+                         SPECIALISED_CASES)
+def test_specialised_loop_matches_reference(rng, lam, alpha, trace_bound, alpha_c, method,
+                                            kind):
+    # the loop compiled with the orders as constants, against the independent reference
+    # with the bounds of the generic loop (the same operations, so the same distance
+    # from the extended-precision answer); every safeguard path is on in some case
+    loop = K.kernel_for(*SPECIALISED, compile_now=True)
+    assert loop is not K.rels_run.compile(K.RELS_RUN_SIGNATURE)
+    _check_against_naive(rng, SPECIALISED, lam, alpha, trace_bound, alpha_c, method, kind,
+                         loop=loop)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["rels", "rml"])
+def test_specialised_loop_is_the_generic_loop_bit_for_bit(rng, method):
+    # the same operations in the same order: any difference (0 tolerance) would be a
+    # constant that does not match the block it runs on; C projections and a trace
+    # bound are forced (tight radius and bound) so that the rare paths run too
+    u, y = _record(rng, "band-limited")
+    kw = dict(lam=0.99, alpha=1e3, trace_bound=20.0, c_radius=0.3, method=method)
+    spec = _run_kernel(u, y, *SPECIALISED, **kw, loop=K.kernel_for(*SPECIALISED,
+                                                                   compile_now=True))
+    generic = _run_kernel(u, y, *SPECIALISED, **kw)
+    assert generic[4]["c_projections"] > 0 and generic[4]["trace_scalings"] > 0
+    assert spec[4] == generic[4]
+    for a, b in zip(spec[:4], generic[:4], strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_kernel_for_is_generic_until_asked(monkeypatch):
+    # orders never specialised (and not in the disk cache) run on the generic loop
+    monkeypatch.setattr(K, "_cached_on_disk", lambda run, sig: False)
+    assert K.kernel_for(9, 0, 0, 3) is K.rels_run.compile(K.RELS_RUN_SIGNATURE)

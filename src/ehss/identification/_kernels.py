@@ -1,9 +1,11 @@
 """Numba kernels of recursive extended least squares (RELS), eqs (19)–(22), and RML.
 
 One loop, :func:`rels_run`, runs the estimator over a record; the streaming estimator
-calls the same compiled loop with a record of one sample. So the per-sample code
-exists once, and is compiled once. The kernels do no validation:
-:mod:`ehss.identification.rels` does.
+calls the same compiled loop with a record of one sample, and a bank of channels
+(:mod:`._bank_kernels`) runs its per-sample step on each channel. So the per-sample
+code exists once; it is compiled for any orders (:func:`rels_run`) or for one set of
+orders as constants (:func:`specialised`; "Orders: generic and specialised" below).
+The kernels do no validation: :mod:`ehss.identification.rels` does.
 
 Two estimators share the loop, selected by ``RelsSettings.rml``:
 
@@ -77,14 +79,36 @@ caller for the duration of a call, and a sample no longer pays the atomic increm
 and decrements that every array crossing a call costs (about fifty a sample before,
 a third of its time). The per-sample path (:func:`_sample` and the three steps it
 calls) is inlined by numba into the loop (``inline="always"``); the small leaf
-helpers are compiled once and inlined by LLVM where they are called
+helpers and the P pass are compiled once and inlined by LLVM where they are called
 (``forceinline=True``: a call passes every array as a struct of seven words, which
-cost more than the helpers' work; inlining them through numba instead cost 3–5 s of
-cold compile); the P pass and the rare paths (:func:`_restart`, :func:`_project_c`)
-stay calls. There is one entry point, so the per-sample path is compiled once (a
-second entry calling it would link and optimise it again). No complex arithmetic
-(slow to compile), no fastmath (measured: no gain). Literal constants are never
-passed to a kernel: numba would compile the callee once more for each literal.
+cost more than the helpers' work, and hides the constant orders of a specialised
+loop from the pass; inlining them through numba instead cost 3–5 s of cold compile);
+the rare paths (:func:`_gain` of P(0), :func:`_restart`, :func:`_project_c`) stay
+calls. No complex arithmetic (slow to compile), no fastmath (measured: no gain).
+Literal constants are never passed to a kernel from Python: numba would compile the
+callee once more for each literal.
+
+Orders: generic and specialised
+-------------------------------
+The loop is written once, as the body of a closure (:func:`_entry`) over the orders:
+:func:`rels_run`, the generic entry point, reads them from the block;
+:func:`specialised` compiles, once per orders and into numba's disk cache, an entry
+point that has them as constants (numba's cache keys a closure by the values it
+holds), so that LLVM sees every loop bound and offset as a number. (The loop as a
+function that each entry point inlined through numba cost ~0.8 s more cold compile.)
+Loop bounds are therefore taken from the orders, never from array shapes (a slice's
+length is clamped at run time, which would hide the constant), and P and the RML rows
+are flat arrays (numba's ``reshape`` goes through a C helper that hides the row
+length). Both run the same operations in the same order: the results are equal bit
+for bit. The RML rows are read and shifted through slices of ψ_f, not as
+ψ_f[j·n + i]: with a run-time n numba cannot prove such an index non-negative, keeps
+its negative-index wrap-around in the loop, and LLVM does not vectorise it (the
+generic RML loop spent ~100 ns a sample there). :func:`kernel_for` picks one: the
+specialised loop once it has been compiled (in this process, or found in the disk
+cache), else the generic one; compiling a specialised loop is asked for by
+:func:`ehss.identification.rels.specialise_rels`. Each entry point is one
+compiled signature (:data:`RELS_RUN_SIGNATURE`), called through the entry point
+``Dispatcher.compile`` returns, so that a call does not pay numba's typing.
 BENCHMARKS.md has the measurements.
 """
 
@@ -190,13 +214,24 @@ def state_views(block: np.ndarray) -> RelsState:
     gives the same views), so that the layout is defined once and nothing is compiled
     for Python callers.
     """
-    return RelsState(*views.py_func(block))
+    na, nb, nc, delay = (int(v) for v in block[:4])
+    n = na + nb + 1 + nc
+    st = RelsState(*_views_with.py_func(block, na, nb, nc, delay))
+    return st._replace(P=st.P.reshape((n, n)), psi_f=st.psi_f.reshape((nc + 1, n)))
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
 def settings_of(block):
     """The :class:`RelsSettings` stored at the start of ``block``."""
-    return RelsSettings(int(block[0]), int(block[1]), int(block[2]), int(block[3]),
+    return _settings_with(block, int(block[0]), int(block[1]), int(block[2]),
+                          int(block[3]))
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _settings_with(block, na, nb, nc, delay):
+    """The settings of ``block`` with these orders: those of the block (generic kernel)
+    or compile-time constants equal to them (a kernel specialised to its orders)."""
+    return RelsSettings(na, nb, nc, delay,
                         block[4], block[5], block[6], block[7], block[8],
                         block[9] != 0.0, block[10] != 0.0, block[11], block[12])
 
@@ -228,32 +263,42 @@ def _starts(n, nu, nc):
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
 def views(block):
-    """The state arrays of ``block``, in :class:`RelsState` order (see :func:`_starts`)."""
-    na, nb, nc, delay = int(block[0]), int(block[1]), int(block[2]), int(block[3])
+    """The state arrays of ``block``, in :class:`RelsState` order (see :func:`_starts`),
+    P and ψ_f flat (row-major: P[i n + j] is P_ij, psi_f[j n + i] is ψ_f(k−j)_i; the
+    Python views, :func:`state_views`, have their two axes)."""
+    return _views_with(block, int(block[0]), int(block[1]), int(block[2]), int(block[3]))
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _views_with(block, na, nb, nc, delay):
+    """:func:`views` for these orders (run-time values or compile-time constants: with
+    constants every shape below is one, and so is every loop bound taken from it).
+
+    P and ψ_f stay flat: numba's ``reshape`` computes the new shape in a call that
+    LLVM cannot see through, which would hide the constant row length."""
     n = na + nb + 1 + nc
     nu = delay + nb + 1
     o_theta, o_P, o_psi, o_g, o_w, o_u, o_c, o_f, o_io, _ = _starts(n, nu, nc)
     return (block[o_theta : o_theta + n],
-            block[o_P : o_P + n * n].reshape((n, n)),
+            block[o_P : o_P + n * n],
             block[o_psi : o_psi + n],
             block[o_g : o_g + n],
             block[o_w : o_w + n],
             block[o_u : o_u + nu],
             block[o_c : o_c + 4 * (nc + 1)],
-            block[o_f : o_f + (nc + 1) * n].reshape((nc + 1, n)),
+            block[o_f : o_f + (nc + 1) * n],
             block[o_io : o_io + 4])
 
 
 # ---------------------------------------------------------------- small helpers
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _dot(p, q):
+def _dot(p, q, n):
     """pᵀq, in four partial sums.
 
     A float sum is one chain of dependent additions that numba may not reorder
     (no fastmath); four interleaved partial sums cut its latency by four. Any
     summation order is as accurate (the tests compare with numpy's own dot).
     """
-    n = p.shape[0]
     s0 = s1 = s2 = s3 = 0.0
     i = 0
     while i + 4 <= n:
@@ -271,7 +316,7 @@ def _dot(p, q):
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _push_input(u_line, psi, u, na, nb, delay):
     """u_line[j] = u(k−j); ψ̂'s u-part becomes u(k−d)..u(k−d−nb)."""
-    for j in range(u_line.shape[0] - 1, 0, -1):
+    for j in range(delay + nb, 0, -1):
         u_line[j] = u_line[j - 1]
     u_line[0] = u
     for j in range(nb + 1):
@@ -279,38 +324,39 @@ def _push_input(u_line, psi, u, na, nb, delay):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _filter_regressor(psi_f, psi, theta, o):
+def _filter_regressor(psi_f, psi, theta, o, n, nc):
     """RML: ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc), into row 0.
 
     Ĉ = Ĉ(k−1), kept inside c_radius, so the filter 1/Ĉ is stable. Runs on every
     sample (frozen or skipped ones too) so that its history stays that of the data.
     """
-    n = psi.shape[0]
+    f0 = psi_f[:n]
     for i in range(n):
-        psi_f[0, i] = psi[i]
-    for j in range(1, psi_f.shape[0]):
+        f0[i] = psi[i]
+    for j in range(1, nc + 1):
         cj = theta[o + j - 1]
+        fj = psi_f[j * n : (j + 1) * n]
         for i in range(n):
-            psi_f[0, i] -= cj * psi_f[j, i]
+            f0[i] -= cj * fj[i]
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _shift_regressors(psi, psi_f, na, nc, rml, y, xi):
+def _shift_regressors(psi, psi_f, n, na, nc, rml, y, xi):
     """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: _push_input);
     RML: ψ_f(k) becomes ψ_f((k+1)−1) (rows move down by one)."""
     for i in range(na - 1, 0, -1):
         psi[i] = psi[i - 1]
     psi[0] = -y
-    o = psi.shape[0] - nc
+    o = n - nc
     for i in range(nc - 1, 0, -1):
         psi[o + i] = psi[o + i - 1]
     if nc > 0:
         psi[o] = xi
     if not rml:
         return
-    for j in range(psi_f.shape[0] - 1, 0, -1):
-        for i in range(psi_f.shape[1]):
-            psi_f[j, i] = psi_f[j - 1, i]
+    later, earlier = psi_f[n : (nc + 1) * n], psi_f[: nc * n]
+    for i in range(nc * n - 1, -1, -1):  # backwards: the two overlap
+        later[i] = earlier[i]
 
 
 # ---------------------------------------------------------------- the C check
@@ -442,19 +488,18 @@ def _project_c(c, radius, work):
 
 # ---------------------------------------------------------------- eqs (21)–(22)
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _gain(P, r, g):
+def _gain(P, r, g, n):
     """g = P r for symmetric P, as g += P[j, :] r_j (row axpys, which vectorise)."""
-    n = r.shape[0]
     for i in range(n):
         g[i] = 0.0
     for j in range(n):
         rj = r[j]
         for i in range(n):
-            g[i] += P[j, i] * rj
+            g[i] += P[j * n + i] * rj
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
-def _update_P_and_gain(P, w, inv_lam, r, g):
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+def _update_P_and_gain(P, w, inv_lam, r, g, n):
     """(22) P(k−1) = P(k−2)/λ − w wᵀ and, in the same pass, g = P(k−1) r(k).
 
     Returns (tr P, min P_ii) for the guards of :func:`_bring_P_up_to_date`.
@@ -465,21 +510,45 @@ def _update_P_and_gain(P, w, inv_lam, r, g):
     P_ij / λ − w_i w_j with w = g √(1/(den λ)): the same expression for entries (i, j)
     and (j, i), so P stays exactly symmetric. Each new row i is added, times r_i,
     into g (g = Σ_i P[i, :] r_i for symmetric P), so P is read once for both.
+
+    Rows go four at a time, g_j += (p_0j r_0 + p_1j r_1) + (p_2j r_2 + p_3j r_3): g is
+    loaded and stored once per four rows, so the chain of additions into g that runs
+    through the rows is four times shorter, and the loop over j is long enough that
+    LLVM vectorises it rather than unrolling it into scalar code (which it does to a
+    one-row loop whose length is a compile-time constant: :func:`specialised`).
     """
-    n = P.shape[0]
     for j in range(n):
         g[j] = 0.0
-    tr = 0.0
-    dmin = np.inf
-    for i in range(n):
+    i = 0
+    while i + 4 <= n:
+        o0, o1, o2, o3 = i * n, (i + 1) * n, (i + 2) * n, (i + 3) * n
+        w0, w1, w2, w3 = w[i], w[i + 1], w[i + 2], w[i + 3]
+        r0, r1, r2, r3 = r[i], r[i + 1], r[i + 2], r[i + 3]
+        for j in range(n):
+            # P_ij ← P_ij / λ − w_i w_j, rows i..i+3
+            p0 = P[o0 + j] * inv_lam - w0 * w[j]
+            p1 = P[o1 + j] * inv_lam - w1 * w[j]
+            p2 = P[o2 + j] * inv_lam - w2 * w[j]
+            p3 = P[o3 + j] * inv_lam - w3 * w[j]
+            P[o0 + j] = p0
+            P[o1 + j] = p1
+            P[o2 + j] = p2
+            P[o3 + j] = p3
+            g[j] += (p0 * r0 + p1 * r1) + (p2 * r2 + p3 * r3)
+        i += 4
+    while i < n:  # the last n mod 4 rows, one by one
         wi = w[i]
         ri = r[i]
         for j in range(n):
-            p = P[i, j] * inv_lam - wi * w[j]
-            P[i, j] = p
+            p = P[i * n + j] * inv_lam - wi * w[j]
+            P[i * n + j] = p
             g[j] += p * ri
-        tr += P[i, i]
-        dmin = min(dmin, P[i, i])
+        i += 1
+    tr = 0.0
+    dmin = np.inf
+    for i in range(n):
+        tr += P[i * n + i]
+        dmin = min(dmin, P[i * n + i])
     return tr, dmin
 
 
@@ -488,23 +557,22 @@ def _restart(s, counters, P, psi_f, psi, theta, r, g):
     """P = P(0) = diag(α (a- and b-part), α_c (c-part)), counted as a reset, and
     g = P(0) r. RML: the filter 1/Ĉ restarts from rest (ψ_f history zeroed), so
     r = ψ_f(k) = ψ̂(k). Rare (a guard failed), hence not inlined."""
-    n = P.shape[0]
     nab = s.na + s.nb + 1
+    n = nab + s.nc
     counters[RESETS] += 1
     for i in range(n):
         for j in range(n):
-            P[i, j] = 0.0
-        P[i, i] = s.alpha if i < nab else s.alpha_c
+            P[i * n + j] = 0.0
+        P[i * n + i] = s.alpha if i < nab else s.alpha_c
     if s.rml:
-        for j in range(1, psi_f.shape[0]):
-            for i in range(n):
-                psi_f[j, i] = 0.0
-        _filter_regressor(psi_f, psi, theta, nab)
-    _gain(P, r, g)
+        for j in range(n, (s.nc + 1) * n):
+            psi_f[j] = 0.0
+        _filter_regressor(psi_f, psi, theta, nab, n, s.nc)
+    _gain(P, r, g, n)
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending):
+def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed):
     """Apply the pending (22), if any, with its guards, and form g = P(k−1) r(k).
 
     Guards after (22): with λ < 1, the diagonal floor δ = 8 n eps tr P: the rank-1
@@ -519,15 +587,18 @@ def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending):
     excitation, P growing like λ^−k in unexcited directions) scales P down to it.
     g follows each change of P: (P + δ I) r = g + δ r, (f P) r = f g.
     """
+    n = s.na + s.nb + 1 + s.nc
     if not pending:
-        _gain(P, r, g)
+        _gain(P, r, g, n)
         return
-    n = P.shape[0]
-    tr, dmin = _update_P_and_gain(P, w, 1.0 / s.lam, r, g)
+    if fixed and s.lam == 1.0:  # P_ij · 1 is P_ij: a copy of the pass without the
+        tr, dmin = _update_P_and_gain(P, w, 1.0, r, g, n)  # multiply (specialised)
+    else:
+        tr, dmin = _update_P_and_gain(P, w, 1.0 / s.lam, r, g, n)
     if s.lam < 1.0:
         delta = EPS_FLOOR * n * tr
         for i in range(n):
-            P[i, i] += delta
+            P[i * n + i] += delta
             g[i] += delta * r[i]
         tr += n * delta
     if not (dmin > 0.0 and np.isfinite(tr)):
@@ -537,8 +608,8 @@ def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending):
         f = s.trace_max / tr
         for i in range(n):
             g[i] *= f
-            for j in range(n):
-                P[i, j] *= f
+        for i in range(n * n):
+            P[i] *= f
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
@@ -550,12 +621,13 @@ def _denominator(s, counters, P, r, g, psi_f, psi, theta):
     That, or overflow, resets P = P(0) (RML: and restarts the filter 1/Ĉ, so that
     r = ψ_f(k) = ψ̂(k)) before g and den are formed again.
     """
-    q = _dot(r, g)
+    n = s.na + s.nb + 1 + s.nc
+    q = _dot(r, g, n)
     den = s.lam + q
     if q >= 0.0 and np.isfinite(den):
         return den
     _restart(s, counters, P, psi_f, psi, theta, r, g)
-    return s.lam + _dot(r, g)
+    return s.lam + _dot(r, g, n)
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
@@ -580,24 +652,24 @@ def _update_theta(s, counters, theta, g, w, psi, c_work, y, e, den):
     step = e * inv_den
     # (22), applied at the next sample: P(k) = P(k−1)/λ − w wᵀ, w = g / √(den λ)
     root = 1.0 / np.sqrt(den * s.lam)
-    for i in range(theta.shape[0]):
+    for i in range(nab + s.nc):
         theta[i] += g[i] * step
         w[i] = g[i] * root
     if s.nc > 0 and not _c_within(theta, nab, s.nc, s.c_radius, c_work):
         _project_c(theta[nab:], s.c_radius, c_work)
         counters[C_PROJECTIONS] += 1
         # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k), formed directly since the projection moved θ̂
-        return True, y - _dot(psi, theta)
+        return True, y - _dot(psi, theta, nab + s.nc)
     # (19) ξ̂(k) = y(k) − ψ̂ᵀ(k) θ̂(k) = e − (ψ̂ᵀ g / den) e, since θ̂ moved by g e/den;
     # for RELS ψ̂ᵀg = ψ̂ᵀPψ̂ = den − λ, so ξ̂ = e λ/den (no second dot product)
     if s.rml:
-        return True, e - _dot(psi, g) * step
+        return True, e - _dot(psi, g, nab + s.nc) * step
     return True, e * (s.lam * inv_den)
 
 
 # ---------------------------------------------------------------- one sample
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _sample(s, block, counters, st, pending, u, y):
+def _sample(s, block, counters, st, pending, u, y, fixed):
     """One RELS or RML sample with every safeguard; returns (e(k), ξ̂(k), pending).
 
     ``u``, ``y`` are scaled and finite (checked by the callers). e(k) = y(k) −
@@ -607,13 +679,14 @@ def _sample(s, block, counters, st, pending, u, y):
     theta, P, psi, g, w, u_line, c_work, psi_f, io = st
     _push_input(u_line, psi, u, s.na, s.nb, s.delay)
     # ŷ(k|k−1) = ψ̂ᵀ(k) θ̂(k−1);  e(k) = y(k) − ŷ  (the bracket of eq 20)
-    e = y - _dot(psi, theta)
+    n = s.na + s.nb + 1 + s.nc
+    e = y - _dot(psi, theta, n)
     counters[COUNT] += 1
     # r, the regressor of the gain and of (22): ψ̂(k) (RELS) or ψ_f(k) (RML)
     if s.rml:
-        _filter_regressor(psi_f, psi, theta, s.na + s.nb + 1)
-    r = psi_f[0] if s.rml else psi
-    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
+        _filter_regressor(psi_f, psi, theta, s.na + s.nb + 1, n, s.nc)
+    r = psi_f[:n] if s.rml else psi
+    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
     moved = False
     xi = e  # ξ̂(k) = e(k) whenever θ̂ is not updated (frozen or skipped)
     if s.enabled and np.isfinite(e):
@@ -629,69 +702,104 @@ def _sample(s, block, counters, st, pending, u, y):
     nv = block[NOISE_VAR] + (xi * xi - block[NOISE_VAR]) / cnt
     if np.isfinite(nv):
         block[NOISE_VAR] = nv
-    _shift_regressors(psi, psi_f, s.na, s.nc, s.rml, y, xi)
+    _shift_regressors(psi, psi_f, n, s.na, s.nc, s.rml, y, xi)
     return (e if np.isfinite(e) else 0.0), xi, moved
 
 
-# ---------------------------------------------------------------- the entry point
-@njit(cache=True, error_model="numpy", _nrt=False)
-def rels_run(block, rec, hist, hist_every, settle):
-    """Run the estimator in ``block`` over a record, or one streaming sample.
+# ---------------------------------------------------------------- the entry points
+def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool):
+    """A dispatcher of the loop: the generic kernel (``fixed`` False: the orders are
+    read from the block at run time, ``na_`` … ``delay_`` unused) or the one
+    specialised to the orders ``na_`` … ``delay_`` (``fixed`` True; :func:`specialised`).
 
-    Parameters
-    ----------
-    block : float64 block of an estimator (:func:`new_block`), updated in place
-    rec : float64 (4, N), C-contiguous
-        Rows u(k) and y(k) in; the step sees u/u_scale and y/y_scale (the settings'
-        scales). Rows e(k), the a-priori prediction error, and ξ̂(k), the residual of
-        eq (19), out, times y_scale. The streaming estimator passes its block's own
-        ``io`` as a (4, 1) record.
-    hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
-        (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
-    hist_every : int ≥ 1
-    settle : bool
-        Apply the last sample's pending (22) at the end, so that the block holds
-        P(k) (True for every caller but the streaming step; a run of no samples with
-        ``settle`` only does that).
-
-    Returns
-    -------
-    int
-        The number of samples run: N, or k if u(k)/u_scale or y(k)/y_scale is not
-        finite (the run stops before sample k; the callers check the records, so
-        this only happens for a streaming sample or a scale that overflows).
+    One source for both, a closure (numba's cache tells closures apart by the values
+    they hold). Each order is ``na_ if fixed else int(block[0])``: a choice on a
+    constant, which LLVM folds before it optimises the loop, so that in a specialised
+    kernel every loop bound is a number. (The loop was a function inlined by numba into
+    each entry point; that extra level of inlining cost ~0.8 s of cold compile.)
     """
-    s = settings_of(block)
+
+    def rels_run(block, rec, hist, hist_every, settle):
+        """Run the estimator in ``block`` over a record, or one streaming sample.
+
+        Parameters
+        ----------
+        block : float64 block of an estimator (:func:`new_block`), updated in place
+        rec : float64 (4, N), C-contiguous
+            Rows u(k) and y(k) in; the step sees u/u_scale and y/y_scale (the
+            settings' scales). Rows e(k), the a-priori prediction error, and ξ̂(k), the
+            residual of eq (19), out, times y_scale. The streaming estimator passes its
+            block's own ``io`` as a (4, 1) record.
+        hist : float64 (N // hist_every, n) out, θ̂ every ``hist_every`` samples
+            (row r holds θ̂ after sample (r+1)·hist_every − 1); shape (0, n) for none
+        hist_every : int ≥ 1
+        settle : bool
+            Apply the last sample's pending (22) at the end, so that the block holds
+            P(k) (True for every caller but the streaming step; a run of no samples
+            with ``settle`` only does that).
+
+        Returns
+        -------
+        int
+            The number of samples run: N, or k if u(k)/u_scale or y(k)/y_scale is not
+            finite (the run stops before sample k; the callers check the records, so
+            this only happens for a streaming sample or a scale that overflows).
+        """
+        na = na_ if fixed else int(block[0])
+        nb = nb_ if fixed else int(block[1])
+        nc = nc_ if fixed else int(block[2])
+        delay = delay_ if fixed else int(block[3])
+        s = _settings_with(block, na, nb, nc, delay)
+        counters = block[N_SETTINGS:NOISE_VAR]
+        st = _views_with(block, na, nb, nc, delay)
+        theta, P, psi, g, w, u_line, c_work, psi_f, io = st
+        inv_us, inv_ys = 1.0 / s.u_scale, 1.0 / s.y_scale
+        # (22) of the previous sample not yet applied (w holds it)
+        pending = block[PENDING] != 0.0
+        countdown = hist_every
+        row = 0
+        n_run = 0
+        for k in range(rec.shape[1]):
+            u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
+            if not (np.isfinite(u) and np.isfinite(y)):
+                break
+            e, xi, pending = _sample(s, block, counters, st, pending, u, y, fixed)
+            rec[2, k] = e * s.y_scale
+            rec[3, k] = xi * s.y_scale
+            n_run += 1
+            countdown -= 1
+            if countdown == 0:
+                countdown = hist_every
+                if row < hist.shape[0]:
+                    for i in range(hist.shape[1]):
+                        hist[row, i] = theta[i]
+                    row += 1
+        if settle and pending:  # the last pending (22): the block holds P(k)
+            r = psi_f[: na + nb + 1 + nc] if s.rml else psi
+            _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, True, fixed)
+            pending = False
+        block[PENDING] = 1.0 if pending else 0.0
+        return n_run
+
+    return njit(cache=True, error_model="numpy", _nrt=False)(rels_run)
+
+
+#: the generic kernel, for any orders: :func:`_entry`'s ``rels_run``
+rels_run = _entry(0, 0, 0, 0, False)
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _settle(block, na, nb, nc, delay, fixed):
+    """Apply the pending (22) of the estimator in ``block``, if any, so that it holds
+    P(k) (what :func:`rels_run` does with ``settle``, for a bank's channel)."""
+    if block[PENDING] == 0.0:
+        return
+    s = _settings_with(block, na, nb, nc, delay)
     counters = block[N_SETTINGS:NOISE_VAR]
-    st = views(block)
-    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
-    inv_us, inv_ys = 1.0 / s.u_scale, 1.0 / s.y_scale
-    # (22) of the previous sample not yet applied (w holds it)
-    pending = block[PENDING] != 0.0
-    countdown = hist_every
-    row = 0
-    n_run = 0
-    for k in range(rec.shape[1]):
-        u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
-        if not (np.isfinite(u) and np.isfinite(y)):
-            break
-        e, xi, pending = _sample(s, block, counters, st, pending, u, y)
-        rec[2, k] = e * s.y_scale
-        rec[3, k] = xi * s.y_scale
-        n_run += 1
-        countdown -= 1
-        if countdown == 0:
-            countdown = hist_every
-            if row < hist.shape[0]:
-                for i in range(hist.shape[1]):
-                    hist[row, i] = theta[i]
-                row += 1
-    if settle and pending:  # the last pending (22): the block holds P(k)
-        r = psi_f[0] if s.rml else psi
-        _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending)
-        pending = False
-    block[PENDING] = 1.0 if pending else 0.0
-    return n_run
+    theta, P, psi, g, w, u_line, c_work, psi_f, io = _views_with(block, na, nb, nc, delay)
+    r = psi_f[: na + nb + 1 + nc] if s.rml else psi
+    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, True, fixed)
+    block[PENDING] = 0.0
 
 
 #: the one signature :func:`rels_run` is compiled for
@@ -705,3 +813,67 @@ def record(u: np.ndarray, y: np.ndarray) -> np.ndarray:
     rec[0] = u
     rec[1] = y
     return rec
+
+
+def kernel_for(na: int, nb: int, nc: int, delay: int, *, compile_now: bool = False):
+    """The compiled loop to run an estimator with these orders (an entry point taking
+    :data:`RELS_RUN_SIGNATURE`'s arguments).
+
+    The one specialised to these orders (:func:`specialised`) when it is compiled in
+    this process or found in numba's cache on disk, or when ``compile_now`` asks for
+    it; else the generic :func:`rels_run`. Compiling a specialised loop costs as much
+    as the generic one (seconds: BENCHMARKS.md) and saves tens of nanoseconds a
+    sample, so it is done only when asked for, and then kept on disk for later runs.
+    """
+    key = (int(na), int(nb), int(nc), int(delay))
+    entry = _ENTRIES.get(key)
+    if entry is None:
+        run = specialised(*key)
+        # the disk is looked at once per orders and process
+        if not (compile_now or (key not in _NOT_ON_DISK
+                                and _cached_on_disk(run, RELS_RUN_SIGNATURE))):
+            _NOT_ON_DISK.add(key)
+            return rels_run.compile(RELS_RUN_SIGNATURE)
+        entry = _ENTRIES[key] = run.compile(RELS_RUN_SIGNATURE)
+    return entry
+
+
+def _cached_on_disk(dispatcher, signature) -> bool:
+    """True if numba's cache holds ``dispatcher`` compiled for ``signature`` (loading
+    it is a matter of milliseconds; numba's loader, used where it is)."""
+    try:
+        cache = dispatcher._cache  # noqa: SLF001 - numba's own cache of the dispatcher
+        return cache.load_overload(types.void(*signature), dispatcher.targetctx) is not None
+    except Exception:  # noqa: BLE001 - another numba: treat as not cached
+        return False
+
+
+_ENTRIES: dict = {}
+_NOT_ON_DISK: set = set()
+
+
+def specialised(na: int, nb: int, nc: int, delay: int):
+    """:func:`rels_run` for these orders, as compile-time constants (a dispatcher).
+
+    The loop is :func:`rels_run`'s again (the same source, :func:`_entry`), with the
+    orders as constants instead of the block's values: every loop bound, offset into the block
+    and row length is then a constant, which LLVM folds into the addressing and the
+    loop control, vectorises without run-time trip counts and, at λ = 1, lets the P
+    pass drop its multiply by 1/λ. The results are the generic kernel's, bit for bit
+    (the same operations in the same order). Compiled once per orders and kept in
+    numba's cache on disk (its index tells closures apart by the values they hold);
+    the dispatcher is kept here for the process.
+    """
+    key = (int(na), int(nb), int(nc), int(delay))
+    run = _SPECIALISED.get(key)
+    if run is None:
+        run = _SPECIALISED[key] = _specialise(*key)
+    return run
+
+
+_SPECIALISED: dict = {}
+
+
+def _specialise(na: int, nb: int, nc: int, delay: int):
+    """A new dispatcher of the loop with the orders fixed (see :func:`specialised`)."""
+    return _entry(na, nb, nc, delay, True)
