@@ -312,3 +312,18 @@ def test_a_file_name_that_is_not_utf8_in_a_plot_title(tmp_path, capsys):
                  "100", "--out", str(tmp_path / "f.csv"), "--plot",
                  str(tmp_path / "f.png")]) == 0
     assert (tmp_path / "f.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(("extra", "words"), [
+    (["--u-scale", "0"], ("u_scale=0.0", "(0, inf)")),
+    (["--y-scale", "-1"], ("y_scale=-1.0", "(0, inf)")),
+    (["--memory", "1e-9"], ("memory_s=1e-09 s", "one sample at 1000 Hz")),
+    (["--band", "10", "900"], ("upper edge 900 Hz", "fs/2 = 500 Hz")),
+])
+def test_live_settings_that_mean_nothing_are_refused(tmp_path, capsys, extra, words):
+    report = tmp_path / "r.json"
+    assert main(["live", "--rig", "position", "--duration", "1", "--speed", "inf",
+                 "--quiet", "--report", str(report), *extra]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert not report.exists()

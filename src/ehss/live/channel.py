@@ -18,6 +18,7 @@ import numpy as np
 from scipy.signal import welch
 
 import ehss
+from ehss._checks import check_band, check_real
 from ehss.errors import EhssError, ParameterError
 from ehss.live.detect import (
     BaselineResidual,
@@ -76,10 +77,11 @@ class EstimatorSettings:
     scale_s: float = 0.5
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.memory_s, (int, float)) and self.memory_s > 0):
-            raise ParameterError(f"memory_s={self.memory_s!r} must be > 0 (s)")
-        if not (isinstance(self.scale_s, (int, float)) and self.scale_s > 0):
-            raise ParameterError(f"scale_s={self.scale_s!r} must be > 0 (s)")
+        check_real(self.memory_s, "memory_s", lo=0.0, lo_open=True, unit="s")
+        check_real(self.scale_s, "scale_s", lo=0.0, lo_open=True, unit="s")
+        for name in ("u_scale", "y_scale"):  # None: from the data; 0 would divide by it
+            if getattr(self, name) is not None:
+                check_real(getattr(self, name), name, lo=0.0, lo_open=True)
         # the estimator checks the rest when it is built
         ehss.RelsEstimator(na=self.na, nb=self.nb, nc=self.nc, delay=self.delay,
                            method=self.method, p0=self.p0,
@@ -90,6 +92,10 @@ class EstimatorSettings:
         """λ at sample rate ``fs``."""
         if self.forgetting is not None:
             return float(self.forgetting)
+        if self.memory_s * fs <= 1.0:
+            raise ParameterError(f"memory_s={self.memory_s!r} s is not longer than one "
+                                 f"sample at {fs:g} Hz ({1.0 / fs:g} s): the estimator "
+                                 "would forget each sample as it comes")
         return 1.0 - 1.0 / (self.memory_s * fs)
 
     def memory(self, fs: float) -> float:
@@ -183,6 +189,8 @@ class ChannelProcessor:
         self._ring_pos = 0
         self.band_hz: tuple[float, float] | None = det.band_hz or (
             baseline.band_hz if baseline is not None else None)
+        if det.band_hz is not None:
+            check_band(det.band_hz, "band_hz", fs=self.fs)
         self.grid_hz: np.ndarray | None = None
         self._va: np.ndarray | None = None
         self._vb: np.ndarray | None = None
