@@ -39,6 +39,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("compensation",),
     ("experiments",),
     ("report",),
+    ("campaign",),  # campaigns over many records or simulated rigs, on Dask
     ("ehss",),  # the package's __init__: re-exports the library
     ("live",),  # online identification of a running rig, built on the public library
     ("cli",),
