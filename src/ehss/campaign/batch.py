@@ -266,6 +266,8 @@ def batch_task(payload: tuple[Record, BatchSettings], seed: np.random.SeedSequen
     import warnings
 
     record, settings = payload
+    if not Path(record.path).is_file():
+        raise DataError(f"{record.path!r}: no such file")
     when, source = record_time(record)
     channels = settings.channels or tuple(channel_pairs(record_columns(record)))
     rows = []

@@ -364,17 +364,30 @@ def _take(it: Iterator[Task], n: int) -> list[Task]:
 
 
 def _outcome(fut: Any, task: Task, folder: Path) -> str:
-    """The task's status; a task that never ran (no ehss on the worker, a worker lost
+    """The task's status; a task that never ran (a worker without ehss, a worker lost
     too often) gets its error row written here, by the client."""
     if fut.status == "finished":
         return fut.result()[1]
     exc = fut.exception()
     message = error_line(exc) if exc is not None else f"task {fut.status}"
-    if isinstance(exc, ModuleNotFoundError) or "No module named" in message:
-        message = f"a worker cannot import what the task needs ({message}); install ehss " \
-                  "on every worker"
+    missing = _missing_module(exc)
+    if missing is not None:
+        message = (f"a worker cannot import what the task needs ({error_line(missing)}); "
+                   "install ehss on every worker")
     _write_rows(folder / f"{task.key}{_ERROR_SUFFIX}", _error_rows(task, message))
     return "error"
+
+
+def _missing_module(exc: BaseException | None) -> BaseException | None:
+    """The ModuleNotFoundError behind ``exc`` (Dask wraps it when it cannot unpack a
+    task on a worker), or None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, ModuleNotFoundError):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def result_files(out: str | Path) -> list[Path]:

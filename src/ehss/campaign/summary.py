@@ -114,6 +114,10 @@ def write_batch_summary(frame: Any, path: str | Path, rule: OutlierRule) -> Path
     import polars as pl
 
     path = Path(path)
+    for name, dtype in (("record_time", pl.Datetime("us", "UTC")), ("channel", pl.String),
+                        ("accepted", pl.Boolean)):
+        if name not in frame.columns:  # every record failed: no such column was written
+            frame = frame.with_columns(pl.lit(None, dtype=dtype).alias(name))
     ok = frame.filter(pl.col("status") == "ok")
     failed = frame.filter(pl.col("status") != "ok")
     m = len(TRENDED)

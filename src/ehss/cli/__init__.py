@@ -63,6 +63,10 @@ _COMMANDS = (
      "changes, record, dashboard"),
     ("stream", "stream", "send the simulated rig or a file as UDP datagrams (for ehss live "
      "--udp)"),
+    ("batch", "batch", "identify every channel of every record of an archive on Dask, "
+     "follow the loops' figures, flag odd records"),
+    ("montecarlo", "montecarlo", "how the compensation holds across the rig's uncertain "
+     "parameters (sampled, on Dask)"),
 )
 
 
