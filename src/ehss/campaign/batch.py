@@ -160,8 +160,8 @@ def load_manifest(path: str | Path | None, **override: Any) -> BatchSettings:
         method = "armax"
         band_hz = [2.0, 100.0]
         holdout = 0.3
-        detrend = "mean"
-        decimate = "auto"
+        detrend = "mean"              # or "linear", "none"
+        decimate = "auto"             # or a factor, "none"
         [acceptance]                  # ehss.workflow.Acceptance
         min_fit_pct = 90.0
         [outliers]
@@ -189,7 +189,8 @@ def load_manifest(path: str | Path | None, **override: Any) -> BatchSettings:
         root = Path(path).parent
         kwargs["records"] = tuple(str(root / r) for r in doc.get("records", []))
         kwargs["channels"] = _channels(doc, where)
-        kwargs.update({k: tuple(v) if isinstance(v, list) else v for k, v in wf.items()})
+        kwargs.update({k: tuple(v) if isinstance(v, list) else None if v == "none" else v
+                       for k, v in wf.items()})
         try:
             kwargs["acceptance"] = Acceptance(**_table(doc, "acceptance", acc_fields, where))
             kwargs["outliers"] = OutlierRule(**_table(doc, "outliers", out_fields, where))

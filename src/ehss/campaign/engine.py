@@ -319,7 +319,17 @@ def run_campaign(
         dashboard = client.dashboard_link
         if not quiet:
             print(f"ehss {description}: Dask dashboard at {dashboard}", file=sys.stderr)
-        threads = sum(client.nthreads().values()) or 1
+        able, unable = _workers_with_ehss(client)
+        if not able:  # nothing can run: every task's row says why
+            for t in pending:
+                _write_rows(folder / f"{t.key}{_ERROR_SUFFIX}", _error_rows(t, unable))
+            return CampaignRun(n_tasks=len(tasks), n_skipped=len(tasks) - len(pending),
+                               n_done=0, n_failed=len(pending), out=out,
+                               dashboard=dashboard, wall_s=time.perf_counter() - start)
+        if unable and not quiet:
+            print(f"ehss {description}: {unable}; those workers get no tasks",
+                  file=sys.stderr)
+        threads = sum(n for w, n in client.nthreads().items() if w in able) or 1
         size = window if window is not None else max(16, 4 * threads)
         with _progress(len(tasks), len(tasks) - len(pending), quiet) as bar:
             bar_id = bar.add_task(description, total=len(tasks),
@@ -330,7 +340,8 @@ def run_campaign(
 
             def submit(task: Task) -> Any:
                 fut = client.submit(execute_task, function, task, seed, str(out),
-                                    key=f"ehss-{task.key}-{token}", pure=False)
+                                    key=f"ehss-{task.key}-{token}", pure=False,
+                                    workers=able, allow_other_workers=False)
                 by_future[fut] = task
                 return fut
 
@@ -351,6 +362,29 @@ def run_campaign(
     return CampaignRun(n_tasks=len(tasks), n_skipped=len(tasks) - len(pending),
                        n_done=n_done, n_failed=n_failed, out=out, dashboard=dashboard,
                        wall_s=time.perf_counter() - start)
+
+
+def _workers_with_ehss(client: Any) -> tuple[list[str], str]:
+    """The workers that can import the campaign engine, and a line on those that cannot.
+
+    A worker without ehss would die on the first task sent to it (Dask cannot unpack
+    the task's message), so each is asked first, by a function sent by value.
+    """
+    def probe() -> str:
+        import importlib
+
+        importlib.import_module("ehss.campaign.engine")
+        return "ok"
+
+    answers = client.run(probe, on_error="return")
+    able = sorted(w for w, a in answers.items() if a == "ok")
+    bad = {w: a for w, a in answers.items() if a != "ok"}
+    if not bad:
+        return able, ""
+    w, exc = next(iter(sorted(bad.items())))
+    why = error_line(exc) if isinstance(exc, BaseException) else str(exc)
+    return able, (f"{len(bad)} of {len(answers)} workers cannot import ehss ({w}: {why}); "
+                  "install ehss on every worker")
 
 
 def _take(it: Iterator[Task], n: int) -> list[Task]:
