@@ -165,7 +165,7 @@ def load_manifest(path: str | Path | None, **override: Any) -> BatchSettings:
         [acceptance]                  # ehss.workflow.Acceptance
         min_fit_pct = 90.0
         [outliers]
-        alpha = 0.01
+        alpha = 0.001
         window = 15
 
     Raises

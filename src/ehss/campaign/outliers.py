@@ -2,8 +2,8 @@
 
 For each channel and each figure (:data:`ehss.campaign.figures.FIGURES`), in record-time
 order, the figure's slow course is followed by a running median over ``window`` records
-(so that a slow drift — oil that ages, a seal that wears — is a trend, not a string of
-outliers), and each record's residual from it is scored robustly:
+of its neighbours (so that a slow drift — oil that ages, a seal that wears — is a trend,
+not a string of outliers), and each record's residual from it is scored robustly:
 
 .. math::
 
@@ -13,7 +13,8 @@ outliers), and each record's residual from it is scored robustly:
 outliers themselves). A record is flagged when ``|z| > Φ⁻¹(1 − α / (2 m))`` for one of
 the ``m`` figures: under normal residuals each figure's two-sided false-flag rate is
 α/m and, by Bonferroni, the chance that a sound record is flagged for any figure is at
-most α (default 1 %: about 4 false flags in a year of daily records on one channel).
+most α (default 0.1 %: about one false flag in three years of daily records on one
+channel).
 """
 
 from __future__ import annotations
@@ -36,14 +37,15 @@ class OutlierRule:
 
     Attributes
     ----------
-    alpha : float, default 0.01
-        Family-wise false-flag rate per record and channel under normal residuals.
+    alpha : float, default 0.001
+        Family-wise false-flag rate per record and channel under normal residuals
+        (about one false flag in three years of daily records on one channel).
     window : int, default 15
         Records in the running median that follows a figure's slow course; a campaign
         shorter than twice this is scored about its plain median.
     """
 
-    alpha: float = 0.01
+    alpha: float = 0.001
     window: int = 15
 
     def __post_init__(self) -> None:
@@ -60,13 +62,14 @@ class OutlierRule:
 
 
 def running_median(x: np.ndarray, window: int) -> np.ndarray:
-    """Centred running median of ``x`` over ``window`` points (shorter at the ends),
-    NaNs ignored."""
+    """Running median of each point's ``window - 1`` neighbours (half on each side,
+    fewer at the ends; the point itself left out, so that an outlier cannot pull its
+    own trend), NaNs ignored."""
     n = x.size
     half = window // 2
     out = np.full(n, math.nan)
     for i in range(n):
-        seg = x[max(0, i - half): i + half + 1]
+        seg = np.concatenate([x[max(0, i - half): i], x[i + 1: i + half + 1]])
         seg = seg[np.isfinite(seg)]
         if seg.size:
             out[i] = float(np.median(seg))
