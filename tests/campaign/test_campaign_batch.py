@@ -11,7 +11,7 @@ import polars as pl
 import pytest
 import scipy.signal
 
-from ehss.campaign import batch, load_manifest
+from ehss.campaign import BatchSettings, batch, load_manifest
 from ehss.errors import ParameterError
 
 from .conftest import N_SAMPLES, A, B, make_archive, run_cli
@@ -72,7 +72,7 @@ def test_hdf5_groups_live_recordings_and_parquet(tmp_path):
         h["samples"] = np.column_stack([t, u1, y1, u2, y2])
     u, y = loop_record(rng)
     write_table(tmp_path / "p.parquet", {"t": t, "ref1": u, "fb1": y}, {})
-    settings = load_manifest(None, orders=(2, 2, 0, 1), method="arx", decimate=None)
+    settings = BatchSettings(orders=(2, 2, 0, 1), method="arx", decimate=None)
     frame = batch([str(tmp_path / "*.h5"), str(tmp_path / "p.parquet")], tmp_path / "out",
                   settings=settings, workers=0, summary=False)
     assert frame["status"].to_list() == ["ok"] * 5, frame["error"].to_list()

@@ -142,8 +142,16 @@ def _channels(doc: dict, where: str) -> tuple[Channel, ...]:
     return tuple(out)
 
 
-def load_manifest(path: str | Path | None, **override: Any) -> BatchSettings:
-    """Batch settings from a TOML manifest (None: the defaults), then ``override``.
+def load_manifest(
+    path: str | Path | None,
+    *,
+    orders: tuple[int, int, int, int] | None = None,
+    method: str | None = None,
+    fs: float | None = None,
+    band_hz: tuple[float, float] | None = None,
+) -> BatchSettings:
+    """Batch settings from a TOML manifest (None: the defaults); the keywords given (not
+    None) replace the manifest's values, as the command line's options do.
 
     Layout (every key optional)::
 
@@ -196,7 +204,8 @@ def load_manifest(path: str | Path | None, **override: Any) -> BatchSettings:
             kwargs["outliers"] = OutlierRule(**_table(doc, "outliers", out_fields, where))
         except TypeError as exc:
             raise ParameterError(f"{where}: {exc}") from None
-    kwargs.update({k: v for k, v in override.items() if v is not None})
+    given = {"orders": orders, "method": method, "fs": fs, "band_hz": band_hz}
+    kwargs.update({k: v for k, v in given.items() if v is not None})
     return BatchSettings(**kwargs)
 
 

@@ -187,8 +187,10 @@ _TOP = {"samples", "sampling", "seed", "loop", "preset", "params_file", "duratio
         "orders", "method", "band_hz", "max_error_pct", "parameters"}
 
 
-def load_montecarlo(path: str | Path, **override: Any) -> MonteCarloSettings:
-    """Monte Carlo settings from TOML, then ``override`` (None values ignored).
+def load_montecarlo(path: str | Path, *, samples: int | None = None,
+                    seed: int | None = None) -> MonteCarloSettings:
+    """Monte Carlo settings from TOML; ``samples`` and ``seed``, when given, replace the
+    file's.
 
     Layout::
 
@@ -225,7 +227,8 @@ def load_montecarlo(path: str | Path, **override: Any) -> MonteCarloSettings:
               if k != "parameters"}
     if "params_file" in kwargs:
         kwargs["params_file"] = str(Path(path).parent / kwargs["params_file"])
-    kwargs.update({k: v for k, v in override.items() if v is not None})
+    kwargs.update({k: v for k, v in {"samples": samples, "seed": seed}.items()
+                   if v is not None})
     probe = MonteCarloSettings(parameters=(Distribution(name="x", kind="uniform", a=0, b=1),),
                                **kwargs)
     nominal = probe.nominal_params()
@@ -362,7 +365,8 @@ def montecarlo(
     summary: bool = True,
     quiet: bool = True,
     connect_timeout_s: float = 5.0,
-    **override: Any,
+    samples: int | None = None,
+    seed: int | None = None,
 ) -> Any:
     """Run a Monte Carlo campaign; one row per sample as a polars DataFrame.
 
@@ -374,8 +378,8 @@ def montecarlo(
         ``settings.json``, ``summary.html``.
     scheduler, workers, quiet, connect_timeout_s
         See :func:`ehss.campaign.engine.run_campaign`.
-    **override
-        Settings to replace (``samples=``, ``seed=``...).
+    samples, seed : int, optional
+        Replace the settings' number of samples and seed.
 
     Returns
     -------
@@ -387,10 +391,10 @@ def montecarlo(
     from ehss.campaign.summary import write_montecarlo_summary
     from ehss.io import write_json
 
+    given = {k: v for k, v in {"samples": samples, "seed": seed}.items() if v is not None}
     if not isinstance(settings, MonteCarloSettings):
-        settings = load_montecarlo(settings, **override)
-    elif override:
-        settings = dataclasses.replace(settings, **override)
+        settings = load_montecarlo(settings)
+    settings = dataclasses.replace(settings, **given)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     values = draw_samples(settings)
