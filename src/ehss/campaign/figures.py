@@ -24,15 +24,14 @@ FIGURE_UNITS = {"natural_freq_hz": "Hz", "damping": "", "dc_gain": "",
 _GRID = 4096
 
 
-def _dominant(poles: np.ndarray, dt: float, band_hz: tuple[float, float] | None
-              ) -> tuple[float, float]:
+def _dominant(poles: np.ndarray, dt: float) -> tuple[float, float]:
     """Natural frequency (Hz) and damping of the dominant poles.
 
     The dominant poles are the complex pair closest to the unit circle (the slowest to
-    decay, the resonance a loop's response shows) among those whose natural frequency
-    lies in ``band_hz`` when a band is given; without a complex pair, the real pole
-    closest to the unit circle (damping 1). Each pole z maps to s = ln(z)/dt:
-    ωn = |s|, ζ = −Re(s)/|s|.
+    decay: the resonance a loop's response shows); without a complex pair, the real
+    pole closest to the unit circle (damping 1). Each pole z maps to s = ln(z)/dt:
+    ωn = |s|, ζ = −Re(s)/|s|. The validated band does not restrict the choice: it
+    varies from record to record with the coherence, and the figure must not.
     """
     p = poles[np.abs(poles) > 0]
     if p.size == 0:
@@ -40,8 +39,6 @@ def _dominant(poles: np.ndarray, dt: float, band_hz: tuple[float, float] | None
     s = np.log(p.astype(complex)) / dt
     wn_hz = np.abs(s) / (2 * math.pi)
     pair = p.imag > 1e-9
-    if band_hz is not None:
-        pair &= (wn_hz >= band_hz[0]) & (wn_hz <= band_hz[1])
     pick = pair if pair.any() else np.isclose(p.imag, 0.0)
     if not pick.any():
         return math.nan, math.nan
@@ -74,8 +71,7 @@ def loop_figures(model: ArmaxModel) -> dict[str, float]:
     Parameters
     ----------
     model : ArmaxModel
-        An identified loop (its ``band_hz``, when set, restricts the dominant poles to
-        those with a natural frequency inside it).
+        An identified loop.
 
     Returns
     -------
@@ -83,6 +79,6 @@ def loop_figures(model: ArmaxModel) -> dict[str, float]:
         Keyed by :data:`FIGURES`; NaN where a figure does not exist.
     """
     dc = float(model.dc_gain())
-    wn, zeta = _dominant(np.asarray(model.poles()), model.dt, model.band_hz)
+    wn, zeta = _dominant(np.asarray(model.poles()), model.dt)
     return {"natural_freq_hz": wn, "damping": zeta, "dc_gain": dc,
             "bandwidth_hz": _bandwidth_hz(model, dc), "delay_s": model.delay * model.dt}
