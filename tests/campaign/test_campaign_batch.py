@@ -96,3 +96,12 @@ def test_manifest_mistakes_are_one_line(tmp_path):
     assert res.stderr.strip().splitlines() == [
         f"ehss batch: error: {bad}: unknown key(s) ['order'] in [workflow]; accepted: "
         "band_hz, decimate, detrend, holdout, method, orders"]
+
+
+def test_a_campaign_resumes_only_with_its_own_settings(tmp_path):
+    manifest = make_archive(tmp_path, n=2)
+    batch(None, tmp_path / "out", manifest=manifest, workers=0, summary=False)
+    other = load_manifest(manifest, orders=(3, 2, 0, 1))
+    with pytest.raises(ParameterError, match=r"other settings \(orders: \[2, 2, 0, 1\] "
+                                             r"then, \[3, 2, 0, 1\] now\)"):
+        batch(None, tmp_path / "out", settings=other, workers=0)

@@ -22,7 +22,13 @@ from typing import Any
 import numpy as np
 
 from ehss._checks import check_choice, check_int, check_real
-from ehss.campaign.engine import Task, error_line, read_results, run_campaign
+from ehss.campaign.engine import (
+    Task,
+    check_same_campaign,
+    error_line,
+    read_results,
+    run_campaign,
+)
 from ehss.campaign.figures import loop_figures
 from ehss.campaign.outliers import OutlierRule
 from ehss.campaign.records import (
@@ -339,6 +345,9 @@ def batch(
                              "manifest")
     found = discover(patterns)
     out = Path(out)
+    # the records may grow between runs; how each is identified may not
+    check_same_campaign(out, {k: v for k, v in settings.summary().items()
+                              if k != "records"})
     tasks = [Task(r.key, (r, settings), {"record": r.name}) for r in found]
     run = run_campaign(batch_task, tasks, out, seed=settings.seed, scheduler=scheduler,
                        workers=workers, quiet=quiet, connect_timeout_s=connect_timeout_s,

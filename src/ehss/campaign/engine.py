@@ -47,6 +47,7 @@ __all__ = [
     "run_campaign",
     "read_results",
     "result_files",
+    "check_same_campaign",
     "TASKS_FOLDER",
     "DEFAULT_CONNECT_TIMEOUT_S",
 ]
@@ -208,7 +209,6 @@ def _client(scheduler: str | None, workers: int | None,
 
     if scheduler is None:
         n = max(1, os.cpu_count() or 1) if workers is None else workers
-        logging.getLogger("distributed").setLevel(logging.ERROR)
         with LocalCluster(n_workers=max(n, 1), threads_per_worker=1,
                           processes=n > 0, dashboard_address=":0",
                           silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
@@ -300,6 +300,11 @@ def run_campaign(
     """
     from distributed import as_completed
 
+    from ehss._checks import check_int, check_real
+
+    if workers is not None:
+        check_int(workers, "workers", lo=0)
+    check_real(connect_timeout_s, "connect_timeout_s", lo=0.0, lo_open=True, unit="s")
     start = time.perf_counter()
     out = Path(out)
     folder = out / TASKS_FOLDER
@@ -422,6 +427,41 @@ def _missing_module(exc: BaseException | None) -> BaseException | None:
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
     return None
+
+
+def check_same_campaign(out: str | Path, settings: dict[str, Any]) -> None:
+    """Refuse to resume a campaign folder made with other settings.
+
+    ``out/campaign.json`` records the settings of the first run (written here when
+    missing); a re-run must give the same, or its rows would mix two campaigns.
+
+    Raises
+    ------
+    ParameterError
+        If ``out`` holds a campaign with other settings (the message names the first
+        that differs).
+    """
+    import json
+
+    from ehss.io import to_jsonable, write_json
+
+    path = Path(out) / "campaign.json"
+    plain = to_jsonable(settings)
+    if not path.exists():
+        Path(out).mkdir(parents=True, exist_ok=True)
+        write_json(path, plain)
+        return
+    try:
+        old = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise DataError(f"{str(path)!r} is not readable ({error_line(exc)}); move the "
+                        "folder aside or use another --out") from None
+    if old != plain:
+        key = next((k for k in sorted(set(old) | set(plain))
+                    if old.get(k) != plain.get(k)), "?")
+        raise ParameterError(f"{str(out)!r} holds a campaign with other settings ({key}: "
+                             f"{old.get(key)!r} then, {plain.get(key)!r} now); resume it "
+                             "with the same settings or use another --out")
 
 
 def result_files(out: str | Path) -> list[Path]:

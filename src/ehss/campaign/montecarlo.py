@@ -32,7 +32,14 @@ import numpy as np
 
 from ehss._checks import check_choice, check_int, check_real
 from ehss.campaign.batch import _read_toml, to_plain
-from ehss.campaign.engine import Task, error_line, read_results, run_campaign, task_seed
+from ehss.campaign.engine import (
+    Task,
+    check_same_campaign,
+    error_line,
+    read_results,
+    run_campaign,
+    task_seed,
+)
 from ehss.campaign.figures import loop_figures
 from ehss.errors import ParameterError
 
@@ -384,9 +391,9 @@ def montecarlo(
     Returns
     -------
     polars.DataFrame
-        Columns: ``task`` (``s<index>``), ``sample``, ``status``, ``error``, each sampled
-        parameter, the own model's ``fit_pct``, ``accepted`` and figures, and
-        ``error_uncompensated_pct``, ``error_nominal_pct``, ``error_own_pct``.
+        Columns: ``task`` (``s000000``, ``s000001``...), ``sample``, ``status``,
+        ``error``, each sampled parameter, the own model's ``fit_pct``, ``accepted``
+        and figures, and ``error_uncompensated_pct``, ``error_nominal_pct``, ``error_own_pct``.
     """
     from ehss.campaign.summary import write_montecarlo_summary
     from ehss.io import write_json
@@ -396,15 +403,16 @@ def montecarlo(
         settings = load_montecarlo(settings)
     settings = dataclasses.replace(settings, **given)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    # more samples later extend the same draw (a Sobol prefix); nothing else may change
+    check_same_campaign(out, {k: v for k, v in to_plain(settings).items()
+                              if k != "samples" or settings.sampling != "sobol"})
     values = draw_samples(settings)
     names = [p.name for p in settings.parameters]
     nominal = identify_rig(settings.nominal_params(), settings,
                            task_seed(settings.seed, "nominal").generate_state(2))
     if not (out / "nominal_model.json").exists():  # a resumed run keeps the first
         nominal.model.save_json(out / "nominal_model.json")
-    width = len(str(settings.samples - 1))
-    tasks = [Task(f"s{i:0{width}d}", (dict(zip(names, map(float, v), strict=True)),
+    tasks = [Task(f"s{i:06d}", (dict(zip(names, map(float, v), strict=True)),
                                       settings, nominal.model), {"sample": str(i)})
              for i, v in enumerate(values)]
     run_campaign(montecarlo_task, tasks, out, seed=settings.seed, scheduler=scheduler,
