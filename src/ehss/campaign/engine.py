@@ -350,11 +350,14 @@ def run_campaign(
                 by_future[fut] = task
                 return fut
 
-            ac = as_completed([submit(t) for t in _take(queue, size)])
+            # results (key, status, error) come back in batches with the completions,
+            # not fetched one round trip per task
+            ac = as_completed([submit(t) for t in _take(queue, size)], with_results=True,
+                              raise_errors=False)
             try:
-                for fut in ac:
+                for fut, result in ac:
                     task = by_future.pop(fut)
-                    status = _outcome(fut, task, folder)
+                    status = _outcome(fut, result, task, folder)
                     fut.release()
                     n_done += status == "ok"
                     n_failed += status != "ok"
@@ -402,12 +405,12 @@ def _take(it: Iterator[Task], n: int) -> list[Task]:
     return out
 
 
-def _outcome(fut: Any, task: Task, folder: Path) -> str:
+def _outcome(fut: Any, result: Any, task: Task, folder: Path) -> str:
     """The task's status; a task that never ran (a worker without ehss, a worker lost
     too often) gets its error row written here, by the client."""
     if fut.status == "finished":
-        return fut.result()[1]
-    exc = fut.exception()
+        return result[1]
+    exc = result if isinstance(result, BaseException) else fut.exception()
     message = error_line(exc) if exc is not None else f"task {fut.status}"
     missing = _missing_module(exc)
     if missing is not None:
