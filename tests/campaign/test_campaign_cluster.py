@@ -118,7 +118,7 @@ def test_worker_without_ehss_records_the_error(tmp_path):
         wait_for_workers(c.address, 1)
         out = tmp_path / "o"
         res = run_cli("batch", "--manifest", str(archive), "--out", str(out),
-                      "--scheduler", c.address, "--quiet", timeout=40)
+                      "--scheduler", c.address, "--quiet")
     finally:
         c.close()
     assert res.returncode == 0, res.stderr
