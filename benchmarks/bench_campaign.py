@@ -84,9 +84,10 @@ def local_cluster(n_workers: int):
     from distributed import Client, LocalCluster
 
     with LocalCluster(n_workers=n_workers, threads_per_worker=1, dashboard_address=":0",
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
-        client.run(_warm)
-        yield cluster.scheduler_address, client
+                      silence_logs=logging.ERROR) as cluster:
+        with Client(cluster) as client:  # closed before the campaign's own client runs
+            client.run(_warm)
+        yield cluster.scheduler_address, cluster
 
 
 def _warm() -> None:
@@ -134,17 +135,20 @@ def bench_overhead(root: Path, n: int) -> None:
 
 
 def bench_throughput(root: Path, n: int) -> None:
+    from distributed import Client
+
     from ehss.campaign.engine import Task, run_campaign
 
-    with local_cluster(2) as (address, client):
+    with local_cluster(2) as (address, cluster):
         run_campaign(noop_task, [Task(f"w{i}", i) for i in range(20)], root / "warm2",
                      scheduler=address)
         run = run_campaign(noop_task, [Task(f"n{i:05d}", i) for i in range(n)],
                            root / "noop", scheduler=address)
-        t0 = time.perf_counter()
-        futures = client.map(noop_task, range(n), [None] * n, [None] * n, pure=False)
-        client.gather(futures)
-        bare = time.perf_counter() - t0
+        with Client(cluster) as client:
+            t0 = time.perf_counter()
+            futures = client.map(noop_task, range(n), [None] * n, [None] * n, pure=False)
+            client.gather(futures)
+            bare = time.perf_counter() - t0
     report(bench="throughput", tasks=n, engine_tasks_per_s=round(n / run.wall_s, 1),
            bare_dask_map_tasks_per_s=round(n / bare, 1), load_average=os.getloadavg())
 
