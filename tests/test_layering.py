@@ -45,6 +45,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("target",),  # the compensator filter a real-time target runs, and its datagram
     ("experiments",),
     ("report",),
+    ("campaign",),  # campaigns over many records or simulated rigs, on Dask
     ("ehss",),  # the package's __init__: re-exports the library
     ("live",),  # online identification of a running rig, built on the public library
     ("cli",),

@@ -66,6 +66,10 @@ _COMMANDS = (
      "--udp)"),
     ("target-code", "target", "write the C99 compensator filter and datagram decoder for a "
      "real-time target, with an integration note"),
+    ("batch", "batch", "identify every channel of every record of an archive on Dask, "
+     "follow the loops' figures, flag odd records"),
+    ("montecarlo", "montecarlo", "how the compensation holds across the rig's uncertain "
+     "parameters (sampled, on Dask)"),
 )
 
 
