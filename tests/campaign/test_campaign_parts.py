@@ -145,3 +145,22 @@ def test_acceptance_fraction_with_its_interval():
     assert out["k"] == 7 and out["fraction"] == 0.7
     # Clopper-Pearson 95 % for 7/10: (0.3475, 0.9333) from the beta quantiles
     assert_allclose(out["ci95"], (0.34754, 0.93326), atol=1e-4)
+
+
+def test_a_tasks_rows_supersede_an_error_row_of_the_same_key(tmp_path):
+    # a task whose worker was lost runs again elsewhere; the client may have recorded
+    # the first run as failed while the second finished: one row, the finished one
+    import polars as pl
+
+    from ehss.campaign.engine import TASKS_FOLDER, read_results
+
+    folder = tmp_path / TASKS_FOLDER
+    folder.mkdir()
+    pl.DataFrame({"task": ["a"], "status": ["ok"], "error": [""]}).write_parquet(
+        folder / "a.parquet")
+    pl.DataFrame({"task": ["a"], "status": ["error"], "error": ["KilledWorker"]}
+                 ).write_parquet(folder / "a.error.parquet")
+    pl.DataFrame({"task": ["b"], "status": ["error"], "error": ["no such file"]}
+                 ).write_parquet(folder / "b.error.parquet")
+    rows = read_results(tmp_path)
+    assert rows.select("task", "status").rows() == [("a", "ok"), ("b", "error")]

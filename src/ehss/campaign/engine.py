@@ -416,6 +416,8 @@ def _outcome(fut: Any, result: Any, task: Task, folder: Path) -> str:
     if missing is not None:
         message = (f"a worker cannot import what the task needs ({error_line(missing)}); "
                    "install ehss on every worker")
+    if (folder / f"{task.key}{_OK_SUFFIX}").exists():
+        return "ok"  # a run of it on a worker since lost had finished its rows
     _write_rows(folder / f"{task.key}{_ERROR_SUFFIX}", _error_rows(task, message))
     return "error"
 
@@ -474,6 +476,12 @@ def result_files(out: str | Path) -> list[Path]:
         return []
     names = sorted(n for n in os.listdir(folder)
                    if n.endswith(_OK_SUFFIX) and not n.startswith("."))
+    # A task's rows supersede an error row of the same key: a task whose worker was
+    # lost is run again elsewhere, and its first run may still have been recorded as
+    # failed by the client while the second one finished.
+    ok = {n[: -len(_OK_SUFFIX)] for n in names if not n.endswith(_ERROR_SUFFIX)}
+    names = [n for n in names
+             if not (n.endswith(_ERROR_SUFFIX) and n[: -len(_ERROR_SUFFIX)] in ok)]
     return [folder / n for n in names]
 
 
