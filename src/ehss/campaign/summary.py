@@ -19,7 +19,7 @@ from ehss.campaign.figures import FIGURE_UNITS, FIGURES
 from ehss.campaign.outliers import OutlierRule, flag_outliers
 
 __all__ = ["flag_campaign", "write_batch_summary", "write_montecarlo_summary",
-           "TRENDED"]
+           "write_trend_png", "TRENDED"]
 
 #: Figures the outlier rule scores: the loop's own. Not the delay (fixed by the orders)
 #: nor the fit (bounded and skewed: its low tail is the noise's, not the loop's; it is
@@ -88,6 +88,17 @@ def _trend_figure(frame: Any, rule: OutlierRule) -> str:
     out = _png(fig)
     plt.close(fig)
     return out
+
+
+def write_trend_png(frame: Any, path: str | Path, rule: OutlierRule) -> Path:
+    """The summary's trend plot of a campaign's rows (:func:`flag_campaign`'s output)
+    as a PNG file, written whole or not at all."""
+    from ehss._files import atomic_path
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(base64.b64decode(_trend_figure(frame, rule)))
+    return path
 
 
 def _table_html(rows: list[list[Any]], head: list[str]) -> str:
