@@ -164,3 +164,25 @@ def test_a_tasks_rows_supersede_an_error_row_of_the_same_key(tmp_path):
                  ).write_parquet(folder / "b.error.parquet")
     rows = read_results(tmp_path)
     assert rows.select("task", "status").rows() == [("a", "ok"), ("b", "error")]
+
+
+def test_the_trend_plot_is_a_png_of_its_own(tmp_path):
+    # forty daily records of a drifting loop with one fault: the plot is written whole
+    import datetime as dt
+
+    import polars as pl
+
+    from ehss.campaign.summary import flag_campaign, write_trend_png
+
+    n = 40
+    days = [dt.datetime(2026, 1, 1, tzinfo=dt.UTC) + dt.timedelta(days=k) for k in range(n)]
+    wn = np.linspace(28.0, 24.0, n) + 0.01 * np.random.default_rng(3).standard_normal(n)
+    wn[25] = 27.5
+    frame = pl.DataFrame({"record": [f"day{k}" for k in range(n)], "channel": ["1"] * n,
+                          "status": ["ok"] * n, "record_time": days, "natural_freq_hz": wn,
+                          "damping": np.full(n, 0.23), "dc_gain": np.full(n, 1.05),
+                          "bandwidth_hz": wn + 1.0, "fit_pct": np.full(n, 97.0)})
+    flagged = flag_campaign(frame, OutlierRule())
+    assert flagged["flagged"].to_list()[25]
+    path = write_trend_png(flagged, tmp_path / "trend.png", OutlierRule())
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
