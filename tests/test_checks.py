@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ehss._checks import SAMPLE_RATE_RANGE_HZ, check_band, check_fs, check_int_list
+from ehss._checks import (
+    SAMPLE_RATE_RANGE_HZ,
+    check_band,
+    check_fs,
+    check_int_list,
+    is_integer,
+    is_real,
+)
 from ehss.errors import ParameterError
 from ehss.frequency import h1_estimate
 from ehss.preprocess import content_edge_hz, excitation_band
@@ -103,3 +110,13 @@ def test_a_list_of_integers():
     for bad in ([1.5], [True], "12", 2.0):
         with pytest.raises(TypeError, match=r"must hold integers >= 1, not "):
             check_int_list(bad, "na", lo=1)
+
+
+@pytest.mark.parametrize(("value", "real", "integer"), [
+    (1, True, True), (np.int32(3), True, True), (2.5, True, False), (np.float64(1.0), True, False),
+    (float("nan"), True, False), (True, False, False), (np.bool_(False), False, False),
+    ("1", False, False), (None, False, False), (1 + 0j, False, False), ([1], False, False),
+])
+def test_the_predicates_for_callers_with_errors_of_their_own(value, real, integer):
+    # what a model file's field or a streaming sample is judged by; bools are not numbers
+    assert (is_real(value), is_integer(value)) == (real, integer)

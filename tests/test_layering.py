@@ -60,15 +60,10 @@ ALLOWED_UPWARD: frozenset[tuple[str, str]] = frozenset()
 #: The one module that may test types inline: the checks everything else calls.
 CHECKS_MODULE = "_checks.py"
 
-# Modules (paths under src/ehss) that still test types inline instead of calling
-# ehss._checks, named by file; each entry leaves the list when its module is converted
-# (test_inline_check_allow_list_holds_only_modules_that_still_need_it holds it to that).
-ALLOWED_INLINE_CHECKS: frozenset[str] = frozenset({
-    "identification/_common.py",  # orders and real settings of the estimators
-    "identification/model.py",  # ArmaxModel and JSON fields, predict horizon, digits
-    "identification/order.py",  # order grids and the fit tolerance
-    "identification/rels.py",  # orders and forgetting settings
-})
+# Modules (paths under src/ehss) allowed to test types inline instead of calling
+# ehss._checks, named by file: none. An entry would leave the list as soon as its module
+# is converted (test_inline_check_allow_list_holds_only_modules_that_still_need_it).
+ALLOWED_INLINE_CHECKS: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)

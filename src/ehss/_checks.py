@@ -53,6 +53,8 @@ import numpy as np
 from ehss.errors import DataError, ParameterError
 
 __all__ = [
+    "is_real",
+    "is_integer",
     "check_real",
     "check_int",
     "check_int_list",
@@ -141,6 +143,21 @@ def _in_range(x: float, lo, hi, lo_open: bool, hi_open: bool) -> bool:
     if lo is not None and (x < lo or (lo_open and x == lo)):
         return False
     return not (hi is not None and (x > hi or (hi_open and x == hi)))
+
+
+def is_real(value: Any) -> bool:
+    """Whether ``value`` is a real number (Python or NumPy; a bool is not).
+
+    For the callers that raise their own error for a wrong type (a field of a model file
+    is a :class:`DataError`); the others call :func:`check_real`.
+    """
+    return not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real)
+
+
+def is_integer(value: Any) -> bool:
+    """Whether ``value`` is an integer (Python or NumPy; a bool is not); see
+    :func:`is_real`."""
+    return not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Integral)
 
 
 def check_real(

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from ehss._checks import as_record
+from ehss._checks import as_record, is_integer, is_real
 from ehss.errors import DataError, ParameterError
 
 __all__ = [
@@ -36,7 +36,7 @@ __all__ = [
 
 def order_arg(name: str, value: Any, minimum: int) -> int:
     """``value`` as an int ≥ ``minimum`` (ParameterError naming ``name`` otherwise)."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+    if not is_integer(value):
         raise ParameterError(f"{name}={value!r} must be an integer >= {minimum}")
     if value < minimum:
         raise ParameterError(f"{name}={value!r} must be an integer >= {minimum}")
@@ -45,7 +45,7 @@ def order_arg(name: str, value: Any, minimum: int) -> int:
 
 def real_arg(name: str, value: Any) -> float:
     """``value`` as a finite float (ParameterError naming ``name`` otherwise)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+    if not is_real(value):
         raise ParameterError(f"{name}={value!r} must be a real number")
     value = float(value)
     if not math.isfinite(value):

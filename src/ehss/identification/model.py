@@ -24,7 +24,14 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import SAMPLE_RATE_RANGE_HZ, check_int, check_real, show
+from ehss._checks import (
+    SAMPLE_RATE_RANGE_HZ,
+    check_int,
+    check_real,
+    is_integer,
+    is_real,
+    show,
+)
 from ehss._files import atomic_path
 from ehss.errors import DataError, EhssWarning, ParameterError
 
@@ -51,7 +58,7 @@ def _pair(name: str, value: Any) -> tuple[float, float]:
         raise ParameterError(f"{name}={value!r} must be a pair of numbers") from None
     out = []
     for x in (lo, hi):
-        if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        if not is_real(x):
             raise ParameterError(f"{name}={value!r} must be a pair of numbers")
         if not math.isfinite(float(x)):
             raise ParameterError(f"{name}={value!r} must be finite")
@@ -342,7 +349,7 @@ class ArmaxModel:
         """
         from scipy.signal import lfilter
 
-        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+        if not is_integer(horizon) or horizon < 1:
             raise ParameterError(f"horizon={horizon!r} must be an integer >= 1")
         u = np.asarray(u, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
@@ -437,7 +444,7 @@ class ArmaxModel:
         """
         from scipy.optimize import linear_sum_assignment
 
-        if isinstance(digits, bool) or not isinstance(digits, (int, np.integer)) or digits < 1:
+        if not is_integer(digits) or digits < 1:
             raise ParameterError(f"digits={digits!r} must be an integer >= 1")
 
         def rnd(v: np.ndarray) -> np.ndarray:
@@ -568,8 +575,7 @@ MAX_DELAY = 100_000
 
 def _number(value: Any, field_name: str) -> float:
     """A finite float from a JSON number (bools and strings refused)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
-                                                                     np.floating)):
+    if not is_real(value):
         raise DataError(f"field {field_name!r} = {show(value)} must be a number, not "
                         f"{_json_type(value)}")
     try:
@@ -635,7 +641,7 @@ def _fields_from_dict(d: Any) -> dict[str, Any]:
     delay = d["delay"]
     if isinstance(delay, float) and delay.is_integer():
         delay = int(delay)  # some JSON writers give every number a decimal point
-    if isinstance(delay, (bool, np.bool_)) or not isinstance(delay, (int, np.integer)):
+    if not is_integer(delay):
         raise DataError(f"field 'delay' = {show(delay)} must be a whole number of samples in "
                         f"[0, {MAX_DELAY}]")
     if not 0 <= delay <= MAX_DELAY:

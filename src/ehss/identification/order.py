@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import is_integer, is_real
 from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification._grid import check_jobs, fit_grid
 from ehss.identification.estimators import INITS, METHODS, estimate
@@ -87,7 +88,7 @@ def _candidates(name: str, v: Any, minimum: int) -> list[int]:
     if not vals:
         raise ParameterError(f"{name}={v!r} must list at least one order")
     for x in vals:
-        if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < minimum:
+        if not is_integer(x) or x < minimum:
             raise ParameterError(f"{name}={v!r} must hold integers >= {minimum}")
     return [int(x) for x in vals]
 
@@ -183,8 +184,7 @@ def select_order(
     if admissible is not None and not callable(admissible):
         raise TypeError(f"admissible must be callable, not {type(admissible).__name__}")
     tol = fit_tolerance
-    if (isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating))
-            or not (math.isfinite(tol) and tol >= 0)):
+    if not is_real(tol) or not (math.isfinite(tol) and tol >= 0):
         raise ParameterError(f"fit_tolerance={fit_tolerance!r} must be a number >= 0")
     u, y = check_record(u, y)
     ncs = _candidates("nc", nc, 0)

@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import as_record
+from ehss._checks import as_record, is_real
 from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification import _kernels as _k
 from ehss.identification._common import check_settings as _check_settings
@@ -158,9 +158,7 @@ def _model_from_state(
 
 def _sample(name: str, value: Any) -> float:
     """One streaming sample as a Python float (TypeError for anything but a real number)."""
-    if isinstance(value, bool) or not isinstance(
-        value, (int, float, np.integer, np.floating)
-    ):
+    if not is_real(value):
         hint = " (use update_many for arrays)" if isinstance(value, (np.ndarray, list,
                                                                      tuple)) else ""
         raise TypeError(
