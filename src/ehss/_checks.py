@@ -139,7 +139,8 @@ def show(value: Any, limit: int = 60) -> str:
     return f"{text[: limit // 2]}...{text[-10:]} ({len(text)} characters)"
 
 
-def _in_range(x: float, lo, hi, lo_open: bool, hi_open: bool) -> bool:
+def _in_range(x: float, lo: float | None, hi: float | None, lo_open: bool,
+              hi_open: bool) -> bool:
     if lo is not None and (x < lo or (lo_open and x == lo)):
         return False
     return not (hi is not None and (x > hi or (hi_open and x == hi)))

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 import scipy.signal
+from numpy.typing import ArrayLike
 
 from ehss._checks import as_record, check_band, check_fs, check_int, check_real
 from ehss.errors import DataError, ParameterError
@@ -255,8 +256,8 @@ def _longest_segment(n: int, min_averages: int, floor: int) -> int:
 
 
 def h1_estimate(
-    u,
-    y,
+    u: ArrayLike,
+    y: ArrayLike,
     fs: float,
     *,
     nperseg: int | None = None,
@@ -324,8 +325,6 @@ def h1_estimate(
     (4096, 8)
     """
     u, y = as_record(u, y)
-    if u.size != y.size:
-        raise DataError(f"u and y must have the same length, got {u.size} and {y.size}")
     fs = check_fs(fs)
     n = u.size
     if n < MIN_SAMPLES:
@@ -349,8 +348,8 @@ def h1_estimate(
     if not np.any(u != u[0]):
         raise DataError("the input u is constant: it has no power to estimate a response")
 
-    window = _check_window(window, nperseg)
-    kw = dict(fs=fs, window=window, nperseg=nperseg, noverlap=noverlap, detrend=detrend)
+    weights = _check_window(window, nperseg)
+    kw = dict(fs=fs, window=weights, nperseg=nperseg, noverlap=noverlap, detrend=detrend)
     # S_uy = conj(U) Y, S_uu, S_yy: Welch averages of windowed segments.
     freq, s_uy = scipy.signal.csd(u, y, **kw)
     _, s_uu = scipy.signal.welch(u, **kw)
@@ -379,8 +378,8 @@ def h1_estimate(
 
 
 def dft_estimate(
-    u,
-    y,
+    u: ArrayLike,
+    y: ArrayLike,
     fs: float,
     *,
     n_average: int | None = None,
@@ -475,8 +474,8 @@ def dft_estimate(
 
 
 def frf_estimate(
-    u,
-    y,
+    u: ArrayLike,
+    y: ArrayLike,
     fs: float,
     *,
     method: str = "auto",
@@ -518,12 +517,9 @@ def frf_estimate(
     if method not in FRF_METHODS:
         raise ParameterError(f"method={method!r} must be one of {', '.join(FRF_METHODS)}")
     min_coherence = check_real(min_coherence, "min_coherence", lo=0.0, hi=1.0)
-    welch = dft = None
-    if method in ("auto", "welch"):
-        welch = h1_estimate(u, y, fs, nperseg=nperseg, band_hz=band_hz,
-                            min_nperseg=min_nperseg)
-        if method == "welch":
-            return welch
+    if method == "welch":
+        return h1_estimate(u, y, fs, nperseg=nperseg, band_hz=band_hz,
+                           min_nperseg=min_nperseg)
     n_average = None
     if nperseg is not None:
         n_u = np.shape(u)[0] if np.ndim(u) == 1 else 0
@@ -531,6 +527,7 @@ def frf_estimate(
     dft = dft_estimate(u, y, fs, n_average=n_average, band_hz=band_hz)
     if method == "dft":
         return dft
+    welch = h1_estimate(u, y, fs, nperseg=nperseg, band_hz=band_hz, min_nperseg=min_nperseg)
     band = band_hz if band_hz is not None else (0.0, welch.fs / 2.0)
     # the DFT estimate only when it validates over clearly more of the band (a quarter
     # more): on stationary tests both cover the same and Welch's estimate is kept

@@ -175,7 +175,8 @@ def _validate_fields(obj: Any) -> None:
     for f in fields(obj):
         value = getattr(obj, f.name)
         name = f"{cls}.{f.name}"
-        kind = type(f.default)
+        default: object = f.default
+        kind = type(default)
         if kind is bool:
             check_bool(value, name)
         elif kind is int:
@@ -597,11 +598,12 @@ class RigParams:
                 if not isinstance(self.name, str):
                     raise TypeError(f"RigParams.name={self.name!r} must be a string")
                 continue
-            expected = f.default_factory  # type: ignore[misc]
+            expected = f.default_factory
+            assert isinstance(expected, type), f"RigParams.{f.name} needs a class as factory"
             value = getattr(self, f.name)
-            if not isinstance(value, expected):  # type: ignore[arg-type]
+            if not isinstance(value, expected):
                 raise TypeError(
-                    f"RigParams.{f.name} must be a {expected.__name__}, "  # type: ignore[union-attr]
+                    f"RigParams.{f.name} must be a {expected.__name__}, "
                     f"got {type(value).__name__}"
                 )
 

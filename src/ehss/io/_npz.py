@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import zipfile
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -39,7 +40,7 @@ def read_npz(path: Path, wanted: list[str] | None, optional: str | None) -> Raw:
     return Raw(pick(path, flat, wanted, optional), stored_rate=stored_rate(scalars))
 
 
-def _archive(path: Path, fh) -> np.lib.npyio.NpzFile:
+def _archive(path: Path, fh: BinaryIO) -> np.lib.npyio.NpzFile:
     archive = np.load(fh, allow_pickle=False)
     if not isinstance(archive, np.lib.npyio.NpzFile):
         raise DataError(f"{str(path)!r}: not an .npz archive")

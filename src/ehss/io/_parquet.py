@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 from ehss.errors import DataError
@@ -34,7 +35,7 @@ def read_parquet(path: Path, wanted: list[str] | None, optional: str | None) -> 
     return Raw({name: frame[name].to_numpy() for name in names})
 
 
-def _chosen(path: Path, schema, available: list[str], wanted: list[str],
+def _chosen(path: Path, schema: Mapping[str, object], available: list[str], wanted: list[str],
             optional: str | None) -> list[str]:
     for name in wanted:
         if name in schema and name not in available:

@@ -227,7 +227,7 @@ def _parse(path: Path, body: bytes, layout: _Layout, idx: list[int]) -> list[np.
     import polars as pl
 
     names = layout.header
-    schema = {name: pl.String for name in names}
+    schema: dict[str, type[pl.DataType]] = {name: pl.String for name in names}
     schema.update({names[j]: pl.Float64 for j in idx})
     refused = ""
     try:

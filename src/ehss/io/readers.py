@@ -226,9 +226,9 @@ def read_columns(
             f"accepted: {', '.join(SUPPORTED_SUFFIXES)}"
         )
     raw = reader(path, wanted, optional_time)
-    columns = _checked(path, raw)
-    has_time = bool(time_column) and time_column in columns
-    return Table(path=path, columns=columns, time_column=time_column if has_time else None,
+    checked = _checked(path, raw)
+    has_time = bool(time_column) and time_column in checked
+    return Table(path=path, columns=checked, time_column=time_column if has_time else None,
                  labels=raw.labels, stored_rate=None if has_time else raw.stored_rate)
 
 
@@ -325,18 +325,18 @@ def sample_rate(
     return fs_t
 
 
-def _given_rate(fs: object) -> float | None:
+def _given_rate(fs: float | None) -> float | None:
     """``fs`` as a float in the accepted range, or None if not given."""
     if fs is None:
         return None
     lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
     try:
-        fs = float(fs)
+        rate = float(fs)  # a string or any other object: float() decides
     except (TypeError, ValueError):
         raise DataError(f"sample rate {fs=} must be a number in Hz") from None
-    if not (math.isfinite(fs) and lo_fs <= fs <= hi_fs):
-        raise DataError(f"sample rate {fs=} Hz must be in [{lo_fs:g}, {hi_fs:g}] Hz")
-    return fs
+    if not (math.isfinite(rate) and lo_fs <= rate <= hi_fs):
+        raise DataError(f"sample rate fs={rate!r} Hz must be in [{lo_fs:g}, {hi_fs:g}] Hz")
+    return rate
 
 
 def _stored_or_given(where: str, stored: tuple[float, str], fs: float | None,

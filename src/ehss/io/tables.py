@@ -28,12 +28,15 @@ import json
 import re
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ehss._files import SIDECAR_KEY, sidecar_path
 from ehss.errors import DataError
+
+if TYPE_CHECKING:
+    import polars as pl
 
 __all__ = [
     "TABLE_SUFFIXES",
@@ -144,7 +147,7 @@ def _os_errors() -> Iterator[None]:
         raise OSError(text[-1] if text else type(exc).__name__) from None
 
 
-def _frame(arrays: Mapping[str, np.ndarray]):
+def _frame(arrays: Mapping[str, np.ndarray]) -> pl.DataFrame:
     import polars as pl
 
     # float64 numpy arrays become polars columns without a copy
@@ -192,7 +195,8 @@ def write_hdf5(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str)
 def write_npz(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str) -> None:
     """Write float64 columns to an uncompressed ``.npz``, metadata as a text entry."""
     with open(path, "wb") as fh:  # a file object: np.savez would append .npz to a name
-        np.savez(fh, **arrays, **{METADATA_KEY: np.array(metadata_json)})
+        entries = {**arrays, METADATA_KEY: np.array(metadata_json)}
+        np.savez(fh, allow_pickle=False, **entries)
 
 
 def write_mat(path: Path, arrays: Mapping[str, np.ndarray], metadata_json: str) -> None:
