@@ -95,7 +95,7 @@ class TvcState(NamedTuple):
 
 
 @njit(cache=True)
-def pid_step(e, ym, st, c):
+def pid_step(e: float, ym: float, st: PidState, c: PidSettings) -> tuple[float, PidState]:
     """One PID step; returns the unsaturated output and the next :class:`PidState`.
 
     u = kp e + I + D, derivative on measurement with a first-order filter (backward Euler),
@@ -114,7 +114,8 @@ def pid_step(e, ym, st, c):
 
 
 @njit(cache=True)
-def tvc_step(ar, ym, am, st, c):
+def tvc_step(ar: float, ym: float, am: float, st: TvcState,
+             c: TvcSettings) -> tuple[float, float, TvcState]:
     """One three-variable-controller step (eqs (10)–(12), Fig. 6).
 
     ``ar`` acceleration reference, ``ym`` LVDT, ``am`` accelerometer. Returns the

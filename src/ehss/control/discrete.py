@@ -14,11 +14,14 @@ The laws run at the control rate fs = 1/dt on sampled sensor signals:
 from __future__ import annotations
 
 import math
+from typing import TypeVar
 
 import numpy as np
 
 from ehss.control._kernels import PidSettings, TvcSettings
 from ehss.params import ForcePidParams, PositionPidParams, TvcParams
+
+_Settings = TypeVar("_Settings", PidSettings, TvcSettings)
 
 __all__ = [
     "pid_coefficients",
@@ -58,7 +61,7 @@ def pid_coefficients(pid: PositionPidParams | ForcePidParams, dt_s: float) -> Pi
     ))
 
 
-def _floats(settings):
+def _floats(settings: _Settings) -> _Settings:
     """``settings`` (a NamedTuple) with every field a Python float."""
     return type(settings)._make(float(v) for v in settings)
 
@@ -94,7 +97,8 @@ def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def generator_zoh(kg: float, omega_g: float, delta_g: float, dt_s: float):
+def generator_zoh(kg: float, omega_g: float, delta_g: float,
+                  dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact ZOH discretisation of the acceleration generator, eq (10).
 
     State [r_d, v_d] with ṙ_d = v_d, v̇_d = Kg a_r − ωg v_d − δg r_d.

@@ -105,7 +105,7 @@ class PlantState(NamedTuple):
 
 
 @njit(cache=True)
-def signed_sqrt(dp, dp_lam):
+def signed_sqrt(dp: float, dp_lam: float) -> float:
     """Sign-preserving root with a laminar region: Δp / √(|Δp| + Δp_lam).
 
     Turbulent (≈ sgn(Δp) √|Δp|, relative error Δp_lam/(2|Δp|)) for |Δp| ≫ Δp_lam,
@@ -115,7 +115,7 @@ def signed_sqrt(dp, dp_lam):
 
 
 @njit(cache=True)
-def friction_force(v, s):
+def friction_force(v: float, s: PlantSettings) -> float:
     """Coulomb + Stribeck seal friction with a smooth sign (0 when both levels are 0).
 
     F = tanh(v/v_eps) [Fc + Fs exp(−(v/vs)²)]
@@ -129,7 +129,7 @@ def friction_force(v, s):
 
 
 @njit(cache=True)
-def plant_derivative(x, ucmd, s):
+def plant_derivative(x: PlantState, ucmd: float, s: PlantSettings) -> PlantState:
     """Right-hand side ẋ = f(x, u_cmd) of one actuator channel, as a :class:`PlantState`.
 
     ``ucmd`` is the normalised valve command (V/command_full_scale_v + null bias).
@@ -240,7 +240,7 @@ def plant_derivative(x, ucmd, s):
 # inline="always": folded into rk4_step by numba itself, which compiles faster than
 # separate functions that LLVM then inlines
 @njit(cache=True, inline="always")
-def _add_scaled(x, c, k):
+def _add_scaled(x: PlantState, c: float, k: PlantState) -> PlantState:
     """x + c k, field by field (c a scalar, k a derivative)."""
     return PlantState(
         x.spool + c * k.spool,
@@ -256,7 +256,8 @@ def _add_scaled(x, c, k):
 
 
 @njit(cache=True, inline="always")
-def _weighted_slope(k1, k2, k3, k4):
+def _weighted_slope(k1: PlantState, k2: PlantState, k3: PlantState,
+                    k4: PlantState) -> PlantState:
     """k1 + 2 k2 + 2 k3 + k4, field by field."""
     return PlantState(
         k1.spool + 2.0 * k2.spool + 2.0 * k3.spool + k4.spool,
@@ -277,7 +278,7 @@ def _weighted_slope(k1, k2, k3, k4):
 
 
 @njit(cache=True)
-def rk4_step(x, ucmd, s, h):
+def rk4_step(x: PlantState, ucmd: float, s: PlantSettings, h: float) -> PlantState:
     """One classical Runge-Kutta step of length ``h`` from ``x``; returns the new state."""
     k1 = plant_derivative(x, ucmd, s)
     k2 = plant_derivative(_add_scaled(x, 0.5 * h, k1), ucmd, s)
@@ -288,7 +289,7 @@ def rk4_step(x, ucmd, s, h):
 
 
 @njit(cache=True)
-def clamp_state(x, s):
+def clamp_state(x: PlantState, s: PlantSettings) -> PlantState:
     """``x`` within the hard limits applied after each step.
 
     Pressures are clamped to [0, Ps] (cavitation / relief); the spool, if saturating, to
@@ -320,7 +321,7 @@ def clamp_state(x, s):
 
 
 @njit(cache=True)
-def with_spool(x, spool):
+def with_spool(x: PlantState, spool: float) -> PlantState:
     """``x`` with the spool set to ``spool`` (a prescribed spool, open-loop tests)."""
     return PlantState(
         spool=spool,
@@ -336,7 +337,7 @@ def with_spool(x, spool):
 
 
 @njit(cache=True)
-def adc(value, full_scale, lsb):
+def adc(value: float, full_scale: float, lsb: float) -> float:
     """Quantise to a step ``lsb`` and clip to ±``full_scale`` (``lsb`` = 0: pass through)."""
     if lsb <= 0.0:
         return value

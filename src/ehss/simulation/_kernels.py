@@ -31,6 +31,7 @@ from numba import njit
 from ehss.control.kernels import PidSettings, PidState, TvcSettings, TvcState, pid_step, tvc_step
 from ehss.plant.kernels import (
     PlantSettings,
+    PlantState,
     adc,
     clamp_state,
     friction_force,
@@ -130,7 +131,8 @@ class LoopRecord(NamedTuple):
 
 
 @njit(cache=True)
-def closed_loop(ref, noise, x0, s, rec, mem):
+def closed_loop(ref: np.ndarray, noise: SensorNoise, x0: PlantState, s: LoopSettings,
+                rec: LoopRecord, mem: np.ndarray) -> PlantState:
     """Simulate ``ref.shape[0]`` control periods; fills ``rec``, returns the final state.
 
     Parameters
