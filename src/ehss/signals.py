@@ -15,11 +15,11 @@ The paper's tests (PAPER.md §6): band-limited random displacement 2–100 Hz
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 import scipy.signal
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike, DTypeLike, NDArray
 
 from ehss._checks import check_band, check_fs, check_int, check_real
 from ehss.errors import ParameterError
@@ -89,7 +89,8 @@ class Signal:
     def __len__(self) -> int:
         return int(self.values.size)
 
-    def __array__(self, dtype=None, copy=None):  # noqa: D105 - numpy protocol
+    def __array__(self, dtype: DTypeLike | None = None,  # noqa: D105 - numpy protocol
+                  copy: bool | None = None) -> np.ndarray:
         return np.asarray(self.values, dtype=dtype)
 
 
@@ -123,7 +124,8 @@ def _n_samples(duration_s: float, fs: float) -> int:
     return n
 
 
-def _scale(x: NDArray[np.float64], rms: float | None, peak: float | None):
+def _scale(x: NDArray[np.float64], rms: float | None,
+           peak: float | None) -> NDArray[np.float64]:
     if (rms is None) == (peak is None):
         raise ParameterError(f"rms={rms!r}, peak={peak!r}: give exactly one of them")
     if rms is not None:
@@ -142,7 +144,8 @@ def _fade_window(n: int, fs: float, fade_in_s: float, fade_out_s: float) -> NDAr
     return w
 
 
-def _band_project(x: NDArray[np.float64], fs: float, lo: float, hi: float):
+def _band_project(x: NDArray[np.float64], fs: float, lo: float,
+                  hi: float) -> NDArray[np.float64]:
     spec = np.fft.rfft(x)
     f = np.fft.rfftfreq(x.size, 1.0 / fs)
     spec[(f < lo) | (f > hi)] = 0.0
@@ -151,7 +154,8 @@ def _band_project(x: NDArray[np.float64], fs: float, lo: float, hi: float):
     return np.fft.irfft(spec, n=x.size)
 
 
-def _zero_ends(x: NDArray[np.float64], fs: float, lo: float, hi: float):
+def _zero_ends(x: NDArray[np.float64], fs: float, lo: float,
+               hi: float) -> NDArray[np.float64]:
     """Subtract band-limited kernels so that x[0] = x[1] = x[-2] = x[-1] = 0."""
     n = x.size
     idx = [0, 1, n - 2, n - 1] if n >= 4 else list(range(n))
@@ -161,10 +165,20 @@ def _zero_ends(x: NDArray[np.float64], fs: float, lo: float, hi: float):
 
 
 # --------------------------------------------------------------------------- generators
+@overload
+def with_fade(
+    signal: Signal, *, fs: float | None = None, fade_in_s: float = 0.1,
+    fade_out_s: float = 0.1, offset: float = 0.0,
+) -> Signal: ...
+@overload
+def with_fade(
+    signal: ArrayLike, *, fs: float | None = None, fade_in_s: float = 0.1,
+    fade_out_s: float = 0.1, offset: float = 0.0,
+) -> NDArray[np.float64]: ...
 def with_fade(
     signal: Signal | ArrayLike, *, fs: float | None = None, fade_in_s: float = 0.1,
     fade_out_s: float = 0.1, offset: float = 0.0,
-):
+) -> Signal | NDArray[np.float64]:
     """Apply raised-cosine fades to the part of a signal around ``offset``.
 
     Returns a :class:`Signal` for a Signal input (``fs`` taken from it), else an ndarray
@@ -211,7 +225,7 @@ def step(
         raise ParameterError(f"start_s={start_s!r} must be in [0, duration_s={duration_s!r})")
     t = np.arange(n) / fs
     # samples at t ≥ start (with a half-sample tolerance against rounding of k/fs)
-    x = off + a * (t >= start - 0.5 / fs)
+    x = np.where(t >= start - 0.5 / fs, off + a, off).astype(np.float64)
     return Signal(values=x, fs=fs, kind="step", settings=dict(
         amplitude=a, duration_s=duration_s, start_s=start, offset=off))
 
@@ -440,7 +454,8 @@ def earthquake(
 
 
 # --------------------------------------------------------------------------- feasibility
-def _generator_response(a_r: NDArray[np.float64], params: RigParams, fs: float):
+def _generator_response(a_r: NDArray[np.float64], params: RigParams,
+                        fs: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """r_d, v_d of the acceleration generator eq (10), ZOH-discretised at fs."""
     t = params.acceleration
     wg = 2.0 * t.generator_damping * t.generator_omega_rad_s
@@ -502,7 +517,8 @@ def check_feasible(
     v_name = ("limits.max_velocity_m_s" if lim.max_velocity_m_s <= params.max_velocity_m_s
               else "the valve's no-load velocity")
 
-    def check_motion(d: NDArray[np.float64], v: NDArray[np.float64], what: str):
+    def check_motion(d: NDArray[np.float64], v: NDArray[np.float64],
+                     what: str) -> dict[str, float]:
         pd, pv = float(np.max(np.abs(d))), float(np.max(np.abs(v)))
         if pd > stroke:
             raise ParameterError(
