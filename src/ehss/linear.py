@@ -87,7 +87,7 @@ def _position_plant(
     comp = a.total_volume_m3 / (4.0 * a.bulk_modulus_pa)
     den = np.polymul([comp, params.kce_m3_s_pa], [ld.mass_kg, ld.damping_n_s_m, k])
     den = np.polyadd(den, [a.piston_area_m2**2, 0.0])
-    return np.array([params.flow_gain_m3_s * a.piston_area_m2]), den
+    return np.array([params.flow_gain_m3_s * a.piston_area_m2]), np.asarray(den, np.float64)
 
 
 def _force_plant(params: RigParams) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -106,7 +106,7 @@ def _force_plant(params: RigParams) -> tuple[NDArray[np.float64], NDArray[np.flo
     )
     # GF = (Kq Ap/Kce)(s²/ωm² + 2ζm s/ωm + 1) / [(s/ωr + 1)(s²/ω0² + 2ζ0 s/ω0 + 1)]  eq (8)
     den = np.polymul([1.0 / wr, 1.0], [1.0 / w0**2, 2.0 * z0 / w0, 1.0])
-    return num, den
+    return num, np.asarray(den, np.float64)
 
 
 # --------------------------------------------------------------------------- open loops
@@ -190,8 +190,21 @@ def _closed(
     return _tf(np.polymul(n_p, n_e), np.polyadd(np.polymul(d_p, d_c), np.polymul(n_p, n_fb)))
 
 
-def _with_valve(params: RigParams, n_p, d_p):
-    return params.valve.gain_per_v * np.asarray(n_p), np.polymul(_valve_den(params), d_p)
+def _with_valve(
+    params: RigParams, n_p: NDArray[np.float64], d_p: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Valve (eq (1)) in series: the numerator times Kv, the denominator times its poles."""
+    return params.valve.gain_per_v * n_p, np.asarray(np.polymul(_valve_den(params), d_p),
+                                                     np.float64)
+
+
+def _pid_gains(params: RigParams, loop: str) -> tuple[float, float, float, float]:
+    """(kp, ki, kd, derivative filter in Hz) of the position or the force PID."""
+    if loop == "position":
+        g = params.position
+        return g.kp_v_per_m, g.ki_v_per_m_per_s, g.kd_v_s_per_m, g.derivative_filter_hz
+    f = params.force
+    return f.kp_v_per_n, f.ki_v_per_n_per_s, f.kd_v_s_per_n, f.derivative_filter_hz
 
 
 # --------------------------------------------------------------------------- discrete
@@ -264,7 +277,8 @@ def _sampled_plant(params: RigParams, loop: str) -> ct.StateSpace:
     return plant * _delay(params.timing.delay_samples, dt)
 
 
-def _pid_discrete(kp: float, ki: float, kd: float, filter_hz: float, dt: float):
+def _pid_discrete(kp: float, ki: float, kd: float, filter_hz: float,
+                  dt: float) -> tuple[ct.StateSpace, ct.StateSpace]:
     """Discrete PID of the controller laws: (Ce on e, Cfb on y), both StateSpace.
 
     I[k] = I[k−1] + ki e[k] dt                       → ki dt z/(z − 1)
@@ -314,7 +328,8 @@ def _tvc_feedforward_discrete(params: RigParams) -> ct.StateSpace:
 
 
 # --------------------------------------------------------------------------- closed loops
-def position_closed_loop(params: RigParams, *, discrete: bool = False, exact: bool = False):
+def position_closed_loop(params: RigParams, *, discrete: bool = False,
+                         exact: bool = False) -> ct.LTI:
     """Reference displacement → measured displacement, eq (9).
 
     Continuous:
@@ -334,27 +349,26 @@ def position_closed_loop(params: RigParams, *, discrete: bool = False, exact: bo
     exact : bool
         Continuous model only: use the exact plant cubic (see :func:`position_open_loop`).
     """
-    g = params.position
-    gains = (g.kp_v_per_m, g.ki_v_per_m_per_s, g.kd_v_s_per_m, g.derivative_filter_hz)
+    gains = _pid_gains(params, "position")
     if discrete:
         return _pid_loop_discrete(params, "position", gains)
     return _closed(*_with_valve(params, *_position_plant(params, exact)), *_pid_polys(*gains))
 
 
-def force_closed_loop(params: RigParams, *, discrete: bool = False):
+def force_closed_loop(params: RigParams, *, discrete: bool = False) -> ct.LTI:
     """Reference force → load-cell force, eqs (14)–(15): Gcf Gsv GF / (1 + Gcf Gsv GF).
 
     Gcf is the PID of ``params.force`` (derivative on the measurement); see
     :func:`position_closed_loop` for ``discrete``.
     """
-    g = params.force
-    gains = (g.kp_v_per_n, g.ki_v_per_n_per_s, g.kd_v_s_per_n, g.derivative_filter_hz)
+    gains = _pid_gains(params, "force")
     if discrete:
         return _pid_loop_discrete(params, "force", gains)
     return _closed(*_with_valve(params, *_force_plant(params)), *_pid_polys(*gains))
 
 
-def _pid_loop_discrete(params: RigParams, loop: str, gains: tuple[float, float, float, float]):
+def _pid_loop_discrete(params: RigParams, loop: str,
+                       gains: tuple[float, float, float, float]) -> ct.StateSpace:
     """Sampled PID loop: the controller's error path ``ce`` closed around the plant by its
     derivative-on-measurement path ``cfb`` (ZOH, delay and valve in the plant)."""
     ce, cfb = _pid_discrete(*gains, params.timing.dt_s)
@@ -363,7 +377,7 @@ def _pid_loop_discrete(params: RigParams, loop: str, gains: tuple[float, float, 
 
 def acceleration_closed_loop(
     params: RigParams, *, discrete: bool = False, exact: bool = False
-):
+) -> ct.LTI:
     """Reference acceleration → measured acceleration of the TVC loop, eqs (10)–(13).
 
     Continuous (ideal sensors, so v̂ = s y):
@@ -395,7 +409,7 @@ def acceleration_closed_loop(
     return _tf(num, den)
 
 
-def loop_gain(params: RigParams, loop: str, *, discrete: bool = True):
+def loop_gain(params: RigParams, loop: str, *, discrete: bool = True) -> ct.LTI:
     """Open-loop gain L (broken at the valve command) for gain/phase margins.
 
     The closed loop is stable and robust when L has the margins returned by
@@ -416,34 +430,21 @@ def loop_gain(params: RigParams, loop: str, *, discrete: bool = True):
         plant = _sampled_plant(params, loop)
         if loop == "acceleration":
             return _tvc_feedback_discrete(params) * plant
-        g = params.position if loop == "position" else params.force
-        gains = (
-            (g.kp_v_per_m, g.ki_v_per_m_per_s, g.kd_v_s_per_m)
-            if loop == "position"
-            else (g.kp_v_per_n, g.ki_v_per_n_per_s, g.kd_v_s_per_n)
-        )
-        _, cfb = _pid_discrete(*gains, g.derivative_filter_hz, dt)
+        _, cfb = _pid_discrete(*_pid_gains(params, loop), dt)
         return cfb * plant
     if loop == "acceleration":
         t = params.acceleration
         n_p, d_p = _with_valve(params, *_position_plant(params))
         n_fb = np.array([t.kaf_v_per_m_s2, t.kvf_v_per_m_s, t.kdf_v_per_m])
         return _tf(np.polymul(n_p, n_fb), d_p)
-    if loop == "position":
-        g = params.position
-        n_p, d_p = _with_valve(params, *_position_plant(params))
-        _, n_fb, d_c = _pid_polys(
-            g.kp_v_per_m, g.ki_v_per_m_per_s, g.kd_v_s_per_m, g.derivative_filter_hz)
-    else:
-        g = params.force
-        n_p, d_p = _with_valve(params, *_force_plant(params))
-        _, n_fb, d_c = _pid_polys(
-            g.kp_v_per_n, g.ki_v_per_n_per_s, g.kd_v_s_per_n, g.derivative_filter_hz)
+    plant_polys = _position_plant(params) if loop == "position" else _force_plant(params)
+    n_p, d_p = _with_valve(params, *plant_polys)
+    _, n_fb, d_c = _pid_polys(*_pid_gains(params, loop))
     return _tf(np.polymul(n_p, n_fb), np.polymul(d_p, d_c))
 
 
 # --------------------------------------------------------------------------- analysis
-def response_at(sys, freq_hz: ArrayLike) -> NDArray[np.complex128]:
+def response_at(sys: ct.LTI, freq_hz: ArrayLike) -> NDArray[np.complex128]:
     """Complex frequency response of a SISO continuous or discrete system at ``freq_hz``.
 
     Evaluates G(j2πf) or G(e^{j2πf dt}); state-space systems are evaluated by solving
@@ -489,7 +490,7 @@ class Margins:
     gain_crossover_hz: float
 
 
-def _grid_hz(sys, f_max_hz: float | None) -> NDArray[np.float64]:
+def _grid_hz(sys: ct.LTI, f_max_hz: float | None) -> NDArray[np.float64]:
     if ct.isdtime(sys, strict=True):
         top = 0.5 / sys.dt * (1.0 - 1e-9)
     else:
@@ -498,7 +499,7 @@ def _grid_hz(sys, f_max_hz: float | None) -> NDArray[np.float64]:
     return np.unique(np.concatenate([log_part, np.linspace(1.0, top, 20_000)]))
 
 
-def margins(loop_tf, *, f_max_hz: float | None = None) -> Margins:
+def margins(loop_tf: ct.LTI, *, f_max_hz: float | None = None) -> Margins:
     """Gain and phase margins of a SISO open loop (continuous or discrete).
 
     Crossovers are located on a dense frequency grid (up to Nyquist for discrete loops,
@@ -558,7 +559,7 @@ def closed_loop_radius(params: RigParams, loop: str) -> float:
     return float(np.max(np.abs(ct.poles(ct.feedback(gain, 1)))))
 
 
-def band_deviation_db(sys, f_lo_hz: float, f_hi_hz: float, *, n: int = 2000) -> tuple[float, float]:
+def band_deviation_db(sys: ct.LTI, f_lo_hz: float, f_hi_hz: float, *, n: int = 2000) -> tuple[float, float]:
     """(min, max) of 20 log10 |G| over [f_lo_hz, f_hi_hz] (a 0 Hz lower end uses 1 mHz)."""
     f_lo_hz, f_hi_hz = check_band((f_lo_hz, f_hi_hz), "band")
     f = np.linspace(max(f_lo_hz, 1e-3), f_hi_hz, n)
@@ -566,7 +567,7 @@ def band_deviation_db(sys, f_lo_hz: float, f_hi_hz: float, *, n: int = 2000) -> 
     return float(db.min()), float(db.max())
 
 
-def bandwidth_hz(sys, *, drop_db: float = 3.0, ref_hz: float = 0.0,
+def bandwidth_hz(sys: ct.LTI, *, drop_db: float = 3.0, ref_hz: float = 0.0,
                  f_max_hz: float | None = None) -> float:
     """First frequency above ``ref_hz`` where |G| leaves ±``drop_db`` of |G(ref_hz)|.
 
