@@ -161,11 +161,11 @@ def __getattr__(name: str) -> Any:
         from importlib.metadata import PackageNotFoundError, version
 
         try:
-            value = version("ehss")
+            text = version("ehss")
         except PackageNotFoundError:  # pragma: no cover - running from a source tree
-            value = "0.0.0+unknown"
-        globals()[name] = value
-        return value
+            text = "0.0.0+unknown"
+        globals()[name] = text
+        return text
     try:
         module_name = _LAZY[name]
     except KeyError:

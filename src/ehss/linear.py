@@ -559,7 +559,8 @@ def closed_loop_radius(params: RigParams, loop: str) -> float:
     return float(np.max(np.abs(ct.poles(ct.feedback(gain, 1)))))
 
 
-def band_deviation_db(sys: ct.LTI, f_lo_hz: float, f_hi_hz: float, *, n: int = 2000) -> tuple[float, float]:
+def band_deviation_db(sys: ct.LTI, f_lo_hz: float, f_hi_hz: float, *,
+                      n: int = 2000) -> tuple[float, float]:
     """(min, max) of 20 log10 |G| over [f_lo_hz, f_hi_hz] (a 0 Hz lower end uses 1 mHz)."""
     f_lo_hz, f_hi_hz = check_band((f_lo_hz, f_hi_hz), "band")
     f = np.linspace(max(f_lo_hz, 1e-3), f_hi_hz, n)

@@ -32,6 +32,7 @@ from typing import Any, Protocol
 import numpy as np
 import scipy.signal
 import scipy.stats
+from numpy.typing import ArrayLike
 
 from ehss._checks import as_record, as_signal, check_band, check_int, check_real
 from ehss.errors import DataError, ParameterError
@@ -238,7 +239,7 @@ def frf_error(
 # ----------------------------------------------------------------------------- fit figures
 
 
-def nrmse_fit(y, yhat) -> float:
+def nrmse_fit(y: ArrayLike, yhat: ArrayLike) -> float:
     """Normalised fit in percent, as MATLAB's ``compare``/``goodnessOfFit('NRMSE')``.
 
     .. math:: \\mathrm{fit} = 100\\left(1 - \\frac{\\lVert y - \\hat y\\rVert}
@@ -269,7 +270,8 @@ def nrmse_fit(y, yhat) -> float:
     return float(100.0 * (1.0 - num / den)) if math.isfinite(num) else -math.inf
 
 
-def free_run(model: _Model, u, y=None, *, initial: str = "zero") -> np.ndarray:
+def free_run(model: _Model, u: ArrayLike, y: ArrayLike | None = None, *,
+             initial: str = "zero") -> np.ndarray:
     """Free-run simulation ``B/A u`` of the model, from rest or from a fitted initial state.
 
     Parameters
@@ -321,7 +323,8 @@ def free_run(model: _Model, u, y=None, *, initial: str = "zero") -> np.ndarray:
     return y0 + phi @ x
 
 
-def simulation_fit(model: _Model, u, y, *, start: int = 0, initial: str = "zero") -> float:
+def simulation_fit(model: _Model, u: ArrayLike, y: ArrayLike, *, start: int = 0,
+                   initial: str = "zero") -> float:
     """Fit (percent, :func:`nrmse_fit`) of the noise-free simulation ``B/A u`` to ``y``.
 
     The model is simulated over the whole record (:func:`free_run`, from rest or from the
@@ -335,7 +338,7 @@ def simulation_fit(model: _Model, u, y, *, start: int = 0, initial: str = "zero"
     return nrmse_fit(y[start:], yhat[start:])
 
 
-def band_fit(y, yhat, *, fs: float, band_hz: tuple[float, float]) -> float:
+def band_fit(y: ArrayLike, yhat: ArrayLike, *, fs: float, band_hz: tuple[float, float]) -> float:
     """Fit (percent) of ``yhat`` to ``y`` with both low-passed to the band of interest.
 
     Both go through the same zero-phase 4th-order Butterworth low-pass at
@@ -364,7 +367,8 @@ def fit_text(v: float | None) -> str:
     return f"{v:.2f} %"
 
 
-def prediction_fit(model: _Model, u, y, horizon: int = 1, *, start: int = 0) -> float:
+def prediction_fit(model: _Model, u: ArrayLike, y: ArrayLike, horizon: int = 1, *,
+                   start: int = 0) -> float:
     """Fit (percent) of the ``horizon``-step-ahead ARMAX prediction of ``y``."""
     u, y = as_record(u, y)
     start = check_int(start, "start", lo=0, hi=y.size - 1)
@@ -451,7 +455,7 @@ class ResidualTests:
         }
 
 
-def ljung_box(x, max_lag: int) -> tuple[float, float]:
+def ljung_box(x: ArrayLike, max_lag: int) -> tuple[float, float]:
     """Ljung–Box statistic and p-value of ``x`` over lags ``1..max_lag``.
 
     .. math:: Q = N(N+2)\\sum_{k=1}^{m} \\frac{\\hat\\rho_k^2}{N-k}, \\qquad
@@ -473,8 +477,8 @@ def ljung_box(x, max_lag: int) -> tuple[float, float]:
 
 def residual_tests(
     model: _Model,
-    u,
-    y,
+    u: ArrayLike,
+    y: ArrayLike,
     *,
     max_lag: int = 25,
     alpha: float = 0.01,
@@ -714,8 +718,8 @@ class ValidationReport:
 
 def validate(
     model: _Model,
-    u,
-    y,
+    u: ArrayLike,
+    y: ArrayLike,
     *,
     fs: float,
     band_hz: tuple[float, float] | None = None,

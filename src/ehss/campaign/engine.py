@@ -32,12 +32,15 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ehss._files import atomic_path
 from ehss.errors import DataError, ParameterError
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 __all__ = [
     "Task",
@@ -229,7 +232,7 @@ def _client(scheduler: str | None, workers: int | None,
         client.close()
 
 
-def _progress(total: int, skipped: int, quiet: bool):
+def _progress(total: int, skipped: int, quiet: bool) -> Progress:
     """A rich progress bar on stderr (a no-op object when ``quiet``)."""
     from rich.console import Console
     from rich.progress import (

@@ -230,8 +230,8 @@ def load_montecarlo(path: str | Path, *, samples: int | None = None,
     if unknown:
         raise ParameterError(f"{where}: unknown key(s) {unknown}; accepted: "
                              f"{', '.join(sorted(_TOP))}")
-    kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in doc.items()
-              if k != "parameters"}
+    kwargs: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                              for k, v in doc.items() if k != "parameters"}
     if "params_file" in kwargs:
         kwargs["params_file"] = str(Path(path).parent / kwargs["params_file"])
     kwargs.update({k: v for k, v in {"samples": samples, "seed": seed}.items()
@@ -269,11 +269,11 @@ def _with_values(params: Any, values: dict[str, float]) -> Any:
     return params
 
 
-def _bands(settings: MonteCarloSettings) -> tuple[dict, tuple[float, float]]:
+def _bands(settings: MonteCarloSettings) -> tuple[dict[str, Any], tuple[float, float]]:
     from ehss.experiments.compensation_demo import LOOP_SETTINGS
 
     cfg = LOOP_SETTINGS[settings.loop]
-    return cfg, tuple(settings.band_hz) if settings.band_hz else cfg["band_hz"]
+    return cfg, settings.band_hz if settings.band_hz else cfg["band_hz"]
 
 
 def identify_rig(params: Any, settings: MonteCarloSettings, seeds: np.ndarray) -> Any:
@@ -398,10 +398,12 @@ def montecarlo(
     from ehss.campaign.summary import write_montecarlo_summary
     from ehss.io import write_json
 
-    given = {k: v for k, v in {"samples": samples, "seed": seed}.items() if v is not None}
     if not isinstance(settings, MonteCarloSettings):
         settings = load_montecarlo(settings)
-    settings = dataclasses.replace(settings, **given)
+    if samples is not None:
+        settings = dataclasses.replace(settings, samples=samples)
+    if seed is not None:
+        settings = dataclasses.replace(settings, seed=seed)
     out = Path(out)
     # more samples later extend the same draw (a Sobol prefix); nothing else may change
     check_same_campaign(out, {k: v for k, v in to_plain(settings).items()

@@ -138,7 +138,8 @@ def discover(patterns: list[str], *, root: str | Path | None = None) -> list[Rec
 def channel_pairs(columns: list[str]) -> list[Channel]:
     """Channels a record's column names imply: ``ref<k>``/``fb<k>`` pairs (as ``ehss
     live`` names them), else ``reference``/``output`` (as ``ehss simulate`` writes)."""
-    refs, fbs = {}, {}
+    refs: dict[str, str] = {}
+    fbs: dict[str, str] = {}
     for c in columns:
         m = _PAIR.match(c)
         if m:

@@ -24,6 +24,8 @@ from collections.abc import Iterator, Sequence
 TYPE_CHECKING = False  # typing itself imports re: not here
 if TYPE_CHECKING:
     import argparse
+    from types import FrameType
+    from typing import NoReturn
 
 __all__ = [
     "main",
@@ -143,7 +145,7 @@ def _sigterm_as_exception() -> Iterator[None]:
         yield
         return
 
-    def handler(signum, frame):
+    def handler(signum: int, frame: FrameType | None) -> NoReturn:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         raise _Terminated
 

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,6 +21,10 @@ from ehss.cli._outputs import InputFile, OutputFile, OutputTable
 from ehss.cli._params import warn_if_unstable
 from ehss.errors import ParameterError
 from ehss.params import GRAVITY_M_S2, PRESETS, RigParams, load_params, params_to_dict, preset
+
+if TYPE_CHECKING:
+    from ehss.signals import Signal
+    from ehss.simulation import SimulationResult
 
 __all__ = ["register", "run", "seed_argument", "SIGNALS", "DEFAULT_AMPLITUDE",
            "DEFAULT_BAND_HZ"]
@@ -93,7 +98,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _generate(args: argparse.Namespace, fs: float):
+def _generate(args: argparse.Namespace, fs: float) -> Signal:
     """The generated reference as an ``ehss.signals.Signal``."""
     from ehss import signals
 
@@ -161,7 +166,10 @@ def run(args: argparse.Namespace) -> int:
         from ehss.plots import plot_simulation
 
         # the temporary file keeps the plot's suffix, which picks the format
-        writers[Path(args.plot)] = lambda tmp: plot_simulation(result, tmp)
+        def draw(tmp: Path) -> None:
+            plot_simulation(result, tmp)
+
+        writers[Path(args.plot)] = draw
     write_outputs(writers)
     hits = result.limits_hit
     if hits:
@@ -172,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _metadata(result, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
+def _metadata(result: SimulationResult, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
     from ehss._provenance import timestamp, versions
 
     return {
@@ -191,7 +199,7 @@ def _metadata(result, kind: str, settings: dict[str, Any]) -> dict[str, Any]:
 
 
 @contextlib.contextmanager
-def _progress(expected_s: float, text: str):
+def _progress(expected_s: float, text: str) -> Iterator[None]:
     """A rich status line on stderr for runs expected to take longer than ~2 s."""
     if expected_s < _LONG_RUN_S:
         yield

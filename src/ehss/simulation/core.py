@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -97,7 +98,7 @@ class SimulationState:
     loop: str
     plant: PlantState
     memory: np.ndarray = dataclasses.field(repr=False)
-    rng_state: dict = dataclasses.field(repr=False)
+    rng_state: dict[str, Any] = dataclasses.field(repr=False)
     seed: int
     fs: float
 
@@ -271,7 +272,8 @@ def _sensor_settings(params: RigParams) -> SK.SensorSettings:
 
 def _new_seed(seed: int | None) -> int:
     if seed is None:
-        return int(np.random.SeedSequence().entropy)
+        # 128 bits of OS entropy, as np.random.SeedSequence() draws them
+        return secrets.randbits(128)
     return check_int(seed, "seed", lo=0)
 
 
@@ -361,22 +363,20 @@ def _kernel_inputs(
     elif loop == "acceleration":
         tvc = tvc_coefficients(params.acceleration, dt)
     drive0 = 0.0
-    x0 = rest_state(params)
-    resume = isinstance(initial_state, SimulationState)
-    if resume:
+    if isinstance(initial_state, SimulationState):
         x0 = initial_state.plant
-    elif loop == "force" and initial_state is None and values[0] != 0.0 \
-            and stiffness_n_m > 0.0:
-        # start in equilibrium on the first reference value (bumpless: the integrator
-        # holds the drive that keeps the valve open against the leakage)
-        x0, drive0 = static_force_state(params, float(values[0]), plant)
-    elif loop == "open" and spool_direct:
-        x0 = x0._replace(spool=float(values[0]))
-    if resume:
         mem = np.array(initial_state.memory, dtype=float)
         rng = np.random.default_rng()
         rng.bit_generator.state = initial_state.rng_state
     else:
+        x0 = rest_state(params)
+        if loop == "force" and initial_state is None and values[0] != 0.0 \
+                and stiffness_n_m > 0.0:
+            # start in equilibrium on the first reference value (bumpless: the integrator
+            # holds the drive that keeps the valve open against the leakage)
+            x0, drive0 = static_force_state(params, float(values[0]), plant)
+        elif loop == "open" and spool_direct:
+            x0 = x0._replace(spool=float(values[0]))
         x0 = apply_initial_state(x0, initial_state)
         mem = _fresh_memory(int(timing.delay_samples), drive0)
         rng = np.random.default_rng(seed)
@@ -440,7 +440,7 @@ def _run(
     x_end = SK.closed_loop(values, noise, x0, settings, record, mem)
     mem.setflags(write=False)
     final_state = SimulationState(loop=loop, plant=PlantState._make(float(v) for v in x_end),
-                                  memory=mem, rng_state=rng.bit_generator.state, seed=seed,
+                                  memory=mem, rng_state=dict(rng.bit_generator.state), seed=seed,
                                   fs=float(fs))
     rows = record._asdict()
     aux = rows.pop("aux")
