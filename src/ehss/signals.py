@@ -499,6 +499,23 @@ def check_feasible(
     stroke and velocity limits. force: |F| ≤ Table 2's force and ≤ 2/3·Ap·Ps (rated load
     pressure, where the valve keeps 1/√3 of its no-load flow).
     """
+    x, fs = _values_and_rate(values, fs)
+    if x.ndim != 1 or x.size < 2 or not np.all(np.isfinite(x)):
+        raise ParameterError("values must be a finite 1-D array of at least 2 samples")
+    if not 0 < stroke_margin <= 1:
+        raise ParameterError(f"stroke_margin={stroke_margin!r} must be in (0, 1]")
+    if loop == "position":
+        return _check_motion(x, np.diff(x) * fs, "position reference", params, stroke_margin)
+    if loop == "acceleration":
+        return _check_acceleration(x, params, fs, stroke_margin)
+    if loop == "force":
+        return _check_force(x, params)
+    raise ParameterError(f"loop={loop!r} must be one of ['position', 'acceleration', 'force']")
+
+
+def _values_and_rate(values: Signal | ArrayLike,
+                     fs: float | None) -> tuple[NDArray[np.float64], float]:
+    """The samples of a reference and its rate (a Signal's own unless ``fs`` is given)."""
     if isinstance(values, Signal):
         fs = values.fs if fs is None else fs
         x = values.values
@@ -507,53 +524,60 @@ def check_feasible(
     if fs is None:
         raise ParameterError("fs=None must be given for an array input")
     check_fs(fs)
-    if x.ndim != 1 or x.size < 2 or not np.all(np.isfinite(x)):
-        raise ParameterError("values must be a finite 1-D array of at least 2 samples")
-    if not 0 < stroke_margin <= 1:
-        raise ParameterError(f"stroke_margin={stroke_margin!r} must be in (0, 1]")
+    return x, fs
+
+
+def _check_motion(d: NDArray[np.float64], v: NDArray[np.float64], what: str,
+                  params: RigParams, stroke_margin: float) -> dict[str, float]:
+    """Peak displacement within the stroke margin, peak velocity within Table 2's and the
+    valve's no-load velocity."""
     lim = params.limits
     stroke = stroke_margin * params.actuator.stroke_m
     v_max = min(lim.max_velocity_m_s, params.max_velocity_m_s)
     v_name = ("limits.max_velocity_m_s" if lim.max_velocity_m_s <= params.max_velocity_m_s
               else "the valve's no-load velocity")
+    pd, pv = float(np.max(np.abs(d))), float(np.max(np.abs(v)))
+    if pd > stroke:
+        raise ParameterError(
+            f"{what} peak displacement {pd:.4g} m exceeds {stroke_margin:.0%} of the "
+            f"stroke ({stroke:.4g} m of actuator.stroke_m={params.actuator.stroke_m!r})"
+        )
+    if pv > v_max:
+        raise ParameterError(
+            f"{what} peak velocity {pv:.4g} m/s exceeds {v_name} ({v_max:.4g} m/s)"
+        )
+    return {"peak_displacement_m": pd, "peak_velocity_m_s": pv}
 
-    def check_motion(d: NDArray[np.float64], v: NDArray[np.float64],
-                     what: str) -> dict[str, float]:
-        pd, pv = float(np.max(np.abs(d))), float(np.max(np.abs(v)))
-        if pd > stroke:
-            raise ParameterError(
-                f"{what} peak displacement {pd:.4g} m exceeds {stroke_margin:.0%} of the "
-                f"stroke ({stroke:.4g} m of actuator.stroke_m={params.actuator.stroke_m!r})"
-            )
-        if pv > v_max:
-            raise ParameterError(
-                f"{what} peak velocity {pv:.4g} m/s exceeds {v_name} ({v_max:.4g} m/s)"
-            )
-        return {"peak_displacement_m": pd, "peak_velocity_m_s": pv}
 
-    if loop == "position":
-        return check_motion(x, np.diff(x) * fs, "position reference")
-    if loop == "acceleration":
-        pa = float(np.max(np.abs(x)))
-        if pa > lim.max_acceleration_m_s2:
-            raise ParameterError(
-                f"acceleration reference peak {pa:.4g} m/s² ({pa / GRAVITY_M_S2:.3g} g) exceeds "
-                f"limits.max_acceleration_m_s2={lim.max_acceleration_m_s2:.4g}"
-            )
-        r_d, v_d = _generator_response(x, params, fs)
-        return {"peak_acceleration_m_s2": pa,
-                **check_motion(r_d, v_d, "generated (eq 10) displacement reference")}
-    if loop == "force":
-        pf = float(np.max(np.abs(x)))
-        rated = 2.0 / 3.0 * params.max_actuator_force_n
-        if pf > lim.max_force_n:
-            raise ParameterError(
-                f"force reference peak {pf:.4g} N exceeds limits.max_force_n={lim.max_force_n:.4g}"
-            )
-        if pf > rated:
-            raise ParameterError(
-                f"force reference peak {pf:.4g} N exceeds 2/3·Ap·Ps = {rated:.4g} N "
-                "(rated load pressure)"
-            )
-        return {"peak_force_n": pf}
-    raise ParameterError(f"loop={loop!r} must be one of ['position', 'acceleration', 'force']")
+def _check_acceleration(x: NDArray[np.float64], params: RigParams, fs: float,
+                        stroke_margin: float) -> dict[str, float]:
+    """Peak acceleration within Table 2's, and the motion eq (10)'s generator makes of it
+    within the stroke and velocity limits."""
+    lim = params.limits
+    pa = float(np.max(np.abs(x)))
+    if pa > lim.max_acceleration_m_s2:
+        raise ParameterError(
+            f"acceleration reference peak {pa:.4g} m/s² ({pa / GRAVITY_M_S2:.3g} g) exceeds "
+            f"limits.max_acceleration_m_s2={lim.max_acceleration_m_s2:.4g}"
+        )
+    r_d, v_d = _generator_response(x, params, fs)
+    return {"peak_acceleration_m_s2": pa,
+            **_check_motion(r_d, v_d, "generated (eq 10) displacement reference", params,
+                            stroke_margin)}
+
+
+def _check_force(x: NDArray[np.float64], params: RigParams) -> dict[str, float]:
+    """Peak force within Table 2's and 2/3·Ap·Ps (the rated load pressure)."""
+    lim = params.limits
+    pf = float(np.max(np.abs(x)))
+    rated = 2.0 / 3.0 * params.max_actuator_force_n
+    if pf > lim.max_force_n:
+        raise ParameterError(
+            f"force reference peak {pf:.4g} N exceeds limits.max_force_n={lim.max_force_n:.4g}"
+        )
+    if pf > rated:
+        raise ParameterError(
+            f"force reference peak {pf:.4g} N exceeds 2/3·Ap·Ps = {rated:.4g} N "
+            "(rated load pressure)"
+        )
+    return {"peak_force_n": pf}
