@@ -46,7 +46,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("experiments",),
     ("report",),
     ("campaign",),  # campaigns over many records or simulated rigs, on Dask
-    ("ehss",),  # the package's __init__: re-exports the library
+    ("ehss", "_warm"),  # the package's __init__: re-exports the library; kernel warm-up
     ("live",),  # online identification of a running rig, built on the public library
     ("cli",),
     ("__main__",),

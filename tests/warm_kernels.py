@@ -15,15 +15,8 @@ import os
 
 os.nice(10)  # yield to the tests when they need both cores
 
-import numpy as np  # noqa: E402
+from ehss import warm_up  # noqa: E402
 
-from ehss import simulate  # noqa: E402
-from ehss.identification import RelsEstimator, rels  # noqa: E402
-
-simulate("position", np.zeros(10), seed=0)
-u = np.random.default_rng(0).standard_normal(200)
-y = np.convolve(u, [0.0, 0.5])[: u.size]
-for method in ("rels", "rml"):
-    rels(u, y, na=1, nb=0, nc=1, method=method)
-estimator = RelsEstimator(na=1, nb=0, nc=1)
-estimator.update(0.1, 0.2)
+# the order the suite first needs them: the closed loop, then RELS and RML, batch and
+# streaming
+warm_up(["simulation", "identification", "streaming"])

@@ -93,12 +93,15 @@ _LAZY = {
     "write_table": "ehss.io",
     "read_metadata": "ehss.io",
     "write_json": "ehss.io",
+    # numba kernels compiled ahead of use
+    "warm_up": "ehss._warm",
 }
 
 if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from typing import Any
 
     from ehss import linear, preprocess, signals, workflow
+    from ehss._warm import warm_up
     from ehss.compensation import InverseModel, compensate, design_inverse
     from ehss.control.tuning import tune_force, tune_position, tune_tvc
     from ehss.errors import (
@@ -251,4 +254,6 @@ __all__ = [
     "write_table",
     "read_metadata",
     "write_json",
+    # numba kernels compiled ahead of use
+    "warm_up",
 ]
