@@ -193,6 +193,27 @@ def save_figure(fig: Figure, path: str | Path, *, dpi: int = DPI) -> Path:
     return path
 
 
+def _figure_for(ax: Axes | None, figsize: tuple[float, float], *,
+                left: float) -> tuple[Figure, Axes]:
+    """``ax`` and its figure, or a new figure of one axes with a fixed layout (``left``
+    margin in inches for the y labels)."""
+    if ax is not None:
+        return _root_figure(ax), ax
+    fig = Figure(figsize=figsize)
+    new_ax = fig.subplots()
+    fixed_layout(fig, left=left, right=0.2, bottom=0.55, top=0.35)
+    return fig, new_ax
+
+
+def _finished(fig: Figure, path: str | Path | None, *, suptitle: str | None = None) -> Figure:
+    """``fig`` with its title, saved to ``path`` when one is given."""
+    if suptitle:
+        fig.suptitle(_shown(suptitle))
+    if path is not None:
+        save_figure(fig, path)
+    return fig
+
+
 def _as_models(models: Any) -> dict[str, Any]:
     if models is None:
         return {}
@@ -302,11 +323,7 @@ def bode_compare(
     for ax in (ax_m, ax_p, ax_c):
         ax.grid(True, which="both", lw=0.3, alpha=0.6)
     ax_m.legend(loc="best", fontsize=8)
-    if title:
-        fig.suptitle(_shown(title))
-    if path is not None:
-        save_figure(fig, path)
-    return fig
+    return _finished(fig, path, suptitle=title)
 
 
 def time_compare(
@@ -364,13 +381,7 @@ def time_compare(
         if not np.any(sel):
             raise ParameterError(f"window {window_s} s holds no samples "
                                  f"(record {t[0]:g}..{t[-1]:g} s)")
-    fig: Figure
-    if ax is None:
-        fig = Figure(figsize=(8.0, 3.8))
-        ax = fig.subplots()
-        fixed_layout(fig, left=0.9, right=0.2, bottom=0.55, top=0.35)
-    else:
-        fig = _root_figure(ax)
+    fig, ax = _figure_for(ax, (8.0, 3.8), left=0.9)
     plot_series(ax, t[sel], measured[sel], color="k", lw=1.2, label="measured")
     for i, (name, v) in enumerate(simulated.items()):
         v = np.asarray(v, dtype=np.float64)
@@ -382,9 +393,7 @@ def time_compare(
     ax.legend(loc="best", fontsize=8)
     if title:
         ax.set_title(_shown(title))
-    if path is not None:
-        save_figure(fig, path)
-    return fig
+    return _finished(fig, path)
 
 
 def theta_convergence(
@@ -420,13 +429,7 @@ def theta_convergence(
     x = np.arange(n) if t is None else np.asarray(t, dtype=np.float64)
     if x.shape != (n,):
         raise DataError(f"t has shape {x.shape}, history has {n} samples")
-    fig: Figure
-    if ax is None:
-        fig = Figure(figsize=(8.0, 4.2))
-        ax = fig.subplots()
-        fixed_layout(fig, left=0.8, right=0.2, bottom=0.55, top=0.35)
-    else:
-        fig = _root_figure(ax)
+    fig, ax = _figure_for(ax, (8.0, 4.2), left=0.8)
     for j in range(p):
         plot_series(ax, x, history[:, j], lw=1.0, label=names[j])
     ax.set_xlabel("sample" if t is None else "time (s)")
@@ -434,9 +437,7 @@ def theta_convergence(
     ax.grid(True, lw=0.3, alpha=0.6)
     ax.legend(loc="best", fontsize=7, ncol=max(1, p // 6))
     ax.set_title(_shown(title or "parameter convergence"))
-    if path is not None:
-        save_figure(fig, path)
-    return fig
+    return _finished(fig, path)
 
 
 def residual_plot(
@@ -483,11 +484,7 @@ def residual_plot(
     ax_x.set_xlabel("lag (samples; > 0: past inputs)")
     for ax in (ax_e, ax_x):
         ax.grid(True, lw=0.3, alpha=0.6)
-    if title:
-        fig.suptitle(_shown(title))
-    if path is not None:
-        save_figure(fig, path)
-    return fig
+    return _finished(fig, path, suptitle=title)
 
 
 _SCALE = {"m": (1e3, "mm")}  # others are drawn in their own unit
