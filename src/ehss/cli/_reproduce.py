@@ -8,6 +8,7 @@ import time
 
 from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFolder
+from ehss.cli._simulate import whole_number
 
 __all__ = ["register"]
 
@@ -39,13 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _jobs(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
-    return value
+    return whole_number(text, lo=1, what="at least 1")
 
 
 def run(args: argparse.Namespace) -> int:

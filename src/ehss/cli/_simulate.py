@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from ehss.signals import Signal
     from ehss.simulation import SimulationResult
 
-__all__ = ["register", "run", "seed_argument", "SIGNALS", "DEFAULT_AMPLITUDE",
+__all__ = ["register", "run", "seed_argument", "whole_number", "SIGNALS", "DEFAULT_AMPLITUDE",
            "DEFAULT_BAND_HZ"]
 
 SIGNALS = ("step", "sine", "random", "sweep", "multisine")
@@ -38,15 +38,20 @@ _LONG_RUN_S = 2.0  # show a progress indicator when the run should take longer t
 _EXPECTED_REAL_TIME_FACTOR = 400.0
 
 
-def seed_argument(text: str) -> int:
-    """The value of a ``--seed`` option: a whole number >= 0 (what numpy seeds with)."""
+def whole_number(text: str, *, lo: int, what: str) -> int:
+    """``text`` as an option's whole number >= ``lo`` (``what`` ends the message)."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{value} must be a whole number >= 0 (a seed)")
+    if value < lo:
+        raise argparse.ArgumentTypeError(f"{value} must be {what}")
     return value
+
+
+def seed_argument(text: str) -> int:
+    """The value of a ``--seed`` option: a whole number >= 0 (what numpy seeds with)."""
+    return whole_number(text, lo=0, what="a whole number >= 0 (a seed)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
