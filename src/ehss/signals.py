@@ -22,6 +22,7 @@ import scipy.signal
 from numpy.typing import ArrayLike, DTypeLike, NDArray
 
 from ehss._checks import check_band, check_fs, check_int, check_real
+from ehss.control.discrete import generator_coefficients, generator_zoh
 from ehss.errors import ParameterError
 from ehss.params import GRAVITY_M_S2, RigParams
 
@@ -458,14 +459,12 @@ def _generator_response(a_r: NDArray[np.float64], params: RigParams,
                         fs: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """r_d, v_d of the acceleration generator eq (10), ZOH-discretised at fs."""
     t = params.acceleration
-    wg = 2.0 * t.generator_damping * t.generator_omega_rad_s
-    dg = t.generator_omega_rad_s**2
-    sys = scipy.signal.cont2discrete(
-        (np.array([[0.0, 1.0], [-dg, -wg]]), np.array([[0.0], [t.kg]]), np.eye(2),
-         np.zeros((2, 1))), 1.0 / fs, method="zoh")
-    # dlsim's recursion (x⁺ = A x + B u, y = C x, from rest) as one transfer function per
-    # output: lfilter runs it in C, dlsim in a Python loop (0.4 s for 16 s at 1 kHz)
-    num, den = scipy.signal.ss2tf(sys[0], sys[1], sys[2], sys[3])  # num: one row per output
+    wg, dg = generator_coefficients(t)
+    # [r_d, v_d][k+1] = Φ [r_d, v_d][k] + Γ a_r[k], the controller's own discretisation
+    phi, gamma = generator_zoh(t.kg, wg, dg, 1.0 / fs)
+    # that recursion from rest as one transfer function per output, which lfilter runs
+    # in C (a loop over the samples in Python would take seconds on long tests)
+    num, den = scipy.signal.ss2tf(phi, gamma[:, None], np.eye(2), np.zeros((2, 1)))
     return scipy.signal.lfilter(num[0], den, a_r), scipy.signal.lfilter(num[1], den, a_r)
 
 

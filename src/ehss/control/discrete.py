@@ -25,6 +25,7 @@ _Settings = TypeVar("_Settings", PidSettings, TvcSettings)
 
 __all__ = [
     "pid_coefficients",
+    "generator_coefficients",
     "generator_zoh",
     "complementary_velocity_tustin",
     "tvc_coefficients",
@@ -138,6 +139,13 @@ def complementary_velocity_tustin(omega_c: float, dt_s: float) -> tuple[float, f
     return (c - omega_c) / (c + omega_c), omega_c * c / (c + omega_c), 1.0 / (c + omega_c)
 
 
+def generator_coefficients(tvc: TvcParams) -> tuple[float, float]:
+    """(ωg, δg) of the acceleration generator GAR(s) = Kg/(s² + ωg s + δg), eq (10):
+    ωg = 2 ζn ωn and δg = ωn² from the generator's natural frequency and damping."""
+    wn = tvc.generator_omega_rad_s
+    return 2.0 * tvc.generator_damping * wn, wn * wn
+
+
 def tvc_coefficients(tvc: TvcParams, dt_s: float) -> TvcSettings:
     """Discrete coefficients of the three-variable controller at the period ``dt_s``.
 
@@ -148,9 +156,7 @@ def tvc_coefficients(tvc: TvcParams, dt_s: float) -> TvcSettings:
         generator's ZOH matrices (:func:`generator_zoh`), the gains of eqs (11)–(12) and
         the velocity filter (:func:`complementary_velocity_tustin`).
     """
-    wn = tvc.generator_omega_rad_s
-    wg = 2.0 * tvc.generator_damping * wn
-    dg = wn * wn
+    wg, dg = generator_coefficients(tvc)
     phi, gam = generator_zoh(tvc.kg, wg, dg, dt_s)
     pole, by, ba = complementary_velocity_tustin(2.0 * math.pi * tvc.velocity_crossover_hz, dt_s)
     return _floats(TvcSettings(
