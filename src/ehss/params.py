@@ -226,9 +226,17 @@ def _unit(name: str) -> str:
     return "-"
 
 
+class _Section:
+    """A section of :class:`RigParams`: its fields are checked against :data:`RANGES`
+    when it is made (:func:`_validate_fields`)."""
+
+    def __post_init__(self) -> None:
+        _validate_fields(self)
+
+
 # --------------------------------------------------------------------------- plant
 @dataclass(frozen=True, kw_only=True)
-class ValveParams:
+class ValveParams(_Section):
     """Two-stage servo valve (Moog G761-3004), eqs (1)–(4).
 
     The spool position is normalised, u ∈ [−1, 1]; the command is a voltage with
@@ -271,9 +279,6 @@ class ValveParams:
     command_full_scale_v: float = 10.0
     saturate: bool = True
 
-    def __post_init__(self) -> None:
-        _validate_fields(self)
-
     @property
     def gain_per_v(self) -> float:
         """Kv of eq (1): normalised spool per volt of command."""
@@ -286,7 +291,7 @@ class ValveParams:
 
 
 @dataclass(frozen=True, kw_only=True)
-class ActuatorParams:
+class ActuatorParams(_Section):
     """Double-rod actuator and hydraulic fluid, eqs (2)–(7).
 
     Attributes
@@ -318,7 +323,7 @@ class ActuatorParams:
     stroke_m: float = 0.1
 
     def __post_init__(self) -> None:
-        _validate_fields(self)
+        super().__post_init__()
         if self.return_pressure_pa >= self.supply_pressure_pa:
             raise ParameterError(
                 f"ActuatorParams.return_pressure_pa={self.return_pressure_pa!r} must be below "
@@ -334,7 +339,7 @@ class ActuatorParams:
 
 
 @dataclass(frozen=True, kw_only=True)
-class LoadParams:
+class LoadParams(_Section):
     """Moving mass, damping, stiffness and the optional nonlinear load effects, eq (6).
 
     Attributes
@@ -364,12 +369,9 @@ class LoadParams:
     stribeck_velocity_m_s: float = 0.005
     clearance_m: float = 0.0
 
-    def __post_init__(self) -> None:
-        _validate_fields(self)
-
 
 @dataclass(frozen=True, kw_only=True)
-class SensorParams:
+class SensorParams(_Section):
     """LVDT, accelerometer, load cell and converters (PAPER.md §7).
 
     Each sensor maps its full-scale range to ±10 V on a ``adc_bits`` converter; noise is
@@ -406,7 +408,7 @@ class SensorParams:
     quantize: bool = True
 
     def __post_init__(self) -> None:
-        _validate_fields(self)
+        super().__post_init__()
         for noise, full in (("lvdt_noise_m", "lvdt_range_m"),
                             ("accel_noise_m_s2", "accel_range_m_s2"),
                             ("force_noise_n", "force_range_n")):
@@ -419,7 +421,7 @@ class SensorParams:
 
 # --------------------------------------------------------------------------- control
 @dataclass(frozen=True, kw_only=True)
-class PositionPidParams:
+class PositionPidParams(_Section):
     """PID on LVDT displacement, eq (9) (Kd of eq (9) is ``kp_v_per_m``).
 
     u = kp·e + ki·∫e + kd·D(e), with D a derivative filtered by a first-order low-pass at
@@ -438,12 +440,9 @@ class PositionPidParams:
     derivative_filter_hz: float = 200.0
     output_limit_v: float = 10.0
 
-    def __post_init__(self) -> None:
-        _validate_fields(self)
-
 
 @dataclass(frozen=True, kw_only=True)
-class TvcParams:
+class TvcParams(_Section):
     """Three-variable controller of the acceleration loop, eqs (10)–(13) and Fig. 6.
 
     The acceleration reference a_r passes through the acceleration generator
@@ -491,12 +490,9 @@ class TvcParams:
     velocity_crossover_hz: float = 5.0
     output_limit_v: float = 10.0
 
-    def __post_init__(self) -> None:
-        _validate_fields(self)
-
 
 @dataclass(frozen=True, kw_only=True)
-class ForcePidParams:
+class ForcePidParams(_Section):
     """PID on load-cell force, eqs (14)–(15) (Gcf of eq (15)).
 
     The defaults are :func:`ehss.control.tuning.tune_force` of the default rig rounded to
@@ -511,12 +507,9 @@ class ForcePidParams:
     derivative_filter_hz: float = 200.0
     output_limit_v: float = 10.0
 
-    def __post_init__(self) -> None:
-        _validate_fields(self)
-
 
 @dataclass(frozen=True, kw_only=True)
-class TimingParams:
+class TimingParams(_Section):
     """Sample rates of the digital controller and of the plant integration.
 
     The plant is integrated with fixed steps at ``internal_rate_hz``, which must be an
@@ -530,7 +523,7 @@ class TimingParams:
     delay_samples: int = 1
 
     def __post_init__(self) -> None:
-        _validate_fields(self)
+        super().__post_init__()
         ratio = self.internal_rate_hz / self.control_rate_hz
         if ratio < 1 or abs(ratio - round(ratio)) > 1e-9:
             raise ParameterError(
@@ -556,15 +549,12 @@ class TimingParams:
 
 
 @dataclass(frozen=True, kw_only=True)
-class RigLimits:
+class RigLimits(_Section):
     """Performance limits of the rig (Table 2) that a test must respect."""
 
     max_velocity_m_s: float = 0.2
     max_acceleration_m_s2: float = 1.0 * GRAVITY_M_S2
     max_force_n: float = 1500.0 * GRAVITY_M_S2
-
-    def __post_init__(self) -> None:
-        _validate_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
