@@ -30,6 +30,7 @@ __all__ = [
     "check_outputs",
     "check_sidecar",
     "check_writable",
+    "read_small_file",
     "sidecar_path",
 ]
 
@@ -195,6 +196,30 @@ def check_folder(path: str | Path) -> Path:
         raise DataError(f"cannot create folder {_name(path)}: {_name(parent)} {what}")
     _probe_folder(parent, "ehss-probe", f"folder {_name(path)}")
     return path
+
+
+def read_small_file(path: Path, where: str, *, max_bytes: int,
+                    error: type[EhssError] = DataError) -> bytes:
+    """The bytes of a small document (a parameter set, a model) at ``path``.
+
+    Every refusal is one ``error`` that starts with ``where`` (e.g. ``"model file
+    'm.json'"``): a folder, not a regular file, larger than ``max_bytes`` (it is then
+    not read), missing or unreadable.
+    """
+    try:
+        if path.is_dir():
+            raise error(f"{where} is a folder")
+        if path.exists() and not path.is_file():
+            raise error(f"{where} is not a regular file (a pipe or a device?)")
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise error(f"{where} is {size} bytes, more than such a file holds "
+                        f"(at most {max_bytes} bytes)")
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise error(f"{where} does not exist") from None
+    except OSError as exc:
+        raise error(f"cannot read {where}: {exc.strerror or exc}") from None
 
 
 def sidecar_path(table: str | Path) -> Path:

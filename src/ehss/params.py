@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from ehss._checks import check_bool, check_int, check_real
+from ehss._files import read_small_file
 from ehss.errors import ParameterError
 
 __all__ = [
@@ -889,20 +890,7 @@ def load_params(path: str | Path) -> RigParams:
     """
     path = Path(path)
     where = f"parameter file {str(path)!r}"
-    try:
-        if path.is_dir():
-            raise ParameterError(f"{where} is a folder")
-        if path.exists() and not path.is_file():
-            raise ParameterError(f"{where} is not a regular file (a pipe or a device?)")
-        size = path.stat().st_size
-        if size > MAX_PARAMS_FILE_BYTES:
-            raise ParameterError(f"{where} is {size} bytes; a parameter file is a few kB "
-                                 f"(at most {MAX_PARAMS_FILE_BYTES} bytes)")
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise ParameterError(f"{where} does not exist") from None
-    except OSError as exc:
-        raise ParameterError(f"cannot read {where}: {exc.strerror or exc}") from None
+    raw = read_small_file(path, where, max_bytes=MAX_PARAMS_FILE_BYTES, error=ParameterError)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -26,7 +26,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,6 +42,13 @@ from ehss.campaign.engine import (
 )
 from ehss.campaign.figures import loop_figures
 from ehss.errors import ParameterError
+
+if TYPE_CHECKING:
+    import polars as pl
+
+    from ehss.identification import ArmaxModel
+    from ehss.params import RigParams
+    from ehss.workflow import Identification
 
 __all__ = ["Distribution", "MonteCarloSettings", "load_montecarlo", "draw_samples",
            "montecarlo", "montecarlo_task", "acceptance_fraction", "DISTRIBUTIONS"]
@@ -96,7 +103,7 @@ class Distribution:
         return self.a * np.exp(self.b * norm.ppf(q))
 
 
-def _nominal(params: Any, name: str) -> float:
+def _nominal(params: RigParams, name: str) -> float:
     group, _, attr = name.partition(".")
     try:
         return float(getattr(getattr(params, group), attr))
@@ -106,7 +113,7 @@ def _nominal(params: Any, name: str) -> float:
                              "'actuator.bulk_modulus_pa')") from None
 
 
-def _distribution(name: str, spec: Any, params: Any) -> Distribution:
+def _distribution(name: str, spec: Any, params: RigParams) -> Distribution:
     if not isinstance(spec, dict) or "distribution" not in spec:
         raise ParameterError(f"[parameters.{name!r}] needs 'distribution' = one of "
                              f"{', '.join(DISTRIBUTIONS)}")
@@ -183,7 +190,7 @@ class MonteCarloSettings:
         if self.max_error_pct is not None:
             check_real(self.max_error_pct, "max_error_pct", lo=0.0, lo_open=True)
 
-    def nominal_params(self) -> Any:
+    def nominal_params(self) -> RigParams:
         """The nominal rig."""
         from ehss.params import load_params, preset
 
@@ -261,7 +268,7 @@ def draw_samples(settings: MonteCarloSettings) -> np.ndarray:
     return np.column_stack([p.ppf(unit[:, j]) for j, p in enumerate(settings.parameters)])
 
 
-def _with_values(params: Any, values: dict[str, float]) -> Any:
+def _with_values(params: RigParams, values: dict[str, float]) -> RigParams:
     for name, v in values.items():
         group, _, attr = name.partition(".")
         params = dataclasses.replace(params, **{group: dataclasses.replace(
@@ -276,7 +283,8 @@ def _bands(settings: MonteCarloSettings) -> tuple[dict[str, Any], tuple[float, f
     return cfg, settings.band_hz if settings.band_hz else cfg["band_hz"]
 
 
-def identify_rig(params: Any, settings: MonteCarloSettings, seeds: np.ndarray) -> Any:
+def identify_rig(params: RigParams, settings: MonteCarloSettings,
+                 seeds: np.ndarray) -> Identification:
     """Run the identification test on ``params`` and identify the loop (workflow)."""
     from ehss.experiments.compensation_demo import random_reference
     from ehss.simulation import simulate
@@ -291,8 +299,9 @@ def identify_rig(params: Any, settings: MonteCarloSettings, seeds: np.ndarray) -
                     decimate=None)
 
 
-def _tracking_error_pct(model: Any, r: np.ndarray, fs: float, band: tuple[float, float],
-                        params: Any, loop: str, seed: int) -> float:
+def _tracking_error_pct(model: ArmaxModel, r: np.ndarray, fs: float,
+                        band: tuple[float, float], params: RigParams, loop: str,
+                        seed: int) -> float:
     from ehss.compensation import compensate
     from ehss.simulation import simulate
 
@@ -302,7 +311,7 @@ def _tracking_error_pct(model: Any, r: np.ndarray, fs: float, band: tuple[float,
     return 100.0 * float(np.sqrt(np.mean((y - r) ** 2)) / np.sqrt(np.mean(r ** 2)))
 
 
-def montecarlo_task(payload: tuple[dict[str, float], MonteCarloSettings, Any],
+def montecarlo_task(payload: tuple[dict[str, float], MonteCarloSettings, ArmaxModel],
                     seed: np.random.SeedSequence, out: Path) -> list[dict[str, Any]]:
     """One sample: identify its rig, track without and with both inverses (one row)."""
     import warnings
@@ -338,7 +347,7 @@ def montecarlo_task(payload: tuple[dict[str, float], MonteCarloSettings, Any],
     return [row]
 
 
-def acceptance_fraction(frame: Any, settings: MonteCarloSettings) -> dict[str, Any]:
+def acceptance_fraction(frame: pl.DataFrame, settings: MonteCarloSettings) -> dict[str, Any]:
     """Samples that meet the acceptance, their fraction and its 95 % Clopper–Pearson
     interval (failed samples count as not meeting it)."""
     import polars as pl
@@ -374,7 +383,7 @@ def montecarlo(
     connect_timeout_s: float = 5.0,
     samples: int | None = None,
     seed: int | None = None,
-) -> Any:
+) -> pl.DataFrame:
     """Run a Monte Carlo campaign; one row per sample as a polars DataFrame.
 
     Parameters
