@@ -35,3 +35,10 @@ def test_identification_and_streaming_warm_up_run_for_given_orders():
 def test_unknown_kind_or_method_is_refused(kwargs):
     with pytest.raises(ParameterError):
         warm_up(**kwargs)
+
+
+def test_specialised_warm_up_compiles_the_loop_for_those_orders():
+    from ehss.identification import _kernels as rels_kernels
+
+    warm_up(["specialised"], na=1, nb=1, nc=1, delay=2, methods=["rels"])
+    assert (1, 1, 1, 2) in rels_kernels._ENTRIES  # what kernel_for then returns

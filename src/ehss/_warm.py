@@ -19,13 +19,15 @@ from ehss._checks import check_choice
 __all__ = ["WARM_UP_KINDS", "warm_up"]
 
 #: What :func:`warm_up` can prepare: the closed-loop simulator (one kernel serves every
-#: loop), batch RELS and RML (:func:`ehss.identification.rels`) and the streaming
-#: estimator (:class:`ehss.identification.RelsEstimator`, one sample and a block).
-WARM_UP_KINDS = ("simulation", "identification", "streaming")
+#: loop), batch RELS and RML (:func:`ehss.identification.rels`), the streaming
+#: estimator (:class:`ehss.identification.RelsEstimator`, one sample and a block), and
+#: the RELS/RML loop specialised to the given orders
+#: (:func:`ehss.identification.rels.specialise_rels`; compiled when asked for only).
+WARM_UP_KINDS = ("simulation", "identification", "streaming", "specialised")
 
 
 def warm_up(
-    kinds: Iterable[str] = WARM_UP_KINDS,
+    kinds: Iterable[str] = ("simulation", "identification", "streaming"),
     *,
     na: int = 1,
     nb: int = 0,
@@ -37,12 +39,13 @@ def warm_up(
 
     Parameters
     ----------
-    kinds : iterable of {"simulation", "identification", "streaming"}
-        Default all of :data:`WARM_UP_KINDS`.
+    kinds : iterable of {"simulation", "identification", "streaming", "specialised"}
+        Default all but ``"specialised"`` (see :data:`WARM_UP_KINDS`), whose compiled
+        loop pays for long records and long-running estimators only.
     na, nb, nc, delay : int
         Orders of the estimators to prepare. The generic RELS loop serves any orders;
         give the orders a command will use so that a loop specialised to them
-        (:func:`ehss.identification.specialise_rels`), if numba's cache holds one, is
+        (:func:`ehss.identification.rels.specialise_rels`), if numba's cache holds one, is
         the one loaded.
     methods : iterable of {"rels", "rml"}
         Estimators to prepare.
@@ -61,6 +64,10 @@ def warm_up(
     chosen = [check_choice(k, "kind", WARM_UP_KINDS) for k in kinds]
     orders = {"na": na, "nb": nb, "nc": nc, "delay": delay}  # the estimators check them
     chosen_methods = [check_choice(m, "method", ("rels", "rml")) for m in methods]
+    if "specialised" in chosen:  # first: the estimators below then run it
+        from ehss.identification.rels import specialise_rels
+
+        specialise_rels(**orders)
     if "simulation" in chosen:
         _warm_simulation()
     if "identification" in chosen:
