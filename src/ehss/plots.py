@@ -25,6 +25,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from numpy.typing import ArrayLike
 
 from ehss._files import atomic_path
 from ehss.errors import DataError, ParameterError
@@ -32,6 +33,7 @@ from ehss.frequency import FrequencyResponse
 
 if TYPE_CHECKING:
     from ehss.simulation import SimulationResult
+    from ehss.validation import ResidualTests
 
 __all__ = [
     "bode_compare",
@@ -130,7 +132,7 @@ def _root_figure(ax: Axes) -> Figure:
 
 
 def plot_series(
-    ax: Axes, x: Any, y: Any, fmt: str | None = None, *, dpi: float = DPI, **kwargs: Any
+    ax: Axes, x: ArrayLike, y: ArrayLike, fmt: str | None = None, *, dpi: float = DPI, **kwargs: Any
 ) -> list[Line2D]:
     """``ax.plot(x, y, fmt, **kwargs)`` with the line decimated to the pixels it covers
     (:func:`decimate_for_pixels`) when saved at up to ``dpi``."""
@@ -175,7 +177,7 @@ def png_bytes(fig: Figure, *, dpi: int = DPI) -> bytes:
     return buf.getvalue()
 
 
-def _save_once(fig: Figure, target: Any, *, dpi: int, fmt: str) -> None:
+def _save_once(fig: Figure, target: Path | io.BytesIO, *, dpi: int, fmt: str) -> None:
     engine = fig.get_layout_engine()
     if engine is not None:
         fig.set_dpi(dpi)  # lay out for the pixels it is saved at
@@ -327,9 +329,9 @@ def bode_compare(
 
 
 def time_compare(
-    t: Any,
-    measured: Any,
-    simulated: Mapping[str, Any] | Any,
+    t: ArrayLike,
+    measured: ArrayLike,
+    simulated: Mapping[str, ArrayLike] | ArrayLike,
     *,
     window_s: tuple[float, float] | float | None = None,
     ylabel: str = "output",
@@ -370,17 +372,7 @@ def time_compare(
     for name, v in simulated.items():
         if np.shape(v) != t.shape:
             raise DataError(f"simulated {name!r} has shape {np.shape(v)}, t has {t.shape}")
-    if window_s is None:
-        sel = slice(None)
-    else:
-        if isinstance(window_s, tuple | list):
-            lo, hi = (float(v) for v in window_s)
-        else:
-            lo, hi = t[-1] - float(window_s), t[-1]
-        sel = (t >= lo) & (t <= hi)
-        if not np.any(sel):
-            raise ParameterError(f"window {window_s} s holds no samples "
-                                 f"(record {t[0]:g}..{t[-1]:g} s)")
+    sel = _time_window(t, window_s)
     fig, ax = _figure_for(ax, (8.0, 3.8), left=0.9)
     plot_series(ax, t[sel], measured[sel], color="k", lw=1.2, label="measured")
     for i, (name, v) in enumerate(simulated.items()):
@@ -396,11 +388,27 @@ def time_compare(
     return _finished(fig, path)
 
 
+def _time_window(t: np.ndarray, window_s: tuple[float, float] | float | None) -> np.ndarray:
+    """Which samples of ``t`` the window holds: ``(start, stop)`` in s, a duration taken
+    from the end, or (None) all of them."""
+    if window_s is None:
+        return np.ones(t.shape, dtype=bool)
+    if isinstance(window_s, tuple | list):
+        lo, hi = (float(v) for v in window_s)
+    else:
+        lo, hi = t[-1] - float(window_s), t[-1]
+    sel = (t >= lo) & (t <= hi)
+    if not np.any(sel):
+        raise ParameterError(f"window {window_s} s holds no samples "
+                             f"(record {t[0]:g}..{t[-1]:g} s)")
+    return sel
+
+
 def theta_convergence(
-    history: Any,
+    history: ArrayLike,
     names: Sequence[str] | None = None,
     *,
-    t: Any = None,
+    t: ArrayLike | None = None,
     ax: Axes | None = None,
     path: str | Path | None = None,
     title: str | None = None,
@@ -441,7 +449,7 @@ def theta_convergence(
 
 
 def residual_plot(
-    tests: Any,
+    tests: ResidualTests,
     *,
     axes: Sequence[Axes] | None = None,
     path: str | Path | None = None,
