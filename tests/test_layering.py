@@ -36,6 +36,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("signals",),
     ("io",),
     ("identification",),
+    ("_warm",),  # compiles the simulator's and the estimators' kernels ahead of use
     ("frequency",),
     ("preprocess",),
     ("validation",),
@@ -46,7 +47,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("experiments",),
     ("report",),
     ("campaign",),  # campaigns over many records or simulated rigs, on Dask
-    ("ehss", "_warm"),  # the package's __init__: re-exports the library; kernel warm-up
+    ("ehss",),  # the package's __init__: re-exports the library
     ("live",),  # online identification of a running rig, built on the public library
     ("cli",),
     ("__main__",),
