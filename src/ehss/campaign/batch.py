@@ -17,7 +17,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,7 +41,10 @@ from ehss.campaign.records import (
     record_time,
 )
 from ehss.errors import DataError, ParameterError
-from ehss.workflow import DEFAULT_METHOD, Acceptance, identify
+from ehss.workflow import DEFAULT_METHOD, Acceptance, Identification, identify
+
+if TYPE_CHECKING:
+    import polars as pl
 
 __all__ = ["BatchSettings", "load_manifest", "batch", "batch_task", "MODELS_FOLDER"]
 
@@ -229,7 +232,7 @@ def _read_toml(path: str | Path) -> tuple[dict, str]:
 # ------------------------------------------------------------------------- the task
 
 
-def _model_rows(ident: Any) -> dict[str, Any]:
+def _model_rows(ident: Identification) -> dict[str, Any]:
     """The row of one identified channel: orders, fits, verdict, band, coefficients,
     figures."""
     model, rep = ident.model, ident.report
@@ -311,7 +314,7 @@ def batch(
     summary: bool = True,
     quiet: bool = True,
     connect_timeout_s: float = 5.0,
-) -> Any:
+) -> pl.DataFrame:
     """Identify every channel of every record; results as a polars DataFrame.
 
     Parameters

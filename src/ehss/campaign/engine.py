@@ -40,6 +40,7 @@ from ehss._files import atomic_path
 from ehss.errors import DataError, ParameterError
 
 if TYPE_CHECKING:
+    import polars as pl
     from rich.progress import Progress
 
 __all__ = [
@@ -488,7 +489,7 @@ def result_files(out: str | Path) -> list[Path]:
     return [folder / n for n in names]
 
 
-def read_results(out: str | Path, *, sort_by: Iterable[str] = ("task",)) -> Any:
+def read_results(out: str | Path, *, sort_by: Iterable[str] = ("task",)) -> pl.DataFrame:
     """Every row of a campaign folder as one polars DataFrame, sorted by ``sort_by``.
 
     Rows of failed tasks have ``status == "error"`` and the error text in ``error``;

@@ -9,14 +9,19 @@ import base64
 import html
 import io
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ehss._files import atomic_path
 from ehss.campaign.figures import FIGURE_UNITS, FIGURES
 from ehss.campaign.outliers import OutlierRule, flag_outliers
+
+if TYPE_CHECKING:
+    import polars as pl
+    from matplotlib.figure import Figure
 
 __all__ = ["flag_campaign", "write_batch_summary", "write_montecarlo_summary",
            "write_trend_png", "TRENDED"]
@@ -27,7 +32,7 @@ __all__ = ["flag_campaign", "write_batch_summary", "write_montecarlo_summary",
 TRENDED = ("natural_freq_hz", "damping", "dc_gain", "bandwidth_hz")
 
 
-def flag_campaign(frame: Any, rule: OutlierRule) -> Any:
+def flag_campaign(frame: pl.DataFrame, rule: OutlierRule) -> pl.DataFrame:
     """``frame`` with ``flagged`` and ``flag_reason`` per row: per channel, in record-time
     order, each figure of :data:`TRENDED` is scored by
     :func:`ehss.campaign.outliers.flag_outliers`; rows that failed are not flagged (their
@@ -51,13 +56,13 @@ def flag_campaign(frame: Any, rule: OutlierRule) -> Any:
                               pl.Series("flag_reason", reasons, dtype=pl.String))
 
 
-def _png(fig: Any) -> str:
+def _png(fig: Figure) -> str:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _trend_figure(frame: Any, rule: OutlierRule) -> str:
+def _trend_figure(frame: pl.DataFrame, rule: OutlierRule) -> str:
     """One panel per figure: the value over record time per channel, flagged records
     ringed in red."""
     import matplotlib
@@ -90,7 +95,7 @@ def _trend_figure(frame: Any, rule: OutlierRule) -> str:
     return out
 
 
-def write_trend_png(frame: Any, path: str | Path, rule: OutlierRule) -> Path:
+def write_trend_png(frame: pl.DataFrame, path: str | Path, rule: OutlierRule) -> Path:
     """The summary's trend plot of a campaign's rows (:func:`flag_campaign`'s output)
     as a PNG file, written whole or not at all."""
     from ehss._files import atomic_path
@@ -121,7 +126,7 @@ def _write_page(path: Path, title: str, parts: list[str]) -> None:
         tmp.write_text(doc, encoding="utf-8")
 
 
-def write_batch_summary(frame: Any, path: str | Path, rule: OutlierRule) -> Path:
+def write_batch_summary(frame: pl.DataFrame, path: str | Path, rule: OutlierRule) -> Path:
     """The batch campaign's page: counts, the rule, trend plots, flagged records,
     failures."""
     import polars as pl
@@ -160,7 +165,7 @@ def write_batch_summary(frame: Any, path: str | Path, rule: OutlierRule) -> Path
     return path
 
 
-def _histograms(frame: Any, columns: list[str]) -> str:
+def _histograms(frame: pl.DataFrame, columns: Sequence[str]) -> str:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -180,7 +185,7 @@ def _histograms(frame: Any, columns: list[str]) -> str:
     return out
 
 
-def write_montecarlo_summary(frame: Any, path: str | Path, parameters: list[str],
+def write_montecarlo_summary(frame: pl.DataFrame, path: str | Path, parameters: list[str],
                              outcome: dict[str, Any]) -> Path:
     """The Monte Carlo campaign's page: the sampled parameters' and the outcomes'
     distributions, and the fraction of samples that meet the acceptance."""
