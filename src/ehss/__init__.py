@@ -64,6 +64,10 @@ _LAZY = {
     "prepare": "ehss.workflow",
     "select_orders": "ehss.workflow",
     "OrderSearch": "ehss.workflow",
+    "Preparation": "ehss.workflow",
+    "Estimation": "ehss.workflow",
+    "Evaluation": "ehss.workflow",
+    "OrderGrid": "ehss.workflow",
     "preprocess": None,
     "workflow": None,
     # frequency response and validation
@@ -146,8 +150,12 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     )
     from ehss.workflow import (
         Acceptance,
+        Estimation,
+        Evaluation,
         Identification,
+        OrderGrid,
         OrderSearch,
+        Preparation,
         assess,
         identify,
         prepare,
@@ -222,6 +230,10 @@ __all__ = [
     "prepare",
     "select_orders",
     "OrderSearch",
+    "Preparation",
+    "Estimation",
+    "Evaluation",
+    "OrderGrid",
     "preprocess",
     "workflow",
     # frequency response and validation

@@ -378,10 +378,10 @@ def _validate(model: Any, identification: tuple[np.ndarray, np.ndarray],
     band that validation confirms. Its operating point stays the model's: the records
     start at rest at 0 and the model was fitted on them as they are."""
     from ehss.experiments.loop_identification import ACCEPTANCE
-    from ehss.workflow import assess, prepare, validated_band
+    from ehss.workflow import Preparation, assess, prepare, validated_band
 
-    prepared = prepare(*identification, fs=fs, validation=validation, band_hz=band,
-                       detrend="mean", decimate=None)
+    prepared = prepare(*identification, fs=fs, preparation=Preparation(
+        validation=validation, band_hz=band, detrend="mean", decimate=None))
     report, verdict = assess(model, prepared, acceptance=ACCEPTANCE)
     checked = dataclasses.replace(model, band_hz=validated_band(report, fs))
     return report, verdict, checked
