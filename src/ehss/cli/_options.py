@@ -35,7 +35,7 @@ def option_dest(flag: str) -> str:
     return flag.lstrip("-").replace("-", "_")
 
 
-def add_options(parser: argparse.ArgumentParser, kind: type, *,
+def add_options(parser: argparse._ActionsContainer, kind: type, *,
                 only: Collection[str] | None = None,
                 help: Mapping[str, str] | None = None) -> None:
     """Add the flags of settings object ``kind`` (its fields that declare one) to
@@ -43,7 +43,7 @@ def add_options(parser: argparse.ArgumentParser, kind: type, *,
 
     Parameters
     ----------
-    parser : argparse.ArgumentParser
+    parser : argparse.ArgumentParser or argument group
     kind : type
         A settings dataclass declared with :func:`ehss.workflow.options.option`.
     only : collection of str, optional

@@ -41,7 +41,7 @@ import numpy as np
 import scipy.signal
 
 from ehss._checks import check_int
-from ehss.compensation import InverseModel, design_inverse
+from ehss.compensation import InverseModel, UpdateOptions, design_inverse
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine, rms
 
@@ -333,8 +333,8 @@ def demonstrate(
         outputs_without[name] = simulate(loop, r, params=params, seed=seed + 300 + i).output
         # Drive-file iteration, as a shaking-table controller does for a known history.
         ref = refine(loop, r, params=params, fs=fs, model=rest, iterations=iterations,
-                     method=method, seed=seed + 200 + 10 * i, known=known,
-                     stop_without_gain=True)
+                     seed=seed + 200 + 10 * i, stop_without_gain=True,
+                     options=UpdateOptions(inverse_method=method, known=known))
         best = int(np.argmin(ref.rms_error))
         drives[name] = ref.drive
         outputs_with[name] = ref.outputs[best]
