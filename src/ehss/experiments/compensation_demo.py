@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from ehss._checks import check_int
+from ehss._checks import check_band, check_int
 from ehss.compensation import InverseModel, UpdateOptions, design_inverse
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine, rms
@@ -299,7 +299,8 @@ def demonstrate(
     cfg = LOOP_SETTINGS[loop]
     params = preset("default") if params is None else params
     fs = float(params.timing.control_rate_hz)
-    band = tuple(band_hz) if band_hz is not None else cfg["band_hz"]
+    band: tuple[float, float] = (check_band(band_hz, "band_hz") if band_hz is not None
+                                 else cfg["band_hz"])
     judge = (max(cfg["judge_hz"][0], band[0]), min(cfg["judge_hz"][1], band[1]))
     id_s = identification_s or duration_s
 
