@@ -45,12 +45,13 @@ from ehss.workflow.options import (
     CRITERIA,
     DEFAULT_METHOD,
     ERROR_TOLERANCE,
+    SAMPLES_PER_PARAMETER,
     Estimation,
     Evaluation,
     OrderGrid,
     Preparation,
 )
-from ehss.workflow.orders import SAMPLES_PER_PARAMETER, OrderSearch, select_orders
+from ehss.workflow.orders import OrderSearch, select_orders
 from ehss.workflow.prepare import HOLDOUT_EXCITATION_WARN, Prepared, judged_band, prepare
 
 __all__ = [

@@ -118,10 +118,8 @@ def identify(
 
     Parameters
     ----------
-    u, y : array_like, shape (n_samples,)
-        Input and output as measured.
-    fs : float
-        Sample rate, Hz.
+    u, y, fs
+        The record as measured and its sample rate in Hz, as :func:`prepare` takes them.
     orders : (na, nb, nc) or (na, nb, nc, delay)
         Model orders; the delay (default 1) in samples of the record, divided by the
         decimation factor (rounded down) for the model.

@@ -45,6 +45,7 @@ __all__ = [
     "or_default",
     "check_fields",
     "choice",
+    "choice_option",
     "Preparation",
     "Estimation",
     "Evaluation",
@@ -52,6 +53,8 @@ __all__ = [
     "DEFAULT_METHOD",
     "ERROR_TOLERANCE",
     "CRITERIA",
+    "SAMPLES_PER_PARAMETER",
+    "DEFAULT_MAX_NB",
     "INITIAL_STATES",
 ]
 
@@ -67,6 +70,14 @@ DEFAULT_METHOD = "armax"
 #: resolve. A tolerance on the error and not on the fit: at 99.9 % a tenth of a point is
 #: 2.8 times the error.
 ERROR_TOLERANCE = 0.05
+
+#: :func:`~ehss.workflow.select_orders` refuses candidates with more parameters than the
+#: estimation data have samples for at this many a parameter (the rule of ten samples a
+#: parameter: beyond it the estimate's variance, p/N of the noise, swamps its fit).
+SAMPLES_PER_PARAMETER = 10
+
+#: nb searched up to by default when the record supports its delay estimate.
+DEFAULT_MAX_NB = 3
 
 #: How an order search picks: the validation fit, or an information criterion.
 CRITERIA = ("fit", "aic", "fpe", "mdl")
@@ -112,6 +123,11 @@ def check_fields(obj: Any) -> None:
     for f in dataclasses.fields(obj):
         value = f.metadata["check"](getattr(obj, f.name), f.name)
         object.__setattr__(obj, f.name, value)
+
+
+def choice_option(default: Any, choices: Collection[Any], *, flag: str, help: str) -> Any:
+    """A field that takes one of ``choices``, offered on the command line as ``flag``."""
+    return option(default, check=choice(choices), flag=flag, choices=choices, help=help)
 
 
 def choice(choices: Collection[Any]) -> Callable[[Any, str], Any]:
@@ -263,13 +279,13 @@ class Estimation:
         Start of "rels" and "rml": from the batch estimate, or the paper's zero start.
     """
 
-    method: str = option(
-        DEFAULT_METHOD, check=choice(METHODS), flag="--method", choices=METHODS,
+    method: str = choice_option(
+        DEFAULT_METHOD, METHODS, flag="--method",
         help="estimator: arx = least squares; armax = prediction-error minimisation "
         "started from extended least squares; rels = the paper's recursive extended least "
         "squares (eqs 19-22); rml = recursive maximum likelihood (default: %(default)s)")
-    init: str = option(
-        "batch", check=choice(INITS), flag="--init", choices=INITS,
+    init: str = choice_option(
+        "batch", INITS, flag="--init",
         help="start of rels/rml: from the batch (armax) estimate, or the paper's zero "
         "start (default: %(default)s; ignored by the batch methods)")
 
@@ -306,12 +322,12 @@ class Evaluation:
         help="segment length of the validation's frequency-response estimate, in samples "
         "at the model's rate (default: from the record's length and the band, at least 8 "
         "averages)")
-    frf_method: str = option(
-        "auto", check=choice(FRF_METHODS), flag="--frf-method", choices=FRF_METHODS,
+    frf_method: str = choice_option(
+        "auto", FRF_METHODS, flag="--frf-method",
         help="validation's frequency response: Welch H1, whole-record DFT (for sweeps), or "
         "whichever validates more of the band (default: %(default)s)")
-    initial: str = option(
-        "estimate", check=choice(INITIAL_STATES), flag="--initial", choices=INITIAL_STATES,
+    initial: str = choice_option(
+        "estimate", INITIAL_STATES, flag="--initial",
         help="initial state of the validation simulation: least-squares estimate or rest "
         "(default: %(default)s)")
     horizons: tuple[int, ...] = option((1, 5), check=_int_list(1))
@@ -352,8 +368,8 @@ class OrderGrid:
     nb: tuple[int, ...] | None = option(None, check=_optional(_int_list(0)))
     nc: tuple[int, ...] = option((1, 2), check=_int_list(0))
     delay: tuple[int, ...] | None = option(None, check=_optional(_int_list(0)))
-    criterion: str = option(
-        "fit", check=choice(CRITERIA), flag="--criterion", choices=CRITERIA,
+    criterion: str = choice_option(
+        "fit", CRITERIA, flag="--criterion",
         help="how the best is chosen: the free-run fit on the validation data (the one "
         "identify reports), or an information criterion on the estimation data "
         "(default: %(default)s)")

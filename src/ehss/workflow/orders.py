@@ -19,6 +19,8 @@ from ehss.validation import ValidationReport
 from ehss.workflow.acceptance import Acceptance, Verdict
 from ehss.workflow.identify import assess
 from ehss.workflow.options import (
+    DEFAULT_MAX_NB,
+    SAMPLES_PER_PARAMETER,
     Estimation,
     Evaluation,
     OrderGrid,
@@ -27,15 +29,7 @@ from ehss.workflow.options import (
 )
 from ehss.workflow.prepare import Prepared, prepare
 
-__all__ = ["OrderSearch", "select_orders", "SAMPLES_PER_PARAMETER"]
-
-#: nb searched up to by :func:`select_orders` when the record supports its delay estimate
-_DEFAULT_MAX_NB = 3
-
-#: :func:`select_orders` refuses candidates with more parameters than the estimation
-#: data have samples for at this many a parameter (the rule of ten samples a parameter:
-#: beyond it the estimate's variance, p/N of the noise, swamps its fit).
-SAMPLES_PER_PARAMETER = 10
+__all__ = ["OrderSearch", "select_orders"]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -126,10 +120,8 @@ def select_orders(
 
     Parameters
     ----------
-    u, y : array_like, shape (n_samples,)
-        Input and output as measured.
-    fs : float
-        Sample rate, Hz.
+    u, y, fs
+        As for :func:`~ehss.workflow.identify`: the record as measured, its rate in Hz.
     grid : OrderGrid, optional
         Candidate orders and how the pick is made (default ``OrderGrid()``). Delays are
         in samples of the record (as :func:`~ehss.workflow.identify` takes them), each
@@ -240,7 +232,7 @@ def _delays(prep: Prepared, given: tuple[int, ...] | None
 
 def _default_nb(prep: Prepared, grid: OrderGrid, scan: DelayScan | None) -> tuple[int, ...]:
     """0-3, or what the delay scan asks for, as far as the record supports it."""
-    top = _DEFAULT_MAX_NB if scan is None else scan.max_nb
+    top = DEFAULT_MAX_NB if scan is None else scan.max_nb
     room = prep.u.size // SAMPLES_PER_PARAMETER - max(grid.na) - 1 - max(grid.nc)
     return tuple(range(0, 1 + max(0, min(top, room))))
 

@@ -30,7 +30,6 @@ HOLDOUT_EXCITATION_WARN = 0.1
 MIN_SAMPLES = 32
 
 
-
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Prepared:
     """Estimation and validation data ready for an estimator (see :func:`prepare`).
