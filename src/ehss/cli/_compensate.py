@@ -10,6 +10,7 @@ import numpy as np
 
 from ehss._checks import check_band
 from ehss.cli import command_help
+from ehss.cli._dataargs import add_rate_arguments
 from ehss.cli._options import add_options, build_options
 from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
 from ehss.cli._simulate import seed_argument
@@ -53,12 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="band limit of the inverse and of every update, Hz (default: the "
                    "band the model was validated over, `band_hz` in its file)")
-    p.add_argument("--fs", type=float, metavar="HZ",
-                   help="sample rate in Hz (needed when the file has no time column)")
-    p.add_argument("--time-column", default="t", metavar="COL",
-                   help="time column of the reference (and of the --update run), used for "
-                   "the sample rate if present; in seconds unless its name states a unit: "
-                   "'t [ms]', 'time_us' (default: %(default)s)")
+    add_rate_arguments(p, "time column of the reference (and of the --update run)")
     p.add_argument("--fade", type=float, metavar="S",
                    help="fade the reference in and out over S seconds (raised cosine) when it "
                    "does not start or end at rest")

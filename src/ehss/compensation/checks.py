@@ -34,6 +34,7 @@ such a drive with the numbers instead of letting it reach a rig:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -125,11 +126,8 @@ class DriveCheck:
     rig: dict
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready figures."""
-        return {"rms_gain": self.rms_gain, "peak_gain": self.peak_gain,
-                "max_gain": self.max_gain, "min_gain": self.min_gain, "peak_abs": self.peak_abs,
-                "peak_rate": self.peak_rate, "peak_rate2": self.peak_rate2,
-                "rig": dict(self.rig)}
+        """JSON-ready figures (every field; ``rig`` a copy)."""
+        return dataclasses.asdict(self)
 
 
 def _rms(x: np.ndarray) -> float:

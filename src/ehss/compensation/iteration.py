@@ -35,6 +35,7 @@ of their cross-correlation, refined by a parabola), and the drive's gain.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -144,11 +145,8 @@ class RunRecord:
     drive_peak_gain: float
 
     def to_dict(self) -> dict[str, float]:
-        """JSON-ready figures."""
-        return {"rms_error": self.rms_error, "peak_error": self.peak_error,
-                "nrmse_percent": self.nrmse_percent, "lag_samples": self.lag_samples,
-                "drive_rms_gain": self.drive_rms_gain,
-                "drive_peak_gain": self.drive_peak_gain}
+        """JSON-ready figures (every field)."""
+        return dataclasses.asdict(self)
 
 
 def run_record(reference: Any, drive: Any, output: Any) -> RunRecord:
