@@ -86,6 +86,7 @@ _LAZY = {
     "compensate": "ehss.compensation",
     "design_inverse": "ehss.compensation",
     "InverseModel": "ehss.compensation",
+    "UpdateOptions": "ehss.compensation",
     "refine": "ehss.experiments.refinement",
     "demonstrate": "ehss.experiments.compensation_demo",
     "CompensationDemo": "ehss.experiments.compensation_demo",
@@ -103,7 +104,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from typing import Any
 
     from ehss import linear, preprocess, signals, workflow
-    from ehss.compensation import InverseModel, compensate, design_inverse
+    from ehss.compensation import InverseModel, UpdateOptions, compensate, design_inverse
     from ehss.control.tuning import tune_force, tune_position, tune_tvc
     from ehss.errors import (
         DataError,
@@ -252,6 +253,7 @@ __all__ = [
     "compensate",
     "design_inverse",
     "InverseModel",
+    "UpdateOptions",
     "refine",
     "demonstrate",
     "CompensationDemo",
