@@ -52,7 +52,7 @@ from ehss.compensation.inverse_model import InverseModel, _fft_band_limit, band_
 from ehss.compensation.rates import rate_factor
 from ehss.errors import ParameterError
 from ehss.preprocess import decimate
-from ehss.workflow.options import check_fields, choice, option, or_default
+from ehss.workflow.options import check_fields, choice, option, optional, or_default
 
 __all__ = [
     "corrected_drive",
@@ -343,12 +343,6 @@ def _orders(value: Any, name: str) -> tuple[int, int]:
     return check_int(value[0], f"{name}[0]", lo=1), check_int(value[1], f"{name}[1]", lo=0)
 
 
-def _optional(check: Any) -> Any:
-    def optional(value: Any, name: str) -> Any:
-        return None if value is None else check(value, name)
-    return optional
-
-
 @dataclass(frozen=True, kw_only=True, eq=False)
 class UpdateOptions:
     """How a drive-file iteration corrects a drive (:func:`update_drive`, :func:`ehss.
@@ -379,17 +373,17 @@ class UpdateOptions:
 
     method: str = option("model", check=choice(UPDATE_METHODS))
     inverse_method: str = option("stable", check=choice(METHODS))
-    band_hz: tuple[float, float] | None = option(None, check=_optional(check_band))
+    band_hz: tuple[float, float] | None = option(None, check=optional(check_band))
     gain: float | None = option(
-        None, check=_optional(_gain), flag="--gain", type=float, metavar="L",
+        None, check=optional(_gain), flag="--gain", type=float, metavar="L",
         help="learning gain L in (0, 2) (default: the largest of 1, 1/2, 1/4, 1/8 that the "
         "run shows to contract the error)")
     reidentify: bool = option(
         False, check=check_bool, flag="--reidentify", action="store_true",
         help="re-identify the loop from the run before inverting it")
-    nc: int | None = option(None, check=_optional(lambda v, n: check_int(v, n, lo=0)))
-    known: tuple[np.ndarray, np.ndarray] | None = option(None, check=_optional(_known))
-    orders: tuple[int, int] | None = option(None, check=_optional(_orders))
+    nc: int | None = option(None, check=optional(lambda v, n: check_int(v, n, lo=0)))
+    known: tuple[np.ndarray, np.ndarray] | None = option(None, check=optional(_known))
+    orders: tuple[int, int] | None = option(None, check=optional(_orders))
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -46,6 +46,7 @@ __all__ = [
     "check_fields",
     "choice",
     "choice_option",
+    "optional",
     "Preparation",
     "Estimation",
     "Evaluation",
@@ -137,11 +138,11 @@ def choice(choices: Collection[Any]) -> Callable[[Any, str], Any]:
     return check
 
 
-def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
+def optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
     """``check``, letting None through (a setting left to the data)."""
-    def optional(value: Any, name: str) -> Any:
+    def checked(value: Any, name: str) -> Any:
         return None if value is None else check(value, name)
-    return optional
+    return checked
 
 
 def _int_list(lo: int) -> Callable[[Any, str], tuple[int, ...]]:
@@ -318,7 +319,7 @@ class Evaluation:
     """
 
     nperseg: int | None = option(
-        None, check=_optional(_nperseg), flag="--nperseg", type=int, metavar="N",
+        None, check=optional(_nperseg), flag="--nperseg", type=int, metavar="N",
         help="segment length of the validation's frequency-response estimate, in samples "
         "at the model's rate (default: from the record's length and the band, at least 8 "
         "averages)")
@@ -365,9 +366,9 @@ class OrderGrid:
     """
 
     na: tuple[int, ...] = option((1, 2, 3, 4), check=_int_list(1))
-    nb: tuple[int, ...] | None = option(None, check=_optional(_int_list(0)))
+    nb: tuple[int, ...] | None = option(None, check=optional(_int_list(0)))
     nc: tuple[int, ...] = option((1, 2), check=_int_list(0))
-    delay: tuple[int, ...] | None = option(None, check=_optional(_int_list(0)))
+    delay: tuple[int, ...] | None = option(None, check=optional(_int_list(0)))
     criterion: str = choice_option(
         "fit", CRITERIA, flag="--criterion",
         help="how the best is chosen: the free-run fit on the validation data (the one "
