@@ -89,7 +89,7 @@ def _rig_plant():
 
 
 def _iterate(kind: str, run, model, r, fs, iterations: int) -> list[dict]:
-    from ehss.compensation import compensate, run_record, update_drive
+    from ehss.compensation import UpdateOptions, compensate, run_record, update_drive
 
     t0 = time.perf_counter()
     if kind == "frf":
@@ -111,8 +111,8 @@ def _iterate(kind: str, run, model, r, fs, iterations: int) -> list[dict]:
             break
         t0 = time.perf_counter()
         step = update_drive(r, drive, y, fs=fs, model=model,
-                            method="frf" if kind == "frf" else "model", inverse=inverse,
-                            state=state)
+                            options=UpdateOptions(method="frf" if kind == "frf" else "model"),
+                            inverse=inverse, state=state)
         rows.append({"run": k, "record": step.record, "update_s": elapsed,
                      "note": "" if step.accepted else "refused"})
         elapsed = time.perf_counter() - t0

@@ -12,7 +12,15 @@ import scipy.signal
 import ehss
 from ehss.errors import DataError, EhssWarning, ParameterError
 from ehss.frequency import h1_estimate
-from ehss.workflow import Acceptance, assess, identify, prepare
+from ehss.workflow import (
+    Acceptance,
+    Estimation,
+    Evaluation,
+    Preparation,
+    assess,
+    identify,
+    prepare,
+)
 
 # ----------------------------------------------------------------------------- prepare
 
@@ -21,7 +29,8 @@ def test_prepare_splits_and_detrends_each_part(rng):
     n = 1000
     u = 2.0 + rng.standard_normal(n)
     y = -1.0 + np.linspace(0, 1, n) + rng.standard_normal(n)
-    p = prepare(u, y, fs=10.0, validation=0.3, detrend="linear", decimate=None)
+    p = prepare(u, y, fs=10.0,
+                preparation=Preparation(validation=0.3, detrend="linear", decimate=None))
     assert p.u.size == 700 and p.u_val.size == 300 and not p.separate_validation
     assert p.offsets == (pytest.approx(np.mean(u[:700])), pytest.approx(np.mean(y[:700])))
     # each part loses its own least-squares line: both are orthogonal to 1 and k
@@ -30,28 +39,36 @@ def test_prepare_splits_and_detrends_each_part(rng):
         assert abs(np.mean(x)) < 1e-12 and abs(np.dot(k - k.mean(), x)) < 1e-9
     # the slope of y (1 over 1000 samples at 10 Hz) is kept, per second
     assert p.trend_y.slope * p.fs == pytest.approx(0.01, rel=0.2)
-    sep = prepare(u, y, fs=10.0, validation=(u[:400], y[:400]), decimate=None)
+    sep = prepare(u, y, fs=10.0,
+                  preparation=Preparation(validation=(u[:400], y[:400]), decimate=None))
     assert sep.separate_validation and sep.u.size == 1000 and sep.u_val.size == 400
 
 
 @pytest.mark.parametrize(
-    "kw,match",
+    "kw,exc,match",
     [
-        ({"validation": 1.2}, "validation fraction"),
-        ({"validation": "x"}, "must be a fraction"),
-        ({"validation": (1, 2, 3)}, "fraction or a pair"),
-        ({"detrend": "cubic"}, "detrend="),
-        ({"decimate": "sometimes"}, "decimate='sometimes'"),
-        ({"decimate": 0}, "decimate=0"),
-        ({"band_hz": (1.0, 6.0)}, "above fs/2"),
-        ({"band_hz": (2.0, 2.0)}, "lo < hi"),
-        ({"decimate": 4, "band_hz": (0.1, 1.5)}, "beyond the anti-alias"),
+        ({"validation": 1.2}, ParameterError, r"validation=1.2 must be in \(0, 1\)"),
+        ({"validation": "x"}, TypeError, "validation='x' must be a real number"),
+        ({"validation": (1, 2, 3)}, ParameterError, "fraction in .* or a pair"),
+        ({"detrend": "cubic"}, ParameterError, "detrend="),
+        ({"decimate": "sometimes"}, ParameterError, "decimate='sometimes'"),
+        ({"decimate": 0}, ParameterError, "decimate=0"),
+        ({"band_hz": (1.0, 6.0)}, ParameterError, "above fs/2"),
+        ({"band_hz": (2.0, 2.0)}, ParameterError, "lo < hi"),
+        ({"band_hz": "output"}, ParameterError, "'input' or None"),
+        ({"decimate": 4, "band_hz": (0.1, 1.5)}, ParameterError, "beyond the anti-alias"),
     ],
 )
-def test_prepare_bad_settings(rng, kw, match):
+def test_prepare_bad_settings(rng, kw, exc, match):
     u = rng.standard_normal(2000)
-    with pytest.raises(ParameterError, match=match):
-        prepare(u, u, fs=10.0, **kw)
+    with pytest.raises(exc, match=match):
+        prepare(u, u, fs=10.0, preparation=Preparation(**kw))
+
+
+def test_settings_of_another_kind_are_refused(rng):
+    u = rng.standard_normal(2000)
+    with pytest.raises(TypeError, match="preparation must be a Preparation, not dict"):
+        prepare(u, u, fs=10.0, preparation={"decimate": None})
 
 
 def test_auto_decimation_leaves_the_validation_data_enough_samples(rng):
@@ -59,7 +76,7 @@ def test_auto_decimation_leaves_the_validation_data_enough_samples(rng):
     # holdout (2000 samples) caps it at 2000 // 256 = 7
     u = scipy.signal.sosfiltfilt(scipy.signal.butter(4, 5.0, fs=1000.0, output="sos"),
                                  rng.standard_normal(20_000))
-    p = prepare(u, u, fs=1000.0, validation=0.1)
+    p = prepare(u, u, fs=1000.0, preparation=Preparation(validation=0.1))
     assert p.decimation == 7 and p.u_val.size >= 256
 
 
@@ -80,7 +97,8 @@ def _arx_record(rng, n=4000, sigma=0.01):
 
 def test_identify_recovers_model_offsets_and_band(rng):
     u, y = _arx_record(rng)
-    res = identify(u + 1.0, y + 2.0, fs=100.0, orders=(1, 0, 1), decimate=None)
+    res = identify(u + 1.0, y + 2.0, fs=100.0, orders=(1, 0, 1),
+                   preparation=Preparation(decimate=None))
     m = res.model
     # 2800 samples, noise 0.01 on an output of RMS ~0.8: coefficients to ~1e-3
     np.testing.assert_allclose(m.a, [1.0, -0.8], atol=3e-3)
@@ -105,19 +123,23 @@ def test_validated_band_starts_where_the_record_was_excited(rng):
     sos = scipy.signal.butter(6, [10.0, 40.0], "bandpass", fs=100.0, output="sos")
     u = scipy.signal.sosfiltfilt(sos, rng.standard_normal(n))
     y = scipy.signal.lfilter([0.0, 0.5], [1.0, -0.8], u) + 1e-3 * rng.standard_normal(n)
-    lo, hi = identify(u, y, fs=100.0, orders=(1, 0, 1), decimate=None).model.band_hz
+    lo, hi = identify(u, y, fs=100.0, orders=(1, 0, 1),
+                      preparation=Preparation(decimate=None)).model.band_hz
     assert 5.0 < lo < 10.0 and 40.0 <= hi <= 45.0
 
 
 def test_acceptance_is_the_one_definition(rng):
     u, y = _arx_record(rng)
     strict = Acceptance(max_magnitude_db=1e-6, uncertainty_sigmas=0.0)
-    res = identify(u, y, fs=100.0, orders=(1, 0, 1), decimate=None, acceptance=strict)
+    res = identify(u, y, fs=100.0, orders=(1, 0, 1), preparation=Preparation(decimate=None),
+                   acceptance=strict)
     assert not res.accepted
     assert any("magnitude error" in f for f in res.verdict.failed)
     assert "does NOT meet" in res.verdict.format()
     # a model of too low an order misses the fit
-    res2 = identify(u, y, fs=100.0, orders=(1, 0, 0, 3), method="arx", decimate=None)
+    res2 = identify(u, y, fs=100.0, orders=(1, 0, 0, 3),
+                    preparation=Preparation(decimate=None),
+                    estimation=Estimation(method="arx"))
     assert not res2.accepted and any(f.startswith("fit ") for f in res2.verdict.failed)
     with pytest.raises(ParameterError, match="min_coherence"):
         Acceptance(min_coherence=1.5)
@@ -152,8 +174,9 @@ def test_unstable_model_is_judged_unstable(rng):
     u = rng.standard_normal(n)
     y = scipy.signal.lfilter([0.0, 1.0], [1.0, -1.02], u)
     with pytest.warns(EhssWarning, match="unstable"):  # never silent
-        res = identify(u, y, fs=1.0, orders=(1, 0, 0), method="arx", decimate=None,
-                       detrend=None)
+        res = identify(u, y, fs=1.0, orders=(1, 0, 0),
+                       preparation=Preparation(decimate=None, detrend=None),
+                       estimation=Estimation(method="arx"))
     assert not res.model.is_stable()
     # the model is the (unstable) truth, so its simulation even follows the data: the
     # verdict rests on the poles, not on the fit
@@ -167,7 +190,7 @@ def test_assess_judges_a_given_model_as_identify_does(rng):
     from ehss.identification import ArmaxModel
 
     u, y = _arx_record(rng)
-    res = identify(u, y, fs=100.0, orders=(1, 0, 1), decimate=None)
+    res = identify(u, y, fs=100.0, orders=(1, 0, 1), preparation=Preparation(decimate=None))
     report, verdict = assess(res.model, res.prepared)
     assert verdict.accepted is res.accepted
     assert report.simulation_fit_pct == pytest.approx(res.report.simulation_fit_pct,
@@ -180,23 +203,28 @@ def test_assess_judges_a_given_model_as_identify_does(rng):
 
 
 @pytest.mark.parametrize(
-    "kw,exc,match",
+    "make,exc,match",
     [
-        ({"orders": (1, 0)}, ParameterError, "orders"),
-        ({"orders": (0, 0, 0)}, ParameterError, "na=0"),
-        ({"orders": (1, 0, 0, -1)}, ParameterError, "delay=-1"),
-        ({"orders": (1, 0, 1), "method": "magic"}, ParameterError, "method='magic'"),
-        ({"orders": (1, 0, 1), "frf_method": "h2"}, ParameterError, "frf_method"),
-        ({"orders": (1, 0, 1), "initial": "warm"}, ParameterError, "initial"),
-        ({"orders": (1, 0, 1), "nperseg": 4}, ParameterError, "nperseg=4"),
-        ({"orders": (1, 0, 1), "nperseg": 10**6}, ParameterError, "longer than"),
-        ({"orders": (1, 0, 1), "acceptance": {"min_fit_pct": 1}}, TypeError, "Acceptance"),
+        (lambda: {"orders": (1, 0)}, ParameterError, "orders"),
+        (lambda: {"orders": (0, 0, 0)}, ParameterError, "na=0"),
+        (lambda: {"orders": (1, 0, 0, -1)}, ParameterError, "delay=-1"),
+        (lambda: {"estimation": Estimation(method="magic")}, ParameterError,
+         "method='magic'"),
+        (lambda: {"evaluation": Evaluation(frf_method="h2")}, ParameterError, "frf_method"),
+        (lambda: {"evaluation": Evaluation(initial="warm")}, ParameterError, "initial"),
+        (lambda: {"evaluation": Evaluation(nperseg=4)}, ParameterError, "nperseg=4"),
+        (lambda: {"evaluation": Evaluation(nperseg=10**6)}, ParameterError, "longer than"),
+        (lambda: {"evaluation": Evaluation(horizons=(0,))}, ParameterError, "horizons"),
+        (lambda: {"acceptance": {"min_fit_pct": 1}}, TypeError,
+         "acceptance must be an Acceptance"),
+        (lambda: {"estimation": "arx"}, TypeError, "estimation must be an Estimation"),
     ],
 )
-def test_identify_bad_arguments(rng, kw, exc, match):
+def test_identify_bad_arguments(rng, make, exc, match):
     u, y = _arx_record(rng, n=1000)
     with pytest.raises(exc, match=match):
-        identify(u, y, fs=10.0, decimate=None, **kw)
+        identify(u, y, fs=10.0, **{"orders": (1, 0, 1),
+                                   "preparation": Preparation(decimate=None), **make()})
 
 
 # ------------------------------------------------------------- the simulated rig's tests
@@ -244,7 +272,8 @@ def test_rig_tests_give_stable_models_matching_a_random_test(random_h1, kind):
     band the test excited."""
     reference, band = _rig_test(kind)
     run = ehss.simulate("position", reference, seed=7)
-    res = identify(run.reference, run.output, fs=FS_RIG, orders=(4, 3, 4, 1), band_hz=band)
+    res = identify(run.reference, run.output, fs=FS_RIG, orders=(4, 3, 4, 1),
+                   preparation=Preparation(band_hz=band))
     assert res.model.is_stable()
     ok = random_h1.valid(band, 0.9)
     f, h = random_h1.freq_hz[ok], random_h1.response[ok]
@@ -298,7 +327,8 @@ def test_oversampled_systems_identify_as_well_as_well_sampled_ones(noise, order,
     if noise == "armax":  # C/A-coloured noise, C with A's poles halved
         e = scipy.signal.lfilter(np.poly(0.5 * np.roots(ad)), ad, e)
     e *= np.std(x) / np.std(e) / math.sqrt(1000.0)  # 30 dB
-    res = identify(u, x + e, fs=fs, orders=(order, order - 1, order, 1), band_hz=band)
+    res = identify(u, x + e, fs=fs, orders=(order, order - 1, order, 1),
+                   preparation=Preparation(band_hz=band))
     assert res.model.is_stable()
     f = np.linspace(*band, 200)
     _, h = scipy.signal.freqz(bd, ad, worN=f, fs=fs)
@@ -324,7 +354,8 @@ def test_servo_loop_sampled_at_4_khz_identifies_over_its_band():
     x = scipy.signal.lfilter(bd, ad, u)
     e = scipy.signal.lfilter([1.0], ad, np.random.default_rng(2).standard_normal(u.size))
     e *= np.std(x) / np.std(e) / 10 ** (50 / 20)
-    res = identify(u, x + e, fs=fs, orders=(5, 4, 5, 1), band_hz=band)
+    res = identify(u, x + e, fs=fs, orders=(5, 4, 5, 1),
+                   preparation=Preparation(band_hz=band))
     assert res.prepared.decimation > 1 and res.model.dt == pytest.approx(
         res.prepared.decimation / fs)
     assert "decimated by" in res.format()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import lfilter
 
-from ehss.workflow import select_orders
+from ehss.workflow import OrderGrid, select_orders
 
 
 def test_progress_is_called_once_per_validated_candidate():
@@ -13,7 +13,8 @@ def test_progress_is_called_once_per_validated_candidate():
     u = rng.standard_normal(3000)
     y = lfilter([0.0, 0.2, 0.1], [1.0, -1.3, 0.6], u) + 0.01 * rng.standard_normal(u.size)
     lines: list[str] = []
-    search = select_orders(u, y, fs=1000.0, na=[1, 2], nb=[0, 1], nc=[0], delay=1,
+    search = select_orders(u, y, fs=1000.0,
+                           grid=OrderGrid(na=[1, 2], nb=[0, 1], nc=[0], delay=1),
                            progress=lines.append)
     validated = [r for r in search.reports if r is not None]
     assert len(lines) == len(validated) == 4

@@ -64,6 +64,10 @@ _LAZY = {
     "prepare": "ehss.workflow",
     "select_orders": "ehss.workflow",
     "OrderSearch": "ehss.workflow",
+    "Preparation": "ehss.workflow",
+    "Estimation": "ehss.workflow",
+    "Evaluation": "ehss.workflow",
+    "OrderGrid": "ehss.workflow",
     "preprocess": None,
     "workflow": None,
     # frequency response and validation
@@ -82,6 +86,7 @@ _LAZY = {
     "compensate": "ehss.compensation",
     "design_inverse": "ehss.compensation",
     "InverseModel": "ehss.compensation",
+    "UpdateOptions": "ehss.compensation",
     "refine": "ehss.experiments.refinement",
     "demonstrate": "ehss.experiments.compensation_demo",
     "CompensationDemo": "ehss.experiments.compensation_demo",
@@ -102,7 +107,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
 
     from ehss import linear, preprocess, signals, workflow
     from ehss._warm import warm_up
-    from ehss.compensation import InverseModel, compensate, design_inverse
+    from ehss.compensation import InverseModel, UpdateOptions, compensate, design_inverse
     from ehss.control.tuning import tune_force, tune_position, tune_tvc
     from ehss.errors import (
         DataError,
@@ -149,8 +154,12 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     )
     from ehss.workflow import (
         Acceptance,
+        Estimation,
+        Evaluation,
         Identification,
+        OrderGrid,
         OrderSearch,
+        Preparation,
         assess,
         identify,
         prepare,
@@ -225,6 +234,10 @@ __all__ = [
     "prepare",
     "select_orders",
     "OrderSearch",
+    "Preparation",
+    "Estimation",
+    "Evaluation",
+    "OrderGrid",
     "preprocess",
     "workflow",
     # frequency response and validation
@@ -243,6 +256,7 @@ __all__ = [
     "compensate",
     "design_inverse",
     "InverseModel",
+    "UpdateOptions",
     "refine",
     "demonstrate",
     "CompensationDemo",

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
+from numpy.typing import ArrayLike
 
 from ehss._checks import as_record, as_signal, check_fs, check_int
 from ehss.errors import DataError, ParameterError
@@ -80,7 +81,7 @@ class Trend:
     slope: float = 0.0
 
 
-def detrend(x, kind: str | None) -> tuple[np.ndarray, Trend]:
+def detrend(x: ArrayLike, kind: str | None) -> tuple[np.ndarray, Trend]:
     """Remove the mean or a least-squares line from ``x``.
 
     Parameters
@@ -117,7 +118,7 @@ def detrend(x, kind: str | None) -> tuple[np.ndarray, Trend]:
     return x - mean - slope * k, Trend(kind=kind, offset=mean, slope=slope)
 
 
-def decimate(u, y, factor: int) -> tuple[np.ndarray, np.ndarray]:
+def decimate(u: ArrayLike, y: ArrayLike, factor: int) -> tuple[np.ndarray, np.ndarray]:
     """Low-pass and keep every ``factor``-th sample of an input/output record.
 
     Parameters
@@ -153,7 +154,7 @@ def decimate(u, y, factor: int) -> tuple[np.ndarray, np.ndarray]:
     return (scipy.signal.resample_poly(u, **kw), scipy.signal.resample_poly(y, **kw))
 
 
-def content_edge_hz(x, fs: float, *, fraction: float = 0.99) -> float:
+def content_edge_hz(x: ArrayLike, fs: float, *, fraction: float = 0.99) -> float:
     """Frequency below which ``fraction`` of the (mean-removed) power of ``x`` lies, Hz.
 
     The power spectrum is a Welch estimate with segments of an eighth of the record
@@ -180,7 +181,7 @@ def content_edge_hz(x, fs: float, *, fraction: float = 0.99) -> float:
 EXCITATION_LEVEL_DB = 20.0
 
 
-def excitation_band(u, fs: float, *, level_db: float = EXCITATION_LEVEL_DB
+def excitation_band(u: ArrayLike, fs: float, *, level_db: float = EXCITATION_LEVEL_DB
                     ) -> tuple[float, float]:
     """The band an input excites: where its power spectrum is within ``level_db`` of its
     peak, Hz.
@@ -239,7 +240,7 @@ def excitation_band(u, fs: float, *, level_db: float = EXCITATION_LEVEL_DB
 
 
 def auto_decimation(
-    u, y, fs: float, *, band_hz: tuple[float, float] | None = None,
+    u: ArrayLike, y: ArrayLike, fs: float, *, band_hz: tuple[float, float] | None = None,
     target: float = TARGET_OVERSAMPLING,
 ) -> int:
     """Decimation factor that brings the sample rate down to about ``target`` times the

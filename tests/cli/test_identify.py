@@ -131,7 +131,7 @@ def test_identify_too_few_samples_for_orders(tmp_path, rng, capsys):
         (["--holdout", "0"], "--holdout 0.0 must be in (0, 1)"),
         (["--holdout", "0.3", "--validate", "x.csv"], "either --holdout or --validate"),
         (["--validate", "nowhere.csv"], "no such file"),
-        (["--nperseg", "4"], "--nperseg 4 must be >= 8"),
+        (["--nperseg", "4"], "--nperseg 4 must be an integer in [8, inf)"),
         (["--nperseg", "100000", "--decimate", "none"], "longer than the validation data"),
         (["--detrend", "quadratic"], "invalid choice: 'quadratic'"),
         (["--decimate", "x"], "--decimate 'x' must be auto, none or an integer"),
@@ -221,7 +221,7 @@ def test_identify_prints_the_workflow_verdict(tmp_path, capsys):
     # The verdict printed by the command is the library's on the same record: a test of
     # the simulated position loop that the report would judge the same way.
     import ehss
-    from ehss.workflow import identify
+    from ehss.workflow import Preparation, identify
 
     fs = 1000.0
     ref = ehss.signals.band_limited_random(band_hz=(0.5, 40.0), rms=1e-3, duration_s=20.0,
@@ -231,7 +231,7 @@ def test_identify_prints_the_workflow_verdict(tmp_path, capsys):
     write_csv(path, {"t": np.arange(run.output.size) / fs, "r": run.reference,
                      "x": run.output})
     res = identify(run.reference, run.output, fs=fs, orders=(4, 3, 4, 1),
-                   band_hz=(0.5, 40.0))
+                   preparation=Preparation(band_hz=(0.5, 40.0)))
     code = main(["identify", str(path), "--input", "r", "--output", "x", "--na", "4",
                  "--nb", "3", "--nc", "4", "--band", "0.5", "40",
                  "--out", str(tmp_path / "m.json")])

@@ -273,7 +273,7 @@ def test_the_pick_meets_the_acceptance_when_a_candidate_does(tmp_path, data_csv,
         return report, workflow.Verdict(accepted=ok, failed=() if ok else ("phase",),
                                         acceptance=acceptance)
 
-    monkeypatch.setattr(workflow, "assess", fake_assess)
+    monkeypatch.setattr(workflow.orders, "assess", fake_assess)
     out = tmp_path / "orders.csv"
     code = main(["order", str(data_csv), "--input", "u", "--output", "y", "--na", "1-3",
                  "--nb", "1", "--nc", "0", "--delay", "1", "--method", "arx", "--out",

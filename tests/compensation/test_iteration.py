@@ -8,6 +8,7 @@ from numpy.testing import assert_allclose
 
 from ehss.compensation import (
     IterationState,
+    UpdateOptions,
     design_inverse,
     lag_samples,
     run_record,
@@ -91,8 +92,8 @@ def test_wrong_model_gain_2x_phase_30_deg_converges_or_stops(model, reference, f
     # The plant is 2·e^{-j30°} times the model. With L = 1 the error would grow by
     # |1 - 2e^{-j30°}| = 1.24 per update; the default gain is chosen from the first run
     # (L = 1/2: |1 - e^{-j30°}| = 0.52), a fixed L = 1 is refused once and halved.
-    res = refine(_phase_shifted(model, 2.0, 30.0), reference, model=model, iterations=5,
-                 learning_gain=fixed_gain, max_gain=None)
+    res = refine(_phase_shifted(model, 2.0, 30.0), reference, model=model,
+                 options=UpdateOptions(gain=fixed_gain), iterations=5, max_gain=None)
     err = res.rms_error
     # accepted[k]: run k improved on the run its drive was built from (run 0: no judge)
     kept = [e for e, ok in zip(err, res.accepted, strict=False) if ok]
@@ -114,8 +115,8 @@ def test_model_too_wrong_for_any_gain_stops(model, reference):
     res = refine(plant, reference, model=model, iterations=2, max_gain=None,
                  stop_without_gain=True)  # as an experiment does: stop, keep the drive
     assert res.stopped and "too large" in res.message and len(res.drives) == 1
-    res = refine(plant, reference, model=model, iterations=10, learning_gain=1.0,
-                 max_gain=None)
+    res = refine(plant, reference, model=model, options=UpdateOptions(gain=1.0),
+                 iterations=10, max_gain=None)
     assert res.stopped
     assert int(np.argmin(res.rms_error)) == 0  # nothing beat the first run
     assert res.drive is res.drives[0]
@@ -127,8 +128,8 @@ def test_frf_iteration_converges_without_a_model(model, reference):
     # the measured H1 of each run. Plant: 1.3× the model with other poles.
     a_true = np.real(np.poly([0.93, 0.8 + 0.25j, 0.8 - 0.25j]))
     true = ArmaxModel(a=a_true, b=0.02 * np.poly([0.4]), c=[1.0], delay=2, dt=1 / FS)
-    res = refine(lambda u: true.simulate(u), reference, model=model, iterations=3,
-                 update="frf", first_drive=reference)
+    res = refine(lambda u: true.simulate(u), reference, model=model,
+                 options=UpdateOptions(method="frf"), iterations=3, first_drive=reference)
     nrmse = [rec.nrmse_percent for rec in res.records]
     assert np.all(np.diff(res.rms_error) < 0)
     # H1 with 1 Hz resolution on an 8 s record, interpolated onto the record's grid: each
@@ -139,9 +140,10 @@ def test_frf_iteration_converges_without_a_model(model, reference):
 def test_update_options_checked(model, reference):
     u = reference.copy()
     with pytest.raises(ParameterError, match="method"):
-        update_drive(reference, u, u, fs=FS, model=model, method="ilc")
+        update_drive(reference, u, u, fs=FS, model=model,
+                     options=UpdateOptions(method="ilc"))
     with pytest.raises(ParameterError, match="gain"):
-        update_drive(reference, u, u, fs=FS, model=model, gain=2.5)
+        update_drive(reference, u, u, fs=FS, model=model, options=UpdateOptions(gain=2.5))
     with pytest.raises(ParameterError, match="same length"):
         update_drive(reference, u[:-1], u, fs=FS, model=model)
     with pytest.raises(TypeError, match="IterationState"):
@@ -150,7 +152,8 @@ def test_update_options_checked(model, reference):
     with pytest.raises(ParameterError, match="needs a band"):
         update_drive(reference, u, 0.9 * u, fs=FS, model=nob)
     inv = design_inverse(model)
-    step = update_drive(reference, u, 0.9 * u, fs=FS, inverse=inv, band_hz=BAND, gain=1.0)
+    step = update_drive(reference, u, 0.9 * u, fs=FS,
+                        options=UpdateOptions(band_hz=BAND, gain=1.0), inverse=inv)
     # u + F (r - 0.9 G u) with G F = 1 in band (r = G u exactly only in band): the
     # update adds F·0.1·r.
     assert step.accepted and step.gain == 1.0

@@ -92,7 +92,7 @@ def test_outside_the_band_the_drive_is_the_reference():
 def test_update_correction_stays_in_the_band():
     # The learning update's correction is Q-filtered: nothing outside the band, even
     # though the one-shot drive passes the reference there.
-    from ehss.compensation import update_drive
+    from ehss.compensation import UpdateOptions, update_drive
 
     fs, n = 1000.0, 40000
     r = _tones([0.5, 10.0], [1.0, 1.0], fs, n)
@@ -100,7 +100,7 @@ def test_update_correction_stays_in_the_band():
     with pytest.warns(EhssWarning, match=r"50 % of the reference's power lies outside"):
         u = compensate(model, r, fs=fs)                # the 0.5 Hz tone is passed through
     y = 2.0 * scipy.signal.lfilter([0.9], [1.0], u)  # the loop: 10 % less than modelled
-    step = update_drive(r, u, y, fs=fs, model=model, gain=1.0)
+    step = update_drive(r, u, y, fs=fs, model=model, options=UpdateOptions(gain=1.0))
     correction = step.drive - u
     # r - y at 0.5 Hz is -0.8 (the pass-through tone, doubled by the loop): left alone
     spec = np.abs(np.fft.rfft(correction))

@@ -14,7 +14,7 @@ import pytest
 import scipy.signal
 from numpy.testing import assert_allclose
 
-from ehss.compensation import design_inverse
+from ehss.compensation import UpdateOptions, design_inverse
 from ehss.control.known import accelerometer_filter
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine
@@ -51,8 +51,9 @@ def _plant(model, gain):
 
 @pytest.mark.parametrize(("gain", "learning_gain"), [(1.2, 1.0), (0.7, 1.0), (1.2, 0.5)])
 def test_error_contracts_by_one_minus_lk(model, reference, gain, learning_gain):
-    res = refine(_plant(model, gain), reference, model=model, iterations=3, band_hz=BAND,
-                 reidentify=False, learning_gain=learning_gain)
+    res = refine(_plant(model, gain), reference, model=model,
+                 options=UpdateOptions(band_hz=BAND, reidentify=False, gain=learning_gain),
+                 iterations=3)
     rms_r = np.sqrt(np.mean(reference**2))
     expected = abs(1 - gain) * abs(1 - learning_gain * gain) ** np.arange(4) * rms_r
     # The reference is at rest and in band, the inverse exact: rounding only (measured
@@ -67,8 +68,8 @@ def test_reidentification_of_a_noise_free_plant_converges(model, reference):
     # it (no noise), so after the first update the error is far below the one-shot's.
     a_true = np.real(np.poly([0.94, 0.86 + 0.21j, 0.86 - 0.21j]))
     true = ArmaxModel(a=a_true, b=0.011 * np.poly([0.4]), c=[1.0], delay=1, dt=1 / FS)
-    res = refine(lambda u: true.simulate(u), reference, model=model, iterations=3,
-                 band_hz=BAND, reidentify=True)
+    res = refine(lambda u: true.simulate(u), reference, model=model,
+                 options=UpdateOptions(band_hz=BAND, reidentify=True), iterations=3)
     e = res.rms_error
     # Each run is better than the last until the error reaches the rounding floor of an
     # exact re-identification (float64 filtering of a 1e-1 signal: ~1e-11 relative),
@@ -89,27 +90,31 @@ def test_known_factor_is_inverted_and_kept_in_reidentification(model, reference)
     def loop(u):
         return gain * model.simulate(scipy.signal.lfilter(num, den, u))
 
-    res = refine(loop, reference, model=model, known=(num, den), iterations=2,
-                 band_hz=BAND, reidentify=False)
+    res = refine(loop, reference, model=model,
+                 options=UpdateOptions(known=(num, den), band_hz=BAND, reidentify=False),
+                 iterations=2)
     rms_r = np.sqrt(np.mean(reference**2))
     # F⁻¹ is applied by FFT over a padded record; on a reference at rest and in band it is
     # exact to rounding (measured ≤ 1e-12 relative).
     assert_allclose(res.rms_error, 0.1 ** np.arange(1, 4) * rms_r, rtol=1e-9)
     # The same with a complete model carrying its known factor: the same drive.
     full = compose(model, num, den)
-    res2 = refine(loop, reference, model=full, iterations=0, band_hz=BAND)
+    res2 = refine(loop, reference, model=full, options=UpdateOptions(band_hz=BAND),
+                  iterations=0)
     assert_allclose(res2.drive, res.drives[0], rtol=0, atol=1e-9 * np.max(np.abs(res.drive)))
     # Re-identification behind F (noise-free: exact) with the rest's orders.
-    res3 = refine(loop, reference, model=full, iterations=1, band_hz=BAND, reidentify=True)
+    res3 = refine(loop, reference, model=full,
+                  options=UpdateOptions(band_hz=BAND, reidentify=True), iterations=1)
     assert (res3.models[1].na, res3.models[1].nb) == (model.na, model.nb)
     assert res3.rms_error[1] < 1e-2 * res3.rms_error[0]
 
 
 def test_loop_function_checked(model, reference):
     with pytest.raises(ParameterError, match="shape"):
-        refine(lambda u: u[:-1], reference, model=model, band_hz=BAND)
+        refine(lambda u: u[:-1], reference, model=model,
+               options=UpdateOptions(band_hz=BAND))
     with pytest.raises(ParameterError, match="gain"):
-        refine(_plant(model, 1.0), reference, model=model, learning_gain=2.0)
+        refine(_plant(model, 1.0), reference, model=model, options=UpdateOptions(gain=2.0))
     with pytest.raises(ParameterError, match="iterations"):
         refine(_plant(model, 1.0), reference, model=model, iterations=-1)
 

@@ -20,7 +20,7 @@ from scipy.signal import BadCoefficients, dlsim, tf2ss
 
 from ehss.identification import estimate
 from ehss.io import read_columns, sample_rate
-from ehss.workflow import identify, select_orders
+from ehss.workflow import OrderGrid, Preparation, identify, select_orders
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -94,11 +94,13 @@ def _best_plain_arx(est, val, na_grid, nb_grid, delay=1):
 def test_default_workflow_is_stable_and_at_least_plain_arx(name):
     u, y, fs = _record(name)
     na_grid, nb_grid, nc_grid = RECORDS[name]
-    search = select_orders(u, y, fs=fs, na=na_grid, nb=nb_grid, nc=nc_grid, validation=0.5)
+    search = select_orders(u, y, fs=fs, grid=OrderGrid(na=na_grid, nb=nb_grid, nc=nc_grid),
+                           preparation=Preparation(validation=0.5))
     # records at 10-20x their bandwidth: no decimation, so the split below is the same
     assert search.prepared.decimation == 1
     assert search.selection.criterion == "fit" and search.method == "armax"
-    res = identify(u, y, fs=fs, orders=search.best_orders, validation=0.5)
+    res = identify(u, y, fs=fs, orders=search.best_orders,
+                   preparation=Preparation(validation=0.5))
     model = res.model
     assert model.is_stable()
     # the refit is the same model (deterministic estimator, same prepared data)

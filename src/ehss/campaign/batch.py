@@ -41,7 +41,14 @@ from ehss.campaign.records import (
     record_time,
 )
 from ehss.errors import DataError, ParameterError
-from ehss.workflow import DEFAULT_METHOD, Acceptance, Identification, identify
+from ehss.workflow import (
+    DEFAULT_METHOD,
+    Acceptance,
+    Estimation,
+    Identification,
+    Preparation,
+    identify,
+)
 
 if TYPE_CHECKING:
     import polars as pl
@@ -260,9 +267,12 @@ def _channel_row(record: Record, channel: Channel, settings: BatchSettings,
                  out: Path, key: str) -> dict[str, Any]:
     u, y, fs = read_channel(record, channel, time_column=settings.time_column,
                             fs=settings.fs)
-    ident = identify(u, y, fs=fs, orders=settings.orders, method=settings.method,
-                     validation=settings.holdout, band_hz=settings.band_hz,
-                     detrend=settings.detrend, decimate=settings.decimate,
+    ident = identify(u, y, fs=fs, orders=settings.orders,
+                     preparation=Preparation(validation=settings.holdout,
+                                             band_hz=settings.band_hz,
+                                             detrend=settings.detrend,
+                                             decimate=settings.decimate),
+                     estimation=Estimation(method=settings.method),
                      acceptance=settings.acceptance)
     name = f"{key}_{channel.name}.json"
     folder = out / MODELS_FOLDER

@@ -288,15 +288,16 @@ def identify_rig(params: RigParams, settings: MonteCarloSettings,
     """Run the identification test on ``params`` and identify the loop (workflow)."""
     from ehss.experiments.compensation_demo import random_reference
     from ehss.simulation import simulate
-    from ehss.workflow import identify
+    from ehss.workflow import Estimation, Preparation, identify
 
     cfg, _ = _bands(settings)
     fs = float(params.timing.control_rate_hz)
     u = random_reference(settings.duration_s, fs, cfg["ident_hz"], cfg["ident_rms"],
                          int(seeds[0]))
     y = simulate(settings.loop, u, params=params, seed=int(seeds[1])).output
-    return identify(u, y, fs=fs, orders=settings.orders, method=settings.method,
-                    decimate=None)
+    return identify(u, y, fs=fs, orders=settings.orders,
+                    preparation=Preparation(decimate=None),
+                    estimation=Estimation(method=settings.method))
 
 
 def _tracking_error_pct(model: ArmaxModel, r: np.ndarray, fs: float,

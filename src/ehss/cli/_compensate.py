@@ -10,6 +10,8 @@ import numpy as np
 
 from ehss._checks import check_band
 from ehss.cli import command_help
+from ehss.cli._dataargs import add_rate_arguments
+from ehss.cli._options import add_options, build_options
 from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
 from ehss.cli._simulate import seed_argument
 from ehss.errors import DataError, ParameterError
@@ -20,7 +22,7 @@ _DRIVE_LOOPS = ("position", "acceleration", "force", "valve")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ehss.compensation import DEFAULT_MAX_GAIN, DEFAULT_MIN_GAIN
+    from ehss.compensation import DEFAULT_MAX_GAIN, DEFAULT_MIN_GAIN, UpdateOptions
     from ehss.params import PRESETS
 
     p = sub.add_parser(
@@ -52,12 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="band limit of the inverse and of every update, Hz (default: the "
                    "band the model was validated over, `band_hz` in its file)")
-    p.add_argument("--fs", type=float, metavar="HZ",
-                   help="sample rate in Hz (needed when the file has no time column)")
-    p.add_argument("--time-column", default="t", metavar="COL",
-                   help="time column of the reference (and of the --update run), used for "
-                   "the sample rate if present; in seconds unless its name states a unit: "
-                   "'t [ms]', 'time_us' (default: %(default)s)")
+    add_rate_arguments(p, "time column of the reference (and of the --update run)")
     p.add_argument("--fade", type=float, metavar="S",
                    help="fade the reference in and out over S seconds (raised cosine) when it "
                    "does not start or end at rest")
@@ -117,11 +114,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="played drive column in RUN.csv (default: %(default)s)")
     it.add_argument("--output-column", default="output",
                     help="measured output column in RUN.csv (default: %(default)s)")
-    it.add_argument("--gain", type=float, metavar="L",
-                    help="learning gain L in (0, 2) (default: the largest of 1, 1/2, 1/4, 1/8 "
-                    "that the run shows to contract the error)")
-    it.add_argument("--reidentify", action="store_true",
-                    help="re-identify the loop from the run before inverting it")
+    add_options(it, UpdateOptions)
     p.set_defaults(func=run)
 
     d = sub.add_parser(
@@ -212,7 +205,7 @@ def _one_shot(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
 def _iterated(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
               band: tuple[float, float], checks: dict[str, Any]) -> tuple[Any, dict, dict]:
     """A drive-file iteration step: the library's, kept even when a check fails."""
-    from ehss.compensation import corrected_drive, model_offsets
+    from ehss.compensation import UpdateOptions, corrected_drive, model_offsets
     from ehss.compensation.rates import rate_factor
     from ehss.io import read_columns, sample_rate
 
@@ -228,14 +221,15 @@ def _iterated(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
     if u.size != r.size or y.size != r.size:
         raise DataError(f"{args.update!r} has {u.size} samples, the reference {r.size}")
     offsets = None if args.ignore_offsets else "model"
-    state, log = None, []
+    state: Any = None
+    log: list[dict[str, Any]] = []
     if args.previous is not None:
         state, log = _previous(args.previous, u, model_offsets(model, offsets)[0])
     method = "frf" if args.method == "frf" else "model"
-    result, step = corrected_drive(
-        model, r, u, y, fs=fs, offsets=offsets, fade_s=args.fade, force=True, checks=checks,
-        method=method, inverse_method="stable" if method == "frf" else args.method,
-        band_hz=band, gain=args.gain, state=state, reidentify=args.reidentify)
+    options = build_options(args, UpdateOptions, method=method, band_hz=band,
+                            inverse_method="stable" if method == "frf" else args.method)
+    result, step = corrected_drive(model, r, u, y, fs=fs, offsets=offsets, fade_s=args.fade,
+                                   force=True, checks=checks, state=state, options=options)
     entry = {"run": str(args.update), **step.record.to_dict(), "accepted": step.accepted,
              "gain_next": step.gain, "decision": step.message}
     log = [*log, entry]
@@ -272,7 +266,8 @@ def run(args: argparse.Namespace) -> int:
     r = np.asarray(table[args.column], dtype=float)
     if args.update is None:
         result = _one_shot(args, model, r, fs, band, checks)
-        columns, extra = {}, {"iteration": {"log": [], "gain": None}}
+        columns: dict[str, Any] = {}
+        extra: dict[str, Any] = {"iteration": {"log": [], "gain": None}}
     else:
         result, columns, extra = _iterated(args, model, r, fs, band, checks)
     if result.failed_check is not None and not args.force:

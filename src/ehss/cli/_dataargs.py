@@ -20,6 +20,7 @@ from ehss.errors import ParameterError
 
 __all__ = [
     "add_record_arguments",
+    "add_rate_arguments",
     "Record",
     "load_record",
     "load_validation",
@@ -48,12 +49,18 @@ def add_record_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--output", required=True, metavar="COL",
                    help="output column (the measured controlled variable): name, or number "
                    "from 1")
+    add_rate_arguments(p, "time column (name, or number from 1)")
+
+
+def add_rate_arguments(p: argparse._ActionsContainer, time_column: str) -> None:
+    """--fs and --time-column: the sample rate, given or read from the time column
+    (``time_column`` says which column that is)."""
     p.add_argument("--fs", type=float, metavar="HZ",
                    help="sample rate in Hz (needed when the file has no time column)")
     p.add_argument("--time-column", default="t", metavar="COL",
-                   help="time column (name, or number from 1), used for the sample rate if "
-                   "present; in seconds unless its name states a unit: 't [ms]', "
-                   "'time_us' (default: %(default)s)")
+                   help=f"{time_column}, used for the sample rate if present; in seconds "
+                   "unless its name states a unit: 't [ms]', 'time_us' (default: "
+                   "%(default)s)")
 
 
 @dataclass(frozen=True)

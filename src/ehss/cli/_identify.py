@@ -9,12 +9,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ehss._checks import check_band
 from ehss.cli import command_help
 from ehss.cli._dataargs import (
     add_record_arguments,
@@ -23,8 +23,18 @@ from ehss.cli._dataargs import (
     report_warnings,
     write_outputs,
 )
+from ehss.cli._options import add_options, build_options
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import IdentificationError, ParameterError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from matplotlib.figure import Figure
+
+    from ehss.cli._dataargs import Record
+    from ehss.identification import ArmaxModel
+    from ehss.workflow import Acceptance, Estimation, Evaluation, Identification, Preparation
 
 __all__ = ["register", "run", "time_plot_path", "plot_window_s", "model_to_mat",
            "PLOT_SAMPLES"]
@@ -34,8 +44,7 @@ PLOT_SAMPLES = 2000
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ehss.identification import INITS, METHODS
-    from ehss.workflow import DEFAULT_METHOD
+    from ehss.workflow import Acceptance, Estimation, Evaluation, Preparation
 
     p = sub.add_parser(
         "identify",
@@ -60,44 +69,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="order of C (>= 0; ignored by arx)")
     p.add_argument("--delay", type=int, default=1, metavar="D",
                    help="input delay in samples (default: %(default)s)")
-    p.add_argument("--method", choices=METHODS, default=DEFAULT_METHOD,
-                   help="estimator: arx = least squares; armax = prediction-error "
-                   "minimisation started from extended least squares; rels = the paper's "
-                   "recursive extended least squares (eqs 19-22); rml = recursive maximum "
-                   "likelihood (default: %(default)s)")
-    p.add_argument("--init", choices=INITS, default="batch",
-                   help="start of rels/rml: from the batch (armax) estimate, or the paper's "
-                   "zero start (default: %(default)s; ignored by the batch methods)")
-    p.add_argument("--holdout", type=float, metavar="FRACTION",
-                   help="fraction at the end of the record kept for validation "
-                   "(default: 0.3, or none with --validate)")
+    add_options(p, Estimation)
+    add_options(p, Preparation)
     p.add_argument("--validate", metavar="FILE", type=InputFile,
                    help="validate on this separate record instead (same column options "
                    "and sample rate as DATA)")
-    p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="band of interest (Hz): where the frequency response is compared, "
-                   "the fit is scored and the decimation aims (default: up to 0.45 fs)")
-    p.add_argument("--min-coherence", type=float, default=0.9, metavar="G2",
-                   help="points of the validation's frequency response with a lower "
-                   "coherence are not compared (default: %(default)s)")
-    p.add_argument("--nperseg", type=int, metavar="N",
-                   help="segment length of the validation's frequency-response estimate, "
-                   "in samples at the model's rate (default: from the record's length and "
-                   "the band, at least 8 averages)")
-    p.add_argument("--frf-method", choices=("auto", "welch", "dft"), default="auto",
-                   help="validation's frequency response: Welch H1, whole-record DFT (for "
-                   "sweeps), or whichever validates more of the band (default: %(default)s)")
-    p.add_argument("--detrend", choices=("mean", "linear", "none"), default="mean",
-                   help="remove the mean (operating point) or a straight line from the "
-                   "estimation and the validation data (default: %(default)s)")
-    p.add_argument("--decimate", default="auto", metavar="auto|none|N",
-                   help="decimate an oversampled record by N (zero-phase anti-alias "
-                   "filter) before identifying; auto: to about 10 times the highest "
-                   "frequency of interest; the model is then at the decimated rate "
-                   "(default: %(default)s)")
-    p.add_argument("--initial", choices=("estimate", "zero"), default="estimate",
-                   help="initial state of the validation simulation: least-squares "
-                   "estimate or rest (default: %(default)s)")
+    add_options(p, Acceptance)
+    add_options(p, Evaluation)
     p.add_argument("--out", required=True, metavar="MODEL.json|MODEL.mat", type=OutputFile,
                    help="model file to write: JSON, or .mat with A, B, C, num, den, nk, Ts, "
                    "offsets and band for MATLAB")
@@ -121,34 +99,32 @@ def plot_window_s(n_validation: int, fs: float) -> float:
     return (min(int(n_validation), PLOT_SAMPLES) - 1) / float(fs)
 
 
-def _decimate_arg(text: str) -> int | str | None:
-    t = text.strip().lower()
-    if t == "auto":
-        return "auto"
-    if t == "none":
-        return None
-    try:
-        q = int(t)
-    except ValueError:
-        raise ParameterError(f"--decimate {text!r} must be auto, none or an integer >= 1") \
-            from None
-    if q < 1:
-        raise ParameterError(f"--decimate {q} must be auto, none or an integer >= 1")
-    return q
+@dataclass(frozen=True)
+class _Settings:
+    """What ``ehss identify`` was asked for, as the library's settings objects."""
+
+    preparation: Preparation
+    estimation: Estimation
+    evaluation: Evaluation
+    acceptance: Acceptance
 
 
-def _check_args(args: argparse.Namespace) -> dict[str, Any]:
+def _settings(args: argparse.Namespace, validation: tuple[Any, Any] | None) -> _Settings:
+    """The settings from the flags; ``validation`` is the separate record, if any."""
+    from ehss.workflow import Acceptance, Estimation, Evaluation, Preparation
+
+    given = {} if validation is None else {"validation": validation}
+    return _Settings(preparation=build_options(args, Preparation, **given),
+                     estimation=build_options(args, Estimation),
+                     evaluation=build_options(args, Evaluation),
+                     acceptance=build_options(args, Acceptance))
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """What can be checked before the record is read (the settings' own values are
+    checked again by :func:`_settings`)."""
     if args.validate is not None and args.holdout is not None:
         raise ParameterError("give either --holdout or --validate, not both")
-    holdout = 0.3 if args.holdout is None else args.holdout
-    if args.validate is None and not (math.isfinite(holdout) and 0.0 < holdout < 1.0):
-        raise ParameterError(f"--holdout {holdout} must be in (0, 1): identify validates on "
-                             "held-out data (or give --validate FILE)")
-    band = None if args.band is None else check_band(args.band, "--band")
-    if not 0.0 <= args.min_coherence <= 1.0:
-        raise ParameterError(f"--min-coherence {args.min_coherence} must be in [0, 1]")
-    if args.nperseg is not None and args.nperseg < 8:
-        raise ParameterError(f"--nperseg {args.nperseg} must be >= 8")
     for name in ("na", "nb", "nc", "delay"):
         v = getattr(args, name)
         if v < (1 if name == "na" else 0):
@@ -157,18 +133,16 @@ def _check_args(args: argparse.Namespace) -> dict[str, Any]:
     if suffix not in (".json", ".mat"):
         raise ParameterError(f"--out {args.out}: the model is written as .json or .mat, "
                              f"not {suffix or 'a file without a suffix'}")
-    return {"holdout": holdout, "band": band, "decimate": _decimate_arg(args.decimate),
-            "detrend": None if args.detrend == "none" else args.detrend}
+    _settings(args, None)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ehss.workflow import Acceptance, identify
+    from ehss.workflow import identify
 
-    opts = _check_args(args)
-    plots = (args.plot, None if args.plot is None else time_plot_path(args.plot))
+    _check_args(args)
     rec = load_record(args)
     val_rec = load_validation(args, rec)
-    validation: Any = opts["holdout"] if val_rec is None else (val_rec.u, val_rec.y)
+    opts = _settings(args, None if val_rec is None else (val_rec.u, val_rec.y))
     from rich.console import Console
 
     with report_warnings("identify"):
@@ -178,10 +152,8 @@ def run(args: argparse.Namespace) -> int:
                 f"{rec.u.size} samples and validating it"):
             res = identify(
                 rec.u, rec.y, fs=rec.fs, orders=(args.na, args.nb, args.nc, args.delay),
-                method=args.method, init=args.init, validation=validation,
-                band_hz=opts["band"], detrend=opts["detrend"], decimate=opts["decimate"],
-                nperseg=args.nperseg, frf_method=args.frf_method, initial=args.initial,
-                acceptance=Acceptance(min_coherence=args.min_coherence),
+                preparation=opts.preparation, estimation=opts.estimation,
+                evaluation=opts.evaluation, acceptance=opts.acceptance,
             )
         model = res.model
         _print_model(res, rec, args)
@@ -207,12 +179,12 @@ def run(args: argparse.Namespace) -> int:
         writers[out] = lambda tmp: tmp.write_text(
             json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     if args.plot is not None:
-        _plots(res, rec, args, plots, writers)
+        _plots(res, rec, args, writers)
     write_outputs(writers)
     return 0
 
 
-def model_to_mat(path: Path, model, doc: dict[str, Any]) -> None:
+def model_to_mat(path: Path, model: ArmaxModel, doc: dict[str, Any]) -> None:
     """Write ``model`` as MATLAB variables (see ``ehss identify --help``).
 
     ``A``, ``B``, ``C`` are the polynomials in z^-1 as MATLAB's ``idpoly(A, B, C, 1, 1,
@@ -249,13 +221,14 @@ def model_to_mat(path: Path, model, doc: dict[str, Any]) -> None:
         scipy.io.savemat(fh, variables, do_compression=True, oned_as="row")
 
 
-def _jsonable(doc):
+def _jsonable(doc: dict[str, Any]) -> Any:
     from ehss.io.writers import to_jsonable
 
     return to_jsonable(doc)
 
 
-def _plots(res, rec, args, plots, writers) -> None:
+def _plots(res: Identification, rec: Record, args: argparse.Namespace,
+           writers: dict[Path, Callable[[Path], None]]) -> None:
     from ehss.plots import DPI, bode_compare, time_compare
 
     model, rep, prep = res.model, res.report, res.prepared
@@ -264,7 +237,7 @@ def _plots(res, rec, args, plots, writers) -> None:
     title = (f"{rec.path.name}: {args.input} → {args.output}, {res.method} "
              f"({model.na},{model.nb},{model.nc}) d={model.delay}")
     bode = bode_compare(rep.frf, {"identified model": model}, band_hz=band,
-                        min_coherence=args.min_coherence, title=title)
+                        min_coherence=res.verdict.acceptance.min_coherence, title=title)
     t = np.arange(prep.y_val.size) / fs_m
     # back to the validation record's own level (and drift), as measured
     tr = prep.trend_y_val
@@ -276,11 +249,11 @@ def _plots(res, rec, args, plots, writers) -> None:
                         ylabel=args.output,
                         title=f"{where}, simulation fit {_fit(rep.simulation_fit_pct)}")
 
-    def saver(fig):
+    def saver(fig: Figure) -> Callable[[Path], None]:
         return lambda tmp: fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
 
-    writers[Path(plots[0])] = saver(bode)
-    writers[Path(plots[1])] = saver(tfig)
+    writers[Path(args.plot)] = saver(bode)
+    writers[time_plot_path(args.plot)] = saver(tfig)
 
 
 def _fit(v: float) -> str:
@@ -289,9 +262,11 @@ def _fit(v: float) -> str:
     return fit_text(v)
 
 
-def _provenance(rec, val_rec, args, opts) -> dict[str, Any]:
+def _provenance(rec: Record, val_rec: Record | None, args: argparse.Namespace,
+                opts: _Settings) -> dict[str, Any]:
     from ehss._provenance import versions
 
+    band = opts.preparation.band_hz
     return {
         "command": "ehss identify",
         "input_file": str(rec.path),
@@ -302,21 +277,21 @@ def _provenance(rec, val_rec, args, opts) -> dict[str, Any]:
         "n_samples": int(rec.u.size),
         "settings": {
             "na": args.na, "nb": args.nb, "nc": args.nc, "delay": args.delay,
-            "method": args.method, "init": args.init,
-            "holdout": None if val_rec is not None else opts["holdout"],
-            "band_hz": None if opts["band"] is None else list(opts["band"]),
-            "min_coherence": args.min_coherence,
-            "nperseg": args.nperseg,
-            "frf_method": args.frf_method,
-            "detrend": opts["detrend"],
-            "decimate": opts["decimate"],
-            "initial": args.initial,
+            "method": opts.estimation.method, "init": opts.estimation.init,
+            "holdout": opts.preparation.holdout,
+            "band_hz": None if band is None else list(band),
+            "min_coherence": opts.acceptance.min_coherence,
+            "nperseg": opts.evaluation.nperseg,
+            "frf_method": opts.evaluation.frf_method,
+            "detrend": opts.preparation.detrend,
+            "decimate": opts.preparation.decimate,
+            "initial": opts.evaluation.initial,
         },
         "versions": versions(),
     }
 
 
-def _print_model(res, rec, args) -> None:
+def _print_model(res: Identification, rec: Record, args: argparse.Namespace) -> None:
     from rich.console import Console
     from rich.table import Table
 

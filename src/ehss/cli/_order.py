@@ -15,14 +15,15 @@ scan_delays`); the messages say delays at the record's rate and at the model's.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import shlex
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ehss._checks import check_band
 from ehss.cli import command_help
 from ehss.cli._dataargs import (
     add_record_arguments,
@@ -32,27 +33,40 @@ from ehss.cli._dataargs import (
     report_warnings,
     write_outputs,
 )
-from ehss.cli._identify import _decimate_arg
+from ehss.cli._options import add_options, build_options
 from ehss.cli._outputs import InputFile, OutputTable
 from ehss.errors import DataError, ParameterError
+
+if TYPE_CHECKING:
+    from ehss.cli._dataargs import Record
+    from ehss.identification.delay import DelayScan
+    from ehss.workflow import OrderGrid, OrderSearch, Preparation, Prepared
 
 __all__ = ["register", "run", "identify_command"]
 
 _COLUMNS = ("na", "nb", "nc", "delay", "n_params", "loss", "aic", "fpe", "mdl", "fit_pct",
             "simulation_fit_pct", "stable", "max_pole_radius", "accepted")
-_DEFAULT_HOLDOUT = 0.3
-#: the grid searched when --na, --nb or --nc is not given: low orders, as most loops of a
-#: rig are at the model's rate (the decimation brings the rate to ten times the band)
-DEFAULT_NA, DEFAULT_NB, DEFAULT_NC = range(1, 5), range(0, 4), range(1, 3)
 _METHOD_HELP = ("arx: least squares; armax: prediction-error minimisation from extended "
                 "least squares; oe: output error by prediction-error minimisation (nc is "
                 "ignored); rels: the paper's recursive extended least squares; rml: recursive "
                 "maximum likelihood")
 
 
+#: ``ehss order``'s own help of the preparation's flags
+_PREPARATION_HELP = {
+    "validation": "fraction at the end of the record kept for validation (default: "
+    "0.3, or none with --validate)",
+    "band_hz": "band of interest (Hz), as in identify: the fit is scored there and the "
+    "decimation aims at it (default: the band the input excites, where its power spectrum "
+    "is within 20 dB of its peak, read once the decimation is chosen from the record's "
+    "content; the identify command printed carries it and the factor)",
+    "decimate": "decimate an oversampled record by N before fitting, as identify does "
+    "(default: %(default)s)",
+}
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    from ehss.identification import INITS, METHODS
-    from ehss.workflow import DEFAULT_METHOD
+    from ehss.workflow import Estimation, Evaluation, OrderGrid, Preparation
 
     p = sub.add_parser(
         "order",
@@ -66,86 +80,75 @@ def register(sub: argparse._SubParsersAction) -> None:
         "2-6.",
     )
     add_record_arguments(p)
-    p.add_argument("--na", type=int_list, default=list(DEFAULT_NA), metavar="LIST",
+    grid = OrderGrid()  # low orders, as most loops of a rig are at the model's rate
+    p.add_argument("--na", type=int_list, default=list(grid.na), metavar="LIST",
                    help="candidate orders of A (default: 1-4)")
     p.add_argument("--nb", type=int_list, metavar="LIST",
                    help="candidate orders of B (default: 0-3, or up to 6 to span the "
                    "response's rise when the record does not support a delay estimate)")
-    p.add_argument("--nc", type=int_list, default=list(DEFAULT_NC), metavar="LIST",
+    p.add_argument("--nc", type=int_list, default=list(grid.nc), metavar="LIST",
                    help="candidate orders of C (default: 1-2)")
     p.add_argument("--delay", type=int_list, metavar="LIST",
                    help="candidate input delays in samples of the record (default: the "
                    "delay estimated from the prepared record's impulse response and the "
                    "one a sample of the model's rate shorter, when each half of the record "
                    "gives the same; else up to 4 delays over the response's rise)")
-    p.add_argument("--criterion", choices=("fit", "aic", "fpe", "mdl"), default="fit",
-                   help="how the best is chosen: the free-run fit on the validation data "
-                   "(the one identify reports), or an information criterion on the "
-                   "estimation data (default: %(default)s)")
-    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
-                   help=f"estimator for each candidate, as in identify: {_METHOD_HELP} "
-                   "(default: %(default)s)")
-    p.add_argument("--init", default="batch", choices=INITS,
-                   help="start of rels/rml: from the batch estimate or the paper's zero "
-                   "start (default: %(default)s)")
-    p.add_argument("--holdout", type=float, metavar="FRACTION",
-                   help="fraction at the end of the record kept for validation (default: "
-                   f"{_DEFAULT_HOLDOUT}, or none with --validate)")
+    add_options(p, OrderGrid)
+    add_options(p, Estimation, help={"method": f"estimator for each candidate, as in "
+                                     f"identify: {_METHOD_HELP} (default: %(default)s)",
+                                     "init": "start of rels/rml: from the batch estimate or "
+                                     "the paper's zero start (default: %(default)s)"})
+    add_options(p, Preparation, help=_PREPARATION_HELP)
     p.add_argument("--validate", metavar="FILE", type=InputFile,
                    help="validate on this separate record (same column options and sample "
                    "rate) instead of the held-out end; the whole DATA is then estimation data")
-    p.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="band of interest (Hz), as in identify: the fit is scored there and "
-                   "the decimation aims at it (default: the band the input excites, where "
-                   "its power spectrum is within 20 dB of its peak, read once the "
-                   "decimation is chosen from the record's content; the identify command "
-                   "printed carries it and the factor)")
-    p.add_argument("--detrend", choices=("mean", "linear", "none"), default="mean",
-                   help="remove the mean (operating point) or a straight line from the "
-                   "estimation and the validation data (default: %(default)s)")
-    p.add_argument("--decimate", default="auto", metavar="auto|none|N",
-                   help="decimate an oversampled record by N before fitting, as identify "
-                   "does (default: %(default)s)")
-    p.add_argument("--initial", choices=("estimate", "zero"), default="estimate",
-                   help="initial state of the validation simulation: least-squares "
-                   "estimate or rest (default: %(default)s)")
+    add_options(p, Evaluation, only=("initial",))
     p.add_argument("--out", metavar="TABLE.csv", type=OutputTable,
                    help="also write the table: .csv (with a .json sidecar), .parquet, .h5, "
                    ".npz or .mat")
     p.set_defaults(func=run)
 
 
-def _check_args(args: argparse.Namespace) -> dict:
+def _check_args(args: argparse.Namespace) -> None:
     if args.validate is not None and args.holdout is not None:
         raise ParameterError("give either --holdout or --validate, not both: the separate "
                              "record is the validation data")
-    holdout = _DEFAULT_HOLDOUT if args.holdout is None else args.holdout
-    if args.validate is None and not (math.isfinite(holdout) and 0.0 < holdout < 1.0):
-        raise ParameterError(f"--holdout {holdout} must be in (0, 1): orders are compared "
-                             "on held-out data (or give --validate FILE)")
-    band = None if args.band is None else check_band(args.band, "--band")
     for name in ("na", "nb", "nc", "delay"):
         low = 1 if name == "na" else 0
         bad = [v for v in getattr(args, name) or [] if v < low]
         if bad:
             raise ParameterError(f"--{name} {bad[0]} must be >= {low}")
-    n_grid = (len(args.na) * len(args.nb or DEFAULT_NB) * len(args.nc)
-               * len(args.delay or [0, 1]))
+    n_grid = _grid(args).size
     if n_grid > 500:
         raise ParameterError(f"the grid has {n_grid} candidates; keep it to 500 or fewer")
-    return {"holdout": None if args.validate is not None else holdout, "band": band,
-            "decimate": _decimate_arg(args.decimate),
-            "detrend": None if args.detrend == "none" else args.detrend}
+    _preparation(args, None)
+
+
+def _grid(args: argparse.Namespace) -> OrderGrid:
+    from ehss.workflow import OrderGrid
+
+    return build_options(args, OrderGrid, na=args.na, nb=args.nb, nc=args.nc,
+                         delay=args.delay)
+
+
+def _preparation(args: argparse.Namespace,
+                 validation: tuple[Any, Any] | None) -> Preparation:
+    """The preparation the flags ask for; without --band, the band the input excites."""
+    from ehss.workflow import Preparation
+
+    given = {} if validation is None else {"validation": validation}
+    prep = build_options(args, Preparation, **given)
+    return prep if prep.band_hz is not None else dataclasses.replace(prep, band_hz="input")
 
 
 def run(args: argparse.Namespace) -> int:
-    from ehss.workflow import select_orders
+    from ehss.workflow import Estimation, Evaluation, select_orders
 
-    opts = _check_args(args)
+    _check_args(args)
     rec = load_record(args)
     val = load_validation(args, rec)
-    validation = opts["holdout"] if val is None else (val.u, val.y)
-    args.band_given = opts["band"] is not None
+    preparation = _preparation(args, None if val is None else (val.u, val.y))
+    args.band_given = args.band is not None
     from rich.console import Console
 
     console = Console(stderr=True)
@@ -153,20 +156,19 @@ def run(args: argparse.Namespace) -> int:
         progress = _Progress(status, tty=console.is_terminal)
         try:
             search = select_orders(
-                rec.u, rec.y, fs=rec.fs, na=args.na, nb=args.nb, nc=args.nc,
-                delay=args.delay, method=args.method, init=args.init, validation=validation,
-                band_hz=opts["band"] or "input", detrend=opts["detrend"],
-                decimate=opts["decimate"],
-                initial=args.initial, criterion=args.criterion, progress=progress,
+                rec.u, rec.y, fs=rec.fs, grid=_grid(args), preparation=preparation,
+                estimation=build_options(args, Estimation),
+                evaluation=build_options(args, Evaluation, only=("initial",)),
+                progress=progress,
             )
         except DataError as exc:
             if args.delay is None and "to estimate a delay" in str(exc):
                 raise DataError(f"{exc} with --delay") from None
             raise
     if not args.band_given:
-        _say_input_band(args, opts, search.prepared)
+        _say_input_band(args, search.prepared)
     if search.delay_scan is not None:
-        print(_delay_message(search), file=sys.stderr)
+        print(_delay_message(search, search.delay_scan), file=sys.stderr)
     command = identify_command(args, search)
     _print_table(search, rec, args)
     if not any(v is not None and v.accepted for v in search.verdicts):
@@ -176,8 +178,10 @@ def run(args: argparse.Namespace) -> int:
                 f"{p.decimation}: near its Nyquist frequency a sampled model of a loop "
                 "with a dead time misses) or judge only the band of interest (--band LO "
                 "HI)")
+        verdict = search.verdicts[search.best_index]
+        failed = "; ".join(verdict.failed) if verdict is not None else ""
         print(f"no candidate meets the acceptance (the pick fails: "
-              f"{'; '.join(search.verdicts[search.best_index].failed) or 'not validated'}); "
+              f"{failed or 'not validated'}); "
               f"widen the grid, or record more data ({p.u.size} estimation samples)"
               f"{rate}", file=sys.stderr)
     print(f"refit and validate it with:\n  {command}")
@@ -193,15 +197,15 @@ def run(args: argparse.Namespace) -> int:
             "what": f"order selection {args.input} -> {args.output}",
             "data": str(rec.path),
             "validate": args.validate,
-            "holdout": opts["holdout"],
+            "holdout": preparation.holdout,
             "method": args.method,
             "init": args.init,
             "criterion": args.criterion,
-            "detrend": opts["detrend"],
+            "detrend": preparation.detrend,
             "decimation": p.decimation,
             "fs_data_hz": p.fs,
             "fs_model_hz": p.fs_model,
-            "band_hz": None if opts["band"] is None else list(opts["band"]),
+            "band_hz": None if args.band is None else list(args.band),
             "band_from": "--band" if args.band_given else "the input's spectrum",
             "delay_scan": None if search.delay_scan is None else {
                 "supported": search.delay_scan.supported,
@@ -226,7 +230,7 @@ class _Progress:
     """How far the search is: a spinner on a terminal; elsewhere (a log, a pipe) a line
     on stderr at every tenth of a grid of 20 candidates or more."""
 
-    def __init__(self, status, *, tty: bool) -> None:
+    def __init__(self, status: Any, *, tty: bool) -> None:
         self.status, self.tty, self.done = status, tty, 0
 
     def __call__(self, line: str) -> None:
@@ -238,7 +242,7 @@ class _Progress:
             print(f"ehss order: {text}", file=sys.stderr, flush=True)
 
 
-def _say_input_band(args, opts: dict, prepared) -> None:
+def _say_input_band(args: argparse.Namespace, prepared: Prepared) -> None:
     """Say the band read from the input's spectrum, and carry it (with the decimation
     chosen before it was read) into the identify command."""
     from ehss.preprocess import EXCITATION_LEVEL_DB
@@ -246,19 +250,19 @@ def _say_input_band(args, opts: dict, prepared) -> None:
     band = prepared.band_hz
     if band is None:
         return
-    opts["band"] = args.band = band
-    if prepared.decimation > 1 and opts["decimate"] == "auto":
+    args.band = band
+    if prepared.decimation > 1 and args.decimate.strip().lower() == "auto":
         args.decimate = str(prepared.decimation)  # the band would change auto's factor
     print(f"band of interest read from the input's spectrum: {band[0]:.4g}-{band[1]:.4g} "
           f"Hz (where its power is within {EXCITATION_LEVEL_DB:g} dB of its peak, below "
           f"what the decimation leaves untouched; --band LO HI sets it)", file=sys.stderr)
 
 
-def _delay_message(search) -> str:
+def _delay_message(search: OrderSearch, scan: DelayScan) -> str:
     """What the record said about its delay and which delays were tried, at both rates."""
     from ehss.workflow import delay_text
 
-    scan, p = search.delay_scan, search.prepared
+    p = search.prepared
     q = p.decimation
 
     def samples(d_model: int) -> str:  # model samples, and the record's when decimated
@@ -270,7 +274,7 @@ def _delay_message(search) -> str:
     tried = ", ".join(str(d) for d in sorted(set(search.delays)))
     nbs = sorted({r.nb for r in search.table})
     nb = f"nb {nbs[0]}-{nbs[-1]}" if len(nbs) > 1 else f"nb {nbs[0]}"
-    if scan.supported:
+    if scan.supported and scan.delay is not None:
         return (f"{delay_text(scan.delay * q, decimation=q, fs=p.fs)} estimated from the "
                 "record's impulse response (each half gives the same); trying delays "
                 f"{tried} samples of the record (--delay sets the candidates)")
@@ -289,7 +293,7 @@ def _delay_message(search) -> str:
             f"samples of the record with {nb} (--delay and --nb set the candidates)")
 
 
-def identify_command(args: argparse.Namespace, search) -> str:
+def identify_command(args: argparse.Namespace, search: OrderSearch) -> str:
     """The ``ehss identify`` command line that refits the pick of ``search`` (the result
     of :func:`ehss.workflow.select_orders` for ``args``) with every setting that affects
     the model and its fit."""
@@ -306,7 +310,7 @@ def identify_command(args: argparse.Namespace, search) -> str:
     if args.validate is not None:
         cmd += ["--validate", str(args.validate)]
     else:
-        cmd += ["--holdout", repr(_DEFAULT_HOLDOUT if args.holdout is None else args.holdout)]
+        cmd += ["--holdout", repr(search.prepared.holdout)]
     cmd += ["--detrend", args.detrend, "--decimate", str(args.decimate).strip().lower()]
     if args.band is not None:
         cmd += ["--band", repr(args.band[0]), repr(args.band[1])]
@@ -316,7 +320,7 @@ def identify_command(args: argparse.Namespace, search) -> str:
     return shlex.join(cmd)
 
 
-def _value(search, i: int, column: str) -> float:
+def _value(search: OrderSearch, i: int, column: str) -> float:
     row = search.table[i]
     rep, verdict = search.reports[i], search.verdicts[i]
     if column == "delay":
@@ -338,7 +342,7 @@ def _fit_text(fit: float | None) -> str:
     return "diverges" if not math.isfinite(fit) or fit < DIVERGED_FIT_PCT else f"{fit:.2f}"
 
 
-def _print_table(search, rec, args) -> None:
+def _print_table(search: OrderSearch, rec: Record, args: argparse.Namespace) -> None:
     from rich.console import Console
     from rich.table import Table
 
@@ -373,6 +377,7 @@ def _print_table(search, rec, args) -> None:
     console.print(table)
     na, nb, nc, d = search.best_orders
     rep = search.reports[search.best_index]
+    assert rep is not None  # the pick is a stable candidate, always validated
     fit = f"simulation fit {fit_text(rep.simulation_fit_pct)}"
     if rep.band_fit_pct is not None:
         fit += f", in the band {fit_text(rep.band_fit_pct)}"

@@ -53,6 +53,7 @@ from ehss.compensation.iteration import (
     DriveUpdate,
     IterationState,
     RunRecord,
+    UpdateOptions,
     corrected_drive,
     lag_samples,
     learning_gain,
@@ -98,4 +99,5 @@ __all__ = [
     "learning_gain",
     "run_record",
     "update_drive",
+    "UpdateOptions",
 ]

@@ -361,7 +361,7 @@ def outside_band_note(r: np.ndarray, fs: float, inverse: InverseModel,
     inverse acts on: there the drive is the reference itself
     (``outside_band="reference"``) or nothing, not compensated. None otherwise."""
     total = float(np.sum(np.square(r - np.mean(r))))
-    if not total > 0.0:
+    if not total > 0.0 or inverse.band_hz is None:  # no band limit: nothing lies outside
         return None
     inside = _fft_band_limit(r - np.mean(r), 1.0 / fs, inverse.band_hz, inverse.cutoff_hz)
     share = 1.0 - float(np.sum(np.square(inside))) / total

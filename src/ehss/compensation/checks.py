@@ -34,6 +34,7 @@ such a drive with the numbers instead of letting it reach a rig:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -125,11 +126,8 @@ class DriveCheck:
     rig: dict
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready figures."""
-        return {"rms_gain": self.rms_gain, "peak_gain": self.peak_gain,
-                "max_gain": self.max_gain, "min_gain": self.min_gain, "peak_abs": self.peak_abs,
-                "peak_rate": self.peak_rate, "peak_rate2": self.peak_rate2,
-                "rig": dict(self.rig)}
+        """JSON-ready figures (every field; ``rig`` a copy)."""
+        return dataclasses.asdict(self)
 
 
 def _rms(x: np.ndarray) -> float:
@@ -200,15 +198,28 @@ def check_drive(
     rms_r, peak_r = _rms(r), float(np.max(np.abs(r)))
     rms_gain = _rms(u) / rms_r if rms_r > 0 else math.inf
     peak_gain = float(np.max(np.abs(u))) / peak_r if peak_r > 0 else math.inf
+    _check_gains(rms_gain, peak_gain, max_gain, min_gain)
+    absolute = u + check_real(drive_offset, "drive_offset")
+    peaks = _peaks(absolute, fs)
+    if limits is not None:
+        _check_limits(peaks, limits)
+    rig = {} if loop is None else check_rig(absolute, loop, params, fs, what="drive")
+    return DriveCheck(rms_gain=rms_gain, peak_gain=peak_gain, max_gain=max_gain,
+                      min_gain=min_gain, peak_abs=peaks[0], peak_rate=peaks[1],
+                      peak_rate2=peaks[2], rig=rig)
+
+
+def _peaks(u: np.ndarray, fs: float) -> tuple[float, float, float]:
+    """Peaks of ``|u|``, ``|du/dt|`` and ``|d²u/dt²|`` (finite differences)."""
     rate = np.diff(u) * fs
     rate2 = np.diff(u, 2) * fs * fs
-    if not (isinstance(drive_offset, (int, float, np.integer, np.floating))
-            and math.isfinite(drive_offset)):
-        raise ParameterError(f"drive_offset={drive_offset!r} must be a finite number")
-    absolute = u + float(drive_offset)
-    peak_abs = float(np.max(np.abs(absolute)))
-    peak_rate = float(np.max(np.abs(rate))) if rate.size else 0.0
-    peak_rate2 = float(np.max(np.abs(rate2))) if rate2.size else 0.0
+    return (float(np.max(np.abs(u))), float(np.max(np.abs(rate))) if rate.size else 0.0,
+            float(np.max(np.abs(rate2))) if rate2.size else 0.0)
+
+
+def _check_gains(rms_gain: float, peak_gain: float, max_gain: float | None,
+                 min_gain: float | None) -> None:
+    """Refuse a drive far larger than its reference, or far smaller."""
     if max_gain is not None:
         for what, value in (("RMS", rms_gain), ("peak", peak_gain)):
             if value > max_gain:
@@ -221,16 +232,15 @@ def check_drive(
             f"the drive's RMS is {rms_gain:.3g}× the reference's (bound {min_gain:.3g}×): the "
             "model says the loop amplifies the reference by 10 dB or more, which a closed "
             "servo loop does not; check the model's gain (units, scale) or re-identify")
-    if limits is not None:
-        for name, value, bound in (("peak", peak_abs, limits.max_abs),
-                                   ("peak rate", peak_rate, limits.max_rate),
-                                   ("peak second derivative", peak_rate2, limits.max_rate2)):
-            if bound is not None and value > bound:
-                raise ParameterError(f"drive {name} {value:.4g} exceeds the limit {bound:.4g}")
-    rig = {} if params is None else check_rig(absolute, loop, params, float(fs), what="drive")
-    return DriveCheck(rms_gain=rms_gain, peak_gain=peak_gain, max_gain=max_gain,
-                      min_gain=min_gain, peak_abs=peak_abs, peak_rate=peak_rate,
-                      peak_rate2=peak_rate2, rig=rig)
+
+
+def _check_limits(peaks: tuple[float, float, float], limits: DriveLimits) -> None:
+    """Refuse a drive whose peak, rate or second derivative exceeds the explicit bounds."""
+    bounds = (limits.max_abs, limits.max_rate, limits.max_rate2)
+    for name, value, bound in zip(("peak", "peak rate", "peak second derivative"), peaks,
+                                  bounds, strict=True):
+        if bound is not None and value > bound:
+            raise ParameterError(f"drive {name} {value:.4g} exceeds the limit {bound:.4g}")
 
 
 def check_rig(values: Any, loop: str, params: Any, fs: float, *, step: bool = False,

@@ -161,6 +161,38 @@ def _band_and_cutoff(band_hz: Any, cutoff_hz: float | None, fs: float
                                 unit="Hz")
 
 
+def _coefficients(b: Any, a: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``b`` and ``a`` as finite float arrays, ``a`` normalised to ``a0 = 1``; refused when
+    ``b`` is all zero (no input path to invert)."""
+    try:
+        b = np.atleast_1d(np.asarray(b, dtype=float)).ravel()
+        a = np.atleast_1d(np.asarray(a, dtype=float)).ravel()
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"model coefficients must be numbers: {exc}") from None
+    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
+        raise ParameterError("model coefficients must be finite (got NaN or inf in a or b)")
+    if a.size == 0 or a[0] == 0.0:
+        raise ParameterError(f"model a={a.tolist()!r} must start with a non-zero a0 (normally 1)")
+    if not (b.size and np.max(np.abs(b)) > 0.0):
+        raise ParameterError("model b is all zero: the model has no input path to invert")
+    return b, a / a[0]
+
+
+def _stable_poles(a: np.ndarray) -> np.ndarray:
+    """The roots of ``A``, refused unless all are inside the unit circle: A(q^-1) goes
+    into the numerator of the inverse, but an unstable model means the identification
+    failed and its inverse is meaningless."""
+    poles = np.roots(a) if a.size > 1 else np.zeros(0, complex)
+    if poles.size:
+        rmax = float(np.max(np.abs(poles)))
+        if rmax >= 1.0:
+            raise ParameterError(
+                f"model is unstable: max pole radius {rmax:.6g} >= 1; an unstable closed-loop "
+                "model cannot be inverted (re-identify it, e.g. with more data or a lower order)"
+            )
+    return poles
+
+
 def design_inverse_tf(
     b: Any,
     a: Any,
@@ -224,36 +256,12 @@ def design_inverse_tf(
     """
     if method not in METHODS:
         raise ParameterError(f"method={method!r} must be one of {METHODS}")
-    if not (isinstance(circle_margin, (int, float, np.floating))
-            and 0.0 < circle_margin < 0.5):
-        raise ParameterError(f"circle_margin={circle_margin!r} must be in (0, 0.5)")
-    try:
-        b = np.atleast_1d(np.asarray(b, dtype=float)).ravel()
-        a = np.atleast_1d(np.asarray(a, dtype=float)).ravel()
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"model coefficients must be numbers: {exc}") from None
+    check_real(circle_margin, "circle_margin", lo=0.0, hi=0.5, lo_open=True, hi_open=True)
+    b, a = _coefficients(b, a)
     dt = check_real(dt, "model dt", lo=0.0, lo_open=True, unit="s")
     delay = check_int(delay, "model delay", lo=0)
-    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
-        raise ParameterError("model coefficients must be finite (got NaN or inf in a or b)")
-    if a.size == 0 or a[0] == 0.0:
-        raise ParameterError(f"model a={a.tolist()!r} must start with a non-zero a0 (normally 1)")
-    a = a / a[0]
-    scale = np.max(np.abs(b)) if b.size else 0.0
-    if scale == 0.0:
-        raise ParameterError("model b is all zero: the model has no input path to invert")
     band, cutoff = _band_and_cutoff(band_hz, cutoff_hz, 1.0 / dt)
-
-    # Poles must be stable: A(q^-1) goes into the numerator of the inverse, but an
-    # unstable model means the identification failed and its inverse is meaningless.
-    poles = np.roots(a) if a.size > 1 else np.zeros(0, complex)
-    if poles.size:
-        rmax = float(np.max(np.abs(poles)))
-        if rmax >= 1.0:
-            raise ParameterError(
-                f"model is unstable: max pole radius {rmax:.6g} >= 1; an unstable closed-loop "
-                "model cannot be inverted (re-identify it, e.g. with more data or a lower order)"
-            )
+    poles = _stable_poles(a)
 
     # Leading exact zeros of b are extra delay; trailing exact zeros only lower the degree.
     nz = np.flatnonzero(b != 0.0)
@@ -438,7 +446,7 @@ def _check_known(known: Any, band: tuple[float, float] | None, cutoff: float | N
     num, den = num / den[0], den / den[0]
     if den.size > 1 and np.max(np.abs(np.roots(den))) >= 1.0:
         raise ParameterError("known factor has an unstable pole (|z| >= 1)")
-    if band is None:
+    if band is None or cutoff is None:
         raise ParameterError("a known factor needs band_hz: its inverse is applied inside "
                              "the band limit")
     # |F| on the support of the band limit (lo/2 .. cutoff): its inverse must stay bounded.

@@ -35,6 +35,7 @@ of their cross-correlation, refined by a parabola), and the drive's gain.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -43,18 +44,20 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from ehss._checks import as_signal, check_int, check_real
+from ehss._checks import as_signal, check_band, check_bool, check_int, check_real, show
 from ehss.compensation.apply import Compensation, apply_inverse, model_offsets
 from ehss.compensation.checks import check_at_rest, checked_drive, fade_to_rest
-from ehss.compensation.inverse import design_inverse
+from ehss.compensation.inverse import METHODS, _band_and_cutoff, design_inverse
 from ehss.compensation.inverse_model import InverseModel, _fft_band_limit, band_taper
 from ehss.compensation.rates import rate_factor
 from ehss.errors import ParameterError
 from ehss.preprocess import decimate
+from ehss.workflow.options import check_fields, choice, option, optional, or_default
 
 __all__ = [
     "corrected_drive",
     "UPDATE_METHODS",
+    "UpdateOptions",
     "MAX_CONTRACTION",
     "MAX_HALVINGS",
     "MIN_COHERENCE",
@@ -142,11 +145,8 @@ class RunRecord:
     drive_peak_gain: float
 
     def to_dict(self) -> dict[str, float]:
-        """JSON-ready figures."""
-        return {"rms_error": self.rms_error, "peak_error": self.peak_error,
-                "nrmse_percent": self.nrmse_percent, "lag_samples": self.lag_samples,
-                "drive_rms_gain": self.drive_rms_gain,
-                "drive_peak_gain": self.drive_peak_gain}
+        """JSON-ready figures (every field)."""
+        return dataclasses.asdict(self)
 
 
 def run_record(reference: Any, drive: Any, output: Any) -> RunRecord:
@@ -323,6 +323,72 @@ def learning_gain(u: Any, y: Any, fs: float, operator: Any, band: tuple[float, f
         "re-identify the loop or iterate with method 'frf'")
 
 
+# --------------------------------------------------------------------------- options
+def _gain(value: Any, name: str) -> float:
+    return check_real(value, name, lo=0.0, hi=2.0, lo_open=True, hi_open=True)
+
+
+def _known(value: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """A known factor ``(num, den)`` in series with the model, as two float arrays."""
+    if not isinstance(value, tuple) or len(value) != 2:
+        raise ParameterError(f"{name} must be a pair (num, den) of polynomial "
+                             f"coefficients, not {show(value)}")
+    return as_signal(value[0], f"{name}[0]"), as_signal(value[1], f"{name}[1]")
+
+
+def _orders(value: Any, name: str) -> tuple[int, int]:
+    """``(na, nb)`` of a re-identified model."""
+    if not isinstance(value, tuple) or len(value) != 2:
+        raise ParameterError(f"{name} must be a pair (na, nb), not {show(value)}")
+    return check_int(value[0], f"{name}[0]", lo=1), check_int(value[1], f"{name}[1]", lo=0)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class UpdateOptions:
+    """How a drive-file iteration corrects a drive (:func:`update_drive`, :func:`ehss.
+    experiments.refinement.refine`).
+
+    Attributes
+    ----------
+    method : {"model", "frf"}, default "model"
+        Inverse used for the correction (see the module notes).
+    inverse_method : {"stable", "zpetc", "zmetc"}, default "stable"
+        Design of the model's inverse (:func:`~ehss.compensation.design_inverse`).
+    band_hz : (lo, hi), optional
+        Band of the Q-filter and of the inverse; default the model's validated band.
+    gain : float, optional
+        Learning gain in (0, 2); default chosen from the run (:func:`learning_gain`), or
+        kept from the iteration's state.
+    reidentify : bool, default False
+        ``method="model"``: re-identify the loop from each run's drive → output (the
+        model's orders and delay, RML) before inverting it.
+    nc : int, optional
+        Noise order of the re-identification (default: the model's).
+    known : (num, den), optional
+        Known factor in series with the model (kept as two float arrays).
+    orders : (na, nb), optional
+        Orders of the re-identified model without the known factor (default: the
+        model's, less the known factor it stores).
+    """
+
+    method: str = option("model", check=choice(UPDATE_METHODS))
+    inverse_method: str = option("stable", check=choice(METHODS))
+    band_hz: tuple[float, float] | None = option(None, check=optional(check_band))
+    gain: float | None = option(
+        None, check=optional(_gain), flag="--gain", type=float, metavar="L",
+        help="learning gain L in (0, 2) (default: the largest of 1, 1/2, 1/4, 1/8 that the "
+        "run shows to contract the error)")
+    reidentify: bool = option(
+        False, check=check_bool, flag="--reidentify", action="store_true",
+        help="re-identify the loop from the run before inverting it")
+    nc: int | None = option(None, check=optional(lambda v, n: check_int(v, n, lo=0)))
+    known: tuple[np.ndarray, np.ndarray] | None = option(None, check=optional(_known))
+    orders: tuple[int, int] | None = option(None, check=optional(_orders))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
 # --------------------------------------------------------------------------- update
 def update_drive(
     reference: Any,
@@ -331,16 +397,9 @@ def update_drive(
     *,
     fs: float,
     model: Any = None,
-    method: str = "model",
     inverse: InverseModel | None = None,
-    inverse_method: str = "stable",
-    band_hz: tuple[float, float] | None = None,
-    gain: float | None = None,
     state: IterationState | None = None,
-    reidentify: bool = False,
-    nc: int | None = None,
-    known: tuple[Any, Any] | None = None,
-    orders: tuple[int, int] | None = None,
+    options: UpdateOptions | None = None,
 ) -> DriveUpdate:
     """One drive-file iteration from a measured run: ``u⁺ = u + L Q F (r − y)``.
 
@@ -354,25 +413,13 @@ def update_drive(
     model : ArmaxModel, optional
         The closed-loop model (needed for ``method="model"``; with ``"frf"`` it only
         supplies the default band).
-    method : {"model", "frf"}
-        Inverse used for the correction (see the module notes).
     inverse : InverseModel, optional
         The inverse of ``model`` if already designed.
-    inverse_method : {"stable", "zpetc", "zmetc"}
-        Design of the model's inverse otherwise (:func:`design_inverse`).
-    band_hz : (lo, hi), optional
-        Band of the Q-filter and of the inverse; default the model's validated band.
-    gain : float, optional
-        Learning gain in (0, 2); default chosen from the run (:func:`learning_gain`), or
-        kept from ``state``.
     state : IterationState, optional
         From the previous update: this run is compared with the one that update started
         from, and the update refused (gain halved) if the error grew.
-    reidentify : bool
-        ``method="model"``: re-identify the loop from this run's drive → output (the
-        model's orders and delay, RML) before inverting it.
-    nc, known, orders
-        Re-identification noise order, known factor in series, and ``(na, nb)``.
+    options : UpdateOptions, optional
+        Inverse, band, gain and re-identification (default ``UpdateOptions()``).
 
     Returns
     -------
@@ -380,65 +427,37 @@ def update_drive(
 
     Raises
     ------
+    TypeError
+        For options or a state of the wrong type.
     ParameterError
-        Bad options, no band, or a model error too large for any stable gain.
+        No band, no model for ``method="model"``, or a model error too large for any
+        stable gain.
     """
-    if method not in UPDATE_METHODS:
-        raise ParameterError(f"method={method!r} must be one of {UPDATE_METHODS}")
+    opts = or_default(options, UpdateOptions, "options")
     r, u, y = _same_length(reference, drive, output)
-    if gain is not None and not (isinstance(gain, (int, float, np.floating))
-                                 and 0.0 < gain < 2.0):
-        raise ParameterError(f"gain={gain!r} must be in (0, 2)")
     if state is not None and not isinstance(state, IterationState):
         raise TypeError(f"state must be an IterationState, not {type(state).__name__}")
     record = run_record(r, u, y)
-
     if state is not None and record.rms_error >= state.base_rms_error:
-        # The error grew: refuse the update, go back to the better drive, halve the gain.
-        halvings = state.halvings + 1
-        if halvings > MAX_HALVINGS:
-            return DriveUpdate(
-                drive=state.base_drive.copy(), record=record, accepted=False, stopped=True,
-                gain=0.0, state=state,
-                message=(f"RMS error {record.rms_error:.4g} did not fall below "
-                         f"{state.base_rms_error:.4g} after {MAX_HALVINGS} gain halvings: "
-                         "iteration stopped, the best drive is handed back"))
-        new_gain = 0.5 * state.gain
-        nxt = IterationState(base_drive=state.base_drive, correction=state.correction,
-                             gain=new_gain, base_rms_error=state.base_rms_error,
-                             halvings=halvings)
-        return DriveUpdate(
-            drive=state.base_drive + new_gain * state.correction, record=record,
-            accepted=False, stopped=False, gain=new_gain, state=nxt,
-            message=(f"RMS error grew from {state.base_rms_error:.4g} to "
-                     f"{record.rms_error:.4g}: update refused, gain halved to {new_gain:g}"))
-
-    band = band_hz if band_hz is not None or model is None else model.band_hz
+        return _refused(state, record)
+    band = opts.band_hz if opts.band_hz is not None or model is None else model.band_hz
     if band is None:
         raise ParameterError("the learning update needs a band (band_hz, or a model that "
                              "carries its validated band)")
-    used_model = model
-    if method == "model":
-        if model is None and inverse is None:
-            raise ParameterError("method='model' needs the model (or its inverse)")
-        if reidentify:
-            used_model, inverse = _reidentified(model, u, y, fs, band, nc, known, orders,
-                                                inverse, inverse_method)
-        if inverse is None:
-            inverse = design_inverse(model, method=inverse_method, band_hz=band, known=known)
+    if opts.method == "model":
+        used_model, inverse = _model_inverse(model, inverse, u, y, fs, band, opts)
         # the correction stays inside the band (Q-filter): nothing passes outside it
         correction = apply_inverse(inverse, r - y, fs, outside_band="zero")
-
-        def operator(f: np.ndarray) -> np.ndarray:
-            return inverse.frequency_response(f)
+        operator = inverse.frequency_response
     else:
-        from ehss.compensation.inverse import _band_and_cutoff
-
-        band, cutoff = _band_and_cutoff(band, None, fs)
+        limited, cutoff = _band_and_cutoff(band, None, fs)
+        assert limited is not None  # a band was given
+        band = limited
         operator = _frf_inverse(u, y, fs, band, cutoff)
         # Q·γ²/Ĥ applied like the band limit: zero-phase, by FFT over a padded record
         correction = _fft_band_limit(r - y, 1.0 / fs, band, cutoff, shape=operator)
         used_model, inverse = None, None
+    gain = opts.gain
     if gain is None:
         gain = state.gain if state is not None else learning_gain(u, y, fs, operator, band)
     # u_{k+1} = u_k + L Q F (r - y_k)
@@ -450,11 +469,47 @@ def update_drive(
                        message=f"update with gain {gain:g} (RMS error {record.rms_error:.4g})")
 
 
+def _refused(state: IterationState, record: RunRecord) -> DriveUpdate:
+    """The error grew: refuse the update, go back to the better drive, halve the gain
+    (or stop after :data:`MAX_HALVINGS` halvings, handing back the best drive)."""
+    halvings = state.halvings + 1
+    if halvings > MAX_HALVINGS:
+        return DriveUpdate(
+            drive=state.base_drive.copy(), record=record, accepted=False, stopped=True,
+            gain=0.0, state=state,
+            message=(f"RMS error {record.rms_error:.4g} did not fall below "
+                     f"{state.base_rms_error:.4g} after {MAX_HALVINGS} gain halvings: "
+                     "iteration stopped, the best drive is handed back"))
+    new_gain = 0.5 * state.gain
+    nxt = IterationState(base_drive=state.base_drive, correction=state.correction,
+                         gain=new_gain, base_rms_error=state.base_rms_error,
+                         halvings=halvings)
+    return DriveUpdate(
+        drive=state.base_drive + new_gain * state.correction, record=record,
+        accepted=False, stopped=False, gain=new_gain, state=nxt,
+        message=(f"RMS error grew from {state.base_rms_error:.4g} to "
+                 f"{record.rms_error:.4g}: update refused, gain halved to {new_gain:g}"))
+
+
+def _model_inverse(model: Any, inverse: InverseModel | None, u: np.ndarray, y: np.ndarray,
+                   fs: float, band: tuple[float, float], opts: UpdateOptions
+                   ) -> tuple[Any, InverseModel]:
+    """The model of a model-based update (re-identified from the run on request) and
+    its inverse in the band."""
+    if model is None and inverse is None:
+        raise ParameterError("method='model' needs the model (or its inverse)")
+    used_model = model
+    if opts.reidentify:
+        used_model, inverse = _reidentified(model, u, y, fs, band, opts, inverse)
+    if inverse is None:
+        inverse = design_inverse(model, method=opts.inverse_method, band_hz=band,
+                                 known=opts.known)
+    return used_model, inverse
+
+
 def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, fs: float,
-                  band: tuple[float, float],
-                  nc: int | None, known: Any, orders: tuple[int, int] | None,
-                  inverse: InverseModel | None, method: str
-                  ) -> tuple[Any, InverseModel | None]:
+                  band: tuple[float, float], opts: UpdateOptions,
+                  inverse: InverseModel | None) -> tuple[Any, InverseModel | None]:
     """Model re-identified from the run (RML, the model's orders) and its inverse; the
     given model and inverse when the re-identification is unusable."""
     from dataclasses import replace
@@ -463,9 +518,10 @@ def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, fs: float,
 
     if model is None:
         raise ParameterError("reidentify needs the model (its orders and delay)")
-    na, nb = (model.na, model.nb) if orders is None else orders
+    known, nc = opts.known, opts.nc
+    na, nb = (model.na, model.nb) if opts.orders is None else opts.orders
     stored = model.meta.get("known_factors")
-    if orders is None and stored is not None:
+    if opts.orders is None and stored is not None:
         na, nb = na - (len(stored["den"]) - 1), nb - (len(stored["num"]) - 1)
         known = (np.asarray(stored["num"], float), np.asarray(stored["den"], float))
     q = rate_factor(fs, model.dt)
@@ -476,7 +532,8 @@ def _reidentified(model: Any, u: np.ndarray, y: np.ndarray, fs: float,
         new = estimate(u_id, y, method="rml", na=na, nb=nb,
                        nc=model.nc if nc is None else nc, delay=model.delay, dt=model.dt)
         new = replace(new, band_hz=band)
-        return new, design_inverse(new, method=method, band_hz=band, known=known)
+        return new, design_inverse(new, method=opts.inverse_method, band_hz=band,
+                                   known=known)
     except ParameterError:
         return model, inverse  # an unusable re-identification (e.g. unstable)
 
@@ -493,7 +550,8 @@ def corrected_drive(
     fade_s: float | None = None,
     force: bool = False,
     checks: dict[str, Any] | None = None,
-    **update: Any,
+    state: IterationState | None = None,
+    options: UpdateOptions | None = None,
 ) -> tuple[Compensation, DriveUpdate]:
     """One drive-file iteration run as :func:`~ehss.compensation.apply.compensation` runs
     a one-shot drive: about the model's operating point, the reference faded and at rest,
@@ -517,9 +575,10 @@ def corrected_drive(
         ``max_gain``, ``min_gain``, ``limits``, ``loop``, ``params`` of
         :func:`~ehss.compensation.checks.check_drive`. When the iteration stopped and
         hands back the best drive (already played), the gain bounds are not applied again.
-    **update
-        :func:`update_drive`'s keywords (``method``, ``inverse_method``, ``band_hz``,
-        ``gain``, ``state``, ``reidentify``, ...).
+    state : IterationState, optional
+        From the previous update (:func:`update_drive`).
+    options : UpdateOptions, optional
+        How the drive is corrected (:func:`update_drive`).
 
     Returns
     -------
@@ -542,7 +601,8 @@ def corrected_drive(
     check_at_rest(r_dev)
     u = as_signal(played, "drive")
     y = as_signal(measured, "output")
-    step = update_drive(r_dev, u - u0, y - y0, fs=fs, model=model, **update)
+    step = update_drive(r_dev, u - u0, y - y0, fs=fs, model=model, state=state,
+                        options=options)
     checks = dict(checks or {})
     if step.stopped:
         checks.update(max_gain=None, min_gain=None)

@@ -40,8 +40,8 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from ehss._checks import check_int
-from ehss.compensation import InverseModel, design_inverse
+from ehss._checks import check_band, check_int
+from ehss.compensation import InverseModel, UpdateOptions, design_inverse
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine, rms
 
@@ -299,7 +299,8 @@ def demonstrate(
     cfg = LOOP_SETTINGS[loop]
     params = preset("default") if params is None else params
     fs = float(params.timing.control_rate_hz)
-    band = tuple(band_hz) if band_hz is not None else cfg["band_hz"]
+    band: tuple[float, float] = (check_band(band_hz, "band_hz") if band_hz is not None
+                                 else cfg["band_hz"])
     judge = (max(cfg["judge_hz"][0], band[0]), min(cfg["judge_hz"][1], band[1]))
     id_s = identification_s or duration_s
 
@@ -333,8 +334,8 @@ def demonstrate(
         outputs_without[name] = simulate(loop, r, params=params, seed=seed + 300 + i).output
         # Drive-file iteration, as a shaking-table controller does for a known history.
         ref = refine(loop, r, params=params, fs=fs, model=rest, iterations=iterations,
-                     method=method, seed=seed + 200 + 10 * i, known=known,
-                     stop_without_gain=True)
+                     seed=seed + 200 + 10 * i, stop_without_gain=True,
+                     options=UpdateOptions(inverse_method=method, known=known))
         best = int(np.argmin(ref.rms_error))
         drives[name] = ref.drive
         outputs_with[name] = ref.outputs[best]
@@ -378,10 +379,10 @@ def _validate(model: Any, identification: tuple[np.ndarray, np.ndarray],
     band that validation confirms. Its operating point stays the model's: the records
     start at rest at 0 and the model was fitted on them as they are."""
     from ehss.experiments.loop_identification import ACCEPTANCE
-    from ehss.workflow import assess, prepare, validated_band
+    from ehss.workflow import Preparation, assess, prepare, validated_band
 
-    prepared = prepare(*identification, fs=fs, validation=validation, band_hz=band,
-                       detrend="mean", decimate=None)
+    prepared = prepare(*identification, fs=fs, preparation=Preparation(
+        validation=validation, band_hz=band, detrend="mean", decimate=None))
     report, verdict = assess(model, prepared, acceptance=ACCEPTANCE)
     checked = dataclasses.replace(model, band_hz=validated_band(report, fs))
     return report, verdict, checked

@@ -22,7 +22,15 @@ from ehss.frequency import FrequencyResponse, h1_estimate
 from ehss.identification import ArmaxModel, RelsEstimator, rels
 from ehss.identification.known import compose
 from ehss.validation import FrfError, ValidationReport
-from ehss.workflow import Acceptance, Prepared, Verdict, assess, prepare, validated_band
+from ehss.workflow import (
+    Acceptance,
+    Preparation,
+    Prepared,
+    Verdict,
+    assess,
+    prepare,
+    validated_band,
+)
 
 __all__ = [
     "ACCEPTANCE",
@@ -158,12 +166,13 @@ def loop_record(
     Returns
     -------
     Record
-        ``prepared`` is ``prepare(u_raw, y_raw, fs=fs, validation=holdout,
-        band_hz=band_hz, detrend="mean", decimate=None)``: ``ehss identify --holdout
-        HOLDOUT --band LO HI --detrend mean --decimate none`` on the same record.
+        ``prepared`` is ``prepare(u_raw, y_raw, fs=fs, preparation=Preparation(
+        validation=holdout, band_hz=band_hz, detrend="mean", decimate=None))``: ``ehss
+        identify --holdout HOLDOUT --band LO HI --detrend mean --decimate none`` on the
+        same record.
     """
-    prepared = prepare(u_raw, y_raw, fs=fs, validation=holdout, band_hz=band_hz,
-                       detrend="mean", decimate=None)
+    prepared = prepare(u_raw, y_raw, fs=fs, preparation=Preparation(
+        validation=holdout, band_hz=band_hz, detrend="mean", decimate=None))
     u_mean, y_mean = float(np.mean(u_raw)), float(np.mean(y_raw))
     u, y = np.asarray(u_raw, float) - u_mean, np.asarray(y_raw, float) - y_mean
     return Record(

@@ -12,7 +12,7 @@ its parameter set, or any callable ``drive -> measured output``.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,11 @@ import numpy as np
 from ehss._checks import check_int
 from ehss.compensation import (
     DEFAULT_MAX_GAIN,
+    DriveUpdate,
     InverseModel,
+    IterationState,
+    RunRecord,
+    UpdateOptions,
     as_reference,
     compensate,
     design_inverse,
@@ -28,6 +32,7 @@ from ehss.compensation import (
     update_drive,
 )
 from ehss.errors import ParameterError
+from ehss.workflow.options import or_default
 
 __all__ = ["RefineResult", "refine", "rms"]
 
@@ -89,14 +94,8 @@ def refine(
     fs: float | None = None,
     params: Any = None,
     iterations: int = 2,
-    method: str = "stable",
-    update: str = "model",
-    band_hz: tuple[float, float] | None = None,
-    learning_gain: float | None = None,
-    reidentify: bool = False,
+    options: UpdateOptions | None = None,
     seed: int | None = 0,
-    nc: int | None = None,
-    known: tuple[Any, Any] | None = None,
     first_drive: np.ndarray | None = None,
     max_gain: float | None = DEFAULT_MAX_GAIN,
     stop_without_gain: bool = False,
@@ -111,28 +110,19 @@ def refine(
     reference : ehss.signals.Signal, or array_like with ``fs``
         Desired output (SI), at rest at both ends, at the model's rate or an integer
         multiple of it.
+    model : ArmaxModel
+        Closed-loop model (band: the options' ``band_hz`` or its validated band).
     fs : float, optional
         Sample rate of an array reference; default the model's (``1 / model.dt``).
-    model : ArmaxModel
-        Closed-loop model (band: ``band_hz`` or its validated band).
     params : RigParams, optional
     iterations : int
         Number of learning updates (``iterations + 1`` runs at most).
-    method : {"stable", "zpetc", "zmetc"}
-        Inverse design of the one-shot drive and of the model-based update.
-    update : {"model", "frf"}
-        Inverse used by the learning update (:func:`ehss.compensation.update_drive`).
-    band_hz : (lo, hi), optional
-    learning_gain : float, optional
-        Fixed gain; default chosen from the first run.
-    reidentify : bool
-        Re-identify the loop from each run before inverting it.
+    options : UpdateOptions, optional
+        The learning update (:func:`ehss.compensation.update_drive`); its
+        ``inverse_method``, ``band_hz`` and ``known`` design the one-shot drive too, and
+        its ``gain`` is the first update's (later ones keep or halve it).
     seed : int, optional
         Sensor-noise seed of the first run (``seed + k`` for run ``k``).
-    nc : int, optional
-        Noise order for re-identification (default: the model's).
-    known : (num, den), optional
-        Known factor in series with ``model``.
     first_drive : ndarray, optional
         Drive of the first run instead of the one-shot inverse (e.g. the reference
         itself, as a non-parametric iteration starts).
@@ -146,16 +136,53 @@ def refine(
     -------
     RefineResult
     """
-    from ehss.simulation import simulate
-
-    iterations = check_int(iterations, "iterations", lo=0)
     from ehss.signals import Signal
 
+    iterations = check_int(iterations, "iterations", lo=0)
+    opts = or_default(options, UpdateOptions, "options")
     if fs is None and not isinstance(reference, Signal):
         fs = 1.0 / model.dt
     r, fs = as_reference(reference, fs)
-    band = band_hz if band_hz is not None else model.band_hz
-    inverse: InverseModel = design_inverse(model, method=method, band_hz=band, known=known)
+    band = opts.band_hz if opts.band_hz is not None else model.band_hz
+    opts = replace(opts, band_hz=band)
+    inverse: InverseModel = design_inverse(model, method=opts.inverse_method, band_hz=band,
+                                           known=opts.known)
+    run = _plant(loop, params, fs, seed)
+    if first_drive is None:
+        drive = compensate(inverse, r, fs=fs, max_gain=max_gain)
+    else:
+        drive = np.asarray(first_drive, dtype=float)
+    log = _Log(model, inverse)
+    state: IterationState | None = None
+    for k in range(iterations + 1):
+        y = run(drive, k)
+        log.played(drive, y)
+        if k == iterations:
+            log.records.append(run_record(r, drive, y))
+            break
+        reuse = opts.method == "model" and not opts.reidentify
+        try:
+            step = update_drive(r, drive, y, fs=fs, model=log.models[-1],
+                                inverse=log.inverses[-1] if reuse else None, state=state,
+                                options=opts if state is None else replace(opts, gain=None))
+        except ParameterError as exc:
+            if opts.gain is not None or state is not None or not stop_without_gain:
+                raise
+            # No gain the run shows to be stable: keep the drive played, iterate no more.
+            log.records.append(run_record(r, drive, y))
+            log.stop(str(exc))
+            break
+        if log.updated(step):
+            break
+        state, drive = step.state, step.drive
+    return log.result()
+
+
+def _plant(loop: str | Callable[[np.ndarray], np.ndarray], params: Any, fs: float,
+           seed: int | None) -> Callable[[np.ndarray, int], np.ndarray]:
+    """``(drive, k) -> output`` of run ``k``: the simulated rig's loop (seed ``seed + k``)
+    or the callable given, its output checked for shape."""
+    from ehss.simulation import simulate
 
     def run(drive: np.ndarray, k: int) -> np.ndarray:
         if callable(loop):
@@ -167,51 +194,47 @@ def refine(
         run_seed = None if seed is None else seed + k
         return simulate(loop, drive, params=params, fs=fs, seed=run_seed).output
 
-    if first_drive is None:
-        drive = compensate(inverse, r, fs=fs, max_gain=max_gain)
-    else:
-        drive = np.asarray(first_drive, dtype=float)
-    drives, outputs, records, gains, accepted = [], [], [], [], []
-    models, inverses = [model], [inverse]
-    state, stopped, message = None, False, ""
-    current_model = model
-    for k in range(iterations + 1):
-        y = run(drive, k)
-        drives.append(drive)
-        outputs.append(y)
-        if k == iterations:
-            records.append(run_record(r, drive, y))
-            break
-        try:
-            step = update_drive(
-                r, drive, y, fs=fs, model=current_model, method=update,
-                inverse=inverses[-1] if update == "model" and not reidentify else None,
-                inverse_method=method,
-                band_hz=band, gain=learning_gain if state is None else None, state=state,
-                reidentify=reidentify, nc=nc, known=known)
-        except ParameterError as exc:
-            if learning_gain is not None or state is not None or not stop_without_gain:
-                raise
-            # No gain the run shows to be stable: keep the drive played, iterate no more.
-            records.append(run_record(r, drive, y))
-            stopped, message = True, str(exc)
-            break
-        records.append(step.record)
+    return run
+
+
+class _Log:
+    """What :func:`refine` keeps of each run and update."""
+
+    def __init__(self, model: Any, inverse: InverseModel) -> None:
+        self.drives: list[np.ndarray] = []
+        self.outputs: list[np.ndarray] = []
+        self.records: list[RunRecord] = []
+        self.gains: list[float] = []
+        self.accepted: list[bool] = []
+        self.models: list[Any] = [model]
+        self.inverses: list[InverseModel] = [inverse]
+        self.stopped, self.message = False, ""
+
+    def played(self, drive: np.ndarray, output: np.ndarray) -> None:
+        self.drives.append(drive)
+        self.outputs.append(output)
+
+    def stop(self, message: str) -> None:
+        self.stopped, self.message = True, message
+
+    def updated(self, step: DriveUpdate) -> bool:
+        """Log an update; True when it stopped the iteration."""
+        self.records.append(step.record)
         if step.stopped:
-            stopped, message = True, step.message
-            break
-        gains.append(step.gain)
-        accepted.append(step.accepted)
-        state = step.state
-        drive = step.drive
-        if step.model is not None:
-            current_model = step.model
-        models.append(current_model)
+            self.stop(step.message)
+            return True
+        self.gains.append(step.gain)
+        self.accepted.append(step.accepted)
+        self.models.append(step.model if step.model is not None else self.models[-1])
         if step.inverse is not None:
-            inverses.append(step.inverse)
-    errors = np.array([rec.rms_error for rec in records])
-    best = int(np.argmin(errors))
-    return RefineResult(drive=drives[best], drives=drives, outputs=outputs,
-                        rms_error=errors, records=records, gains=gains, accepted=accepted,
-                        stopped=stopped, message=message, models=models,
-                        inverses=inverses)
+            self.inverses.append(step.inverse)
+        return False
+
+    def result(self) -> RefineResult:
+        errors = np.array([rec.rms_error for rec in self.records])
+        best = int(np.argmin(errors))
+        return RefineResult(drive=self.drives[best], drives=self.drives,
+                            outputs=self.outputs, rms_error=errors, records=self.records,
+                            gains=self.gains, accepted=self.accepted, stopped=self.stopped,
+                            message=self.message, models=self.models,
+                            inverses=self.inverses)
