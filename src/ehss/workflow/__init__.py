@@ -27,14 +27,14 @@ does :meth:`Identification.format`); :func:`ehss.compensate` applies it at the r
 rate.
 
 Modules: :mod:`~ehss.workflow.options` (the settings), :mod:`~ehss.workflow.acceptance`,
-:mod:`~ehss.workflow.prepare`, :mod:`~ehss.workflow.identify`,
+:mod:`~ehss.workflow.preparing`, :mod:`~ehss.workflow.identifying`,
 :mod:`~ehss.workflow.orders`.
 """
 
 from __future__ import annotations
 
 from ehss.workflow.acceptance import Acceptance, Verdict
-from ehss.workflow.identify import (
+from ehss.workflow.identifying import (
     Identification,
     assess,
     delay_text,
@@ -52,7 +52,7 @@ from ehss.workflow.options import (
     Preparation,
 )
 from ehss.workflow.orders import OrderSearch, select_orders
-from ehss.workflow.prepare import HOLDOUT_EXCITATION_WARN, Prepared, judged_band, prepare
+from ehss.workflow.preparing import HOLDOUT_EXCITATION_WARN, Prepared, judged_band, prepare
 
 __all__ = [
     "Acceptance",

@@ -17,7 +17,7 @@ from ehss.identification.delay import DelayScan, scan_delays
 from ehss.identification.order import OrderRow, OrderSelection, select_order
 from ehss.validation import ValidationReport
 from ehss.workflow.acceptance import Acceptance, Verdict
-from ehss.workflow.identify import assess
+from ehss.workflow.identifying import assess
 from ehss.workflow.options import (
     DEFAULT_MAX_NB,
     SAMPLES_PER_PARAMETER,
@@ -27,7 +27,7 @@ from ehss.workflow.options import (
     Preparation,
     or_default,
 )
-from ehss.workflow.prepare import Prepared, prepare
+from ehss.workflow.preparing import Prepared, prepare
 
 __all__ = ["OrderSearch", "select_orders"]
 

@@ -16,7 +16,7 @@ from ehss.identification import ArmaxModel, estimate
 from ehss.validation import ValidationReport, free_run, nrmse_fit, validate
 from ehss.workflow.acceptance import Acceptance, Verdict
 from ehss.workflow.options import Estimation, Evaluation, Preparation, or_default
-from ehss.workflow.prepare import Prepared, judged_band, prepare
+from ehss.workflow.preparing import Prepared, judged_band, prepare
 
 __all__ = ["Identification", "identify", "assess", "validated_band", "delay_text"]
 
