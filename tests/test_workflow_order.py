@@ -75,7 +75,7 @@ def test_no_unstable_recommendation(rng):
         ({"delay": [-1]}, ParameterError, "delay=\\[-1\\] must hold integers >= 0"),
         ({"delay": []}, ParameterError, "must list at least one delay"),
         ({"validation": 1.5}, ParameterError, "validation fraction 1.5 must be in"),
-        ({"init": "warm"}, ParameterError, "init='warm' must be one of batch, zero"),
+        ({"init": "warm"}, ParameterError, "init='warm' must be one of 'batch', 'zero'"),
         ({"acceptance": 0.9}, TypeError, "acceptance must be an Acceptance"),
     ],
 )
