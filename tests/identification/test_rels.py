@@ -274,6 +274,7 @@ def test_bad_parameters(rng, kwargs, message):
         (dict(p0="big"), r"p0='big' must be a real number, not str"),
         (dict(forgetting=None), r"forgetting=None must be a real number, not NoneType"),
         (dict(passes=2.0), r"passes=2.0 must be an integer, not float"),
+        (dict(theta0=["0"] * 5), r"theta0=\['0', .* must be a sequence of real numbers"),
         (dict(method=None), r"method=None must be one of 'rels', 'rml', not NoneType"),
     ],
 )

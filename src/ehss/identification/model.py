@@ -38,16 +38,9 @@ from ehss.errors import DataError, EhssWarning, ParameterError
 __all__ = ["ArmaxModel", "RoundingSensitivity"]
 
 
-def _coeffs(name: str, value: Any, *, monic: bool) -> np.ndarray:
-    """``value`` as a read-only float64 vector of finite coefficients.
-
-    Raises
-    ------
-    TypeError
-        If ``value`` does not hold real numbers (strings, None, complex, nested lists).
-    ParameterError
-        If it is empty, not finite or (``monic``) does not start with 1.
-    """
+def real_array(value: Any, name: str) -> np.ndarray:
+    """``value`` as a new float64 array (TypeError unless it holds real numbers:
+    strings, None, complex or a ragged nesting are refused)."""
     try:
         arr = np.asarray(value)
         if arr.dtype.kind not in "iuf":
@@ -55,7 +48,20 @@ def _coeffs(name: str, value: Any, *, monic: bool) -> np.ndarray:
     except (TypeError, ValueError):  # a ragged list cannot even be an array
         raise TypeError(f"{name}={show(value)} must be a sequence of real numbers, not "
                         f"{type(value).__name__}") from None
-    arr = np.array(arr, dtype=np.float64, copy=True).reshape(-1)
+    return np.array(arr, dtype=np.float64, copy=True)
+
+
+def _coeffs(name: str, value: Any, *, monic: bool) -> np.ndarray:
+    """``value`` as a read-only float64 vector of finite coefficients.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` does not hold real numbers (see :func:`real_array`).
+    ParameterError
+        If it is empty, not finite or (``monic``) does not start with 1.
+    """
+    arr = real_array(value, name).reshape(-1)
     if arr.size == 0:
         raise ParameterError(f"{name}={value!r} must have at least one coefficient")
     if not np.all(np.isfinite(arr)):

@@ -64,7 +64,7 @@ from ehss.identification._common import (
     theta_scale,
     too_short,
 )
-from ehss.identification.model import ArmaxModel
+from ehss.identification.model import ArmaxModel, real_array
 
 __all__ = ["rels", "RelsEstimator", "specialise_rels"]
 
@@ -72,12 +72,12 @@ __all__ = ["rels", "RelsEstimator", "specialise_rels"]
 def _check_theta0(theta0: Any, n: int) -> np.ndarray:
     if theta0 is None:
         return np.zeros(n)
-    t = np.asarray(theta0, dtype=np.float64)
+    t = real_array(theta0, "theta0")
     if t.shape != (n,):
         raise ParameterError(f"theta0 has shape {t.shape}, must be ({n},) = na + nb + 1 + nc")
     if not np.all(np.isfinite(t)):
         raise ParameterError(f"theta0={theta0!r} must be finite")
-    return t.copy()
+    return t
 
 
 def record_scales(u: np.ndarray, y: np.ndarray, settings: RelsSettings,
