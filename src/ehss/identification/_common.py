@@ -37,6 +37,7 @@ __all__ = [
     "root_radius",
     "too_short",
     "first_sample",
+    "record_scales",
     "rms_scale",
     "theta_scale",
     "regression_matrix",
@@ -170,6 +171,12 @@ class RelsSettings(ArmaxOrders):
             return self.trace_bound
         return (self.na + self.nb + 1) * self.p0 + self.nc * self.alpha_c
 
+    def meta(self) -> dict[str, Any]:
+        """The settings an estimate records in its ``meta``: λ, P(0), bounds (α_c and
+        the bound of tr P as they are used)."""
+        return {"forgetting": self.forgetting, "p0": self.p0, "p0_c": self.alpha_c,
+                "trace_bound": self.trace_max, "c_radius": self.c_radius}
+
     def kernel(self, *, u_scale: float = 1.0, y_scale: float = 1.0,
                enabled: bool = True) -> _k.RelsSettings:
         """The compiled loop's settings, as plain Python scalars (one compiled signature)."""
@@ -231,6 +238,27 @@ def check_batch(u: Any, y: Any, orders: ArmaxOrders) -> tuple[np.ndarray, np.nda
     u, y = as_record(u, y)
     too_short(u.size, orders)
     return u, y
+
+
+def record_scales(u: np.ndarray, y: np.ndarray, orders: ArmaxOrders,
+                  where: str = "") -> tuple[float, float, np.ndarray]:
+    """RMS of u and y, and the factor D of θ_physical = D θ_scaled that they make.
+
+    Raises
+    ------
+    DataError
+        If u and y are so far apart in magnitude that D leaves float64 (``where``, e.g.
+        ``"channel 2: "``, starts the message).
+    """
+    o = orders
+    su, sy = rms_scale(u), rms_scale(y)
+    dvec = theta_scale(o.na, o.nb, o.nc, su, sy)
+    if not np.all((dvec >= np.finfo(float).tiny) & np.isfinite(dvec)):
+        raise DataError(
+            f"{where}u and y are too far apart in magnitude for float64 (RMS of u {su:.3g}, "
+            f"of y {sy:.3g}: b would be scaled by {sy:.3g}/{su:.3g}); rescale them"
+        )
+    return su, sy, dvec
 
 
 def rms_scale(x: np.ndarray) -> float:

@@ -29,13 +29,13 @@ from ehss.identification._common import (
     RelsSettings,
     block_counters,
     model_from_state,
+    record_scales,
     rels_settings,
     start_state,
     theta_scale,
     too_short,
 )
 from ehss.identification.model import ArmaxModel
-from ehss.identification.rels import record_scales, settings_meta
 
 __all__ = ["rels_multichannel", "RelsBank"]
 
@@ -112,7 +112,7 @@ def rels_multichannel(
         nv_s = float(np.mean(np.square(rec[3, n_samples // 2 :, c])))
         counts = block_counters(blocks[c])
         counts.pop("n_samples")
-        meta = {"method": s.method, "n_samples": int(n_samples), **settings_meta(s),
+        meta = {"method": s.method, "n_samples": int(n_samples), **s.meta(),
                 "passes": 1, "u_scale": su, "y_scale": sy, "channel": c, **counts}
         model = model_from_state(views[c], s, su, sy, nv_s, meta)
         model.check(warn=True)
@@ -245,7 +245,7 @@ class RelsBank:
         self._settle()
         s = self._rels
         us, ys = self._us[c], self._ys[c]
-        meta = {"method": f"{s.method}-bank", **settings_meta(s), "u_scale": us,
+        meta = {"method": f"{s.method}-bank", **s.meta(), "u_scale": us,
                 "y_scale": ys, "channel": c, **block_counters(self._blocks[c])}
         return model_from_state(self._views[c], s, us, ys,
                                 float(self._blocks[c, _k.NOISE_VAR]), meta)

@@ -59,8 +59,8 @@ from ehss.identification._common import (
     block_counters,
     model_from_state,
     new_state,
+    record_scales,
     rels_settings,
-    rms_scale,
     theta_scale,
     too_short,
 )
@@ -78,34 +78,6 @@ def _check_theta0(theta0: Any, n: int) -> np.ndarray:
     if not np.all(np.isfinite(t)):
         raise ParameterError(f"theta0={theta0!r} must be finite")
     return t
-
-
-def record_scales(u: np.ndarray, y: np.ndarray, settings: RelsSettings,
-                  where: str = "") -> tuple[float, float, np.ndarray]:
-    """RMS of u and y, and the factor D of θ_physical = D θ_scaled that they make.
-
-    Raises
-    ------
-    DataError
-        If u and y are so far apart in magnitude that D leaves float64 (``where``, e.g.
-        ``"channel 2: "``, starts the message).
-    """
-    s = settings
-    su, sy = rms_scale(u), rms_scale(y)
-    dvec = theta_scale(s.na, s.nb, s.nc, su, sy)
-    if not np.all((dvec >= np.finfo(float).tiny) & np.isfinite(dvec)):
-        raise DataError(
-            f"{where}u and y are too far apart in magnitude for float64 (RMS of u {su:.3g}, "
-            f"of y {sy:.3g}: b would be scaled by {sy:.3g}/{su:.3g}); rescale them"
-        )
-    return su, sy, dvec
-
-
-def settings_meta(settings: RelsSettings) -> dict[str, Any]:
-    """The settings an estimate records in its ``meta`` (P(0), bounds; method aside)."""
-    s = settings
-    return {"forgetting": s.forgetting, "p0": s.p0, "p0_c": s.alpha_c,
-            "trace_bound": s.trace_max, "c_radius": s.c_radius}
 
 
 def _sample(name: str, value: Any) -> float:
@@ -256,7 +228,7 @@ def rels(
         theta_s = views.theta.copy()
     totals.pop("n_samples")
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
-    meta = {"method": s.method, "n_samples": int(u.size), **settings_meta(s), "passes": passes,
+    meta = {"method": s.method, "n_samples": int(u.size), **s.meta(), "passes": passes,
             "u_scale": su, "y_scale": sy, **totals}
     model = model_from_state(views, s, su, sy, nv_s, meta)
     model.check(warn=True)
@@ -491,7 +463,7 @@ class RelsEstimator:
         """The current estimate as an :class:`ArmaxModel` (no stability warning)."""
         s = self._rels
         self._settle()
-        meta = {"method": f"{s.method}-streaming", **settings_meta(s), "u_scale": self._us,
+        meta = {"method": f"{s.method}-streaming", **s.meta(), "u_scale": self._us,
                 "y_scale": self._ys, **block_counters(self._block)}
         return model_from_state(self._views, s, self._us, self._ys,
                                 float(self._block[_k.NOISE_VAR]), meta)
