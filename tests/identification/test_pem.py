@@ -296,8 +296,12 @@ def test_a_neighbour_start_can_only_lower_the_loss(rng):
 
 def test_theta0_of_the_wrong_size_is_refused(rng):
     u = rng.standard_normal(500)
-    with pytest.raises(ParameterError, match="theta0 must hold 4 finite coefficients"):
+    with pytest.raises(ParameterError, match=r"theta0 has shape \(2,\), must be \(4,\)"):
         armax_pem(u, u, na=1, nb=1, nc=1, theta0=[0.1, 0.2])
+    with pytest.raises(ParameterError, match=r"theta0=.* must be finite"):
+        armax_pem(u, u, na=1, nb=1, nc=1, theta0=[0.1, 0.2, np.nan, 0.0])
+    with pytest.raises(TypeError, match=r"theta0=.* must be a sequence of real numbers"):
+        armax_pem(u, u, na=1, nb=1, nc=1, theta0=["0.1", 0.2, 0.3, 0.0])
 
 
 def test_the_smaller_c_start_is_the_one_the_order_search_hands_over(rng):

@@ -20,9 +20,9 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ehss._checks import as_record, check_choice, check_int, check_real, show
-from ehss.errors import DataError, IdentificationError
+from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification import _kernels as _k
-from ehss.identification.model import ArmaxModel
+from ehss.identification.model import ArmaxModel, real_array
 
 __all__ = [
     "OrderKeywords",
@@ -33,6 +33,7 @@ __all__ = [
     "RELS_METHODS",
     "rels_settings",
     "check_batch",
+    "check_theta0",
     "solver_budget",
     "root_radius",
     "too_short",
@@ -208,6 +209,26 @@ def solver_budget(iterations: Any, name: str, tol: Any) -> tuple[int, float]:
 def root_radius(radius: Any, name: str = "radius") -> float:
     """A bound of the roots of a predictor's polynomial, in (0, 1)."""
     return check_real(radius, name, lo=0.0, hi=1.0, lo_open=True, hi_open=True)
+
+
+def check_theta0(theta0: Any, n: int) -> np.ndarray:
+    """A start θ0 of n finite coefficients as a new float64 array (zeros for None).
+
+    Raises
+    ------
+    TypeError
+        If it does not hold real numbers.
+    ParameterError
+        If it is not of shape (n,) or not finite.
+    """
+    if theta0 is None:
+        return np.zeros(n)
+    t = real_array(theta0, "theta0")
+    if t.shape != (n,):
+        raise ParameterError(f"theta0 has shape {t.shape}, must be ({n},) = na + nb + 1 + nc")
+    if not np.all(np.isfinite(t)):
+        raise ParameterError(f"theta0={theta0!r} must be finite")
+    return t
 
 
 def _settle(obj: object, name: str, value: Any) -> None:

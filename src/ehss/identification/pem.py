@@ -57,12 +57,13 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from ehss.errors import IdentificationError, ParameterError
+from ehss.errors import IdentificationError
 from ehss.identification import _pem_kernels as _pk
 from ehss.identification._common import (
     ArmaxOrders,
     OrderKeywords,
     check_batch,
+    check_theta0,
     regression_matrix,
     rms_scale,
     root_radius,
@@ -225,6 +226,8 @@ def armax_pem(
     radius = root_radius(radius)
     max_nfev, tol = solver_budget(max_nfev, "max_nfev", tol)
     na, nb, nc, delay, dt = o.na, o.nb, o.nc, o.delay, o.dt
+    if theta0 is not None and nc:  # ignored for nc = 0
+        theta0 = check_theta0(theta0, o.n_params)
     if theta0 is None and smaller_c and nc >= 2:
         theta0 = _smaller_c_theta(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol)
     model = _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0)
@@ -293,12 +296,9 @@ def _armax_starts(us, ys, na, nb, nc, delay, radius, max_nfev, tol):
 
 def _given_start(theta0: Any, dvec: np.ndarray, na: int, nb: int, nc: int,
                  radius: float) -> np.ndarray:
-    """``theta0`` (physical units) on the scaled data, its C stabilised inside radius."""
-    t = np.array(theta0, dtype=np.float64).reshape(-1)
-    if t.size != dvec.size or not np.all(np.isfinite(t)):
-        raise ParameterError(f"theta0 must hold {dvec.size} finite coefficients "
-                             f"(na + nb + 1 + nc), got {np.asarray(theta0).size}")
-    t = t / dvec
+    """``theta0`` (physical units, checked) on the scaled data, its C stabilised inside
+    radius."""
+    t = theta0 / dvec
     n_ab = na + nb + 1
     t[n_ab:] = stabilise(t[n_ab:], radius)
     return t

@@ -50,13 +50,14 @@ from typing import Any, Unpack
 import numpy as np
 
 from ehss._checks import as_record, check_int, check_real, is_real
-from ehss.errors import DataError, ParameterError
+from ehss.errors import DataError
 from ehss.identification import _kernels as _k
 from ehss.identification._common import (
     ArmaxOrders,
     RelsKeywords,
     RelsSettings,
     block_counters,
+    check_theta0,
     model_from_state,
     new_state,
     record_scales,
@@ -64,22 +65,11 @@ from ehss.identification._common import (
     theta_scale,
     too_short,
 )
-from ehss.identification.model import ArmaxModel, real_array
+from ehss.identification.model import ArmaxModel
 
 __all__ = ["rels", "RelsEstimator", "specialise_rels"]
 
 # ---------------------------------------------------------------- validation helpers
-def _check_theta0(theta0: Any, n: int) -> np.ndarray:
-    if theta0 is None:
-        return np.zeros(n)
-    t = real_array(theta0, "theta0")
-    if t.shape != (n,):
-        raise ParameterError(f"theta0 has shape {t.shape}, must be ({n},) = na + nb + 1 + nc")
-    if not np.all(np.isfinite(t)):
-        raise ParameterError(f"theta0={theta0!r} must be finite")
-    return t
-
-
 def _sample(name: str, value: Any) -> float:
     """One streaming sample as a Python float (TypeError for anything but a real number)."""
     if not is_real(value):
@@ -209,7 +199,7 @@ def rels(
     """
     s = rels_settings(settings, keywords)
     passes = check_int(passes, "passes", lo=1)
-    theta0 = _check_theta0(theta0, s.n_params)
+    theta0 = check_theta0(theta0, s.n_params)
     u, y = as_record(u, y)
     too_short(u.size, s)
     su, sy, dvec = record_scales(u, y, s)
@@ -296,7 +286,7 @@ class RelsEstimator:
         self._us, self._ys = (check_real(v, name, lo=0.0, lo_open=True)
                               for name, v in (("u_scale", u_scale), ("y_scale", y_scale)))
         self._dvec = theta_scale(s.na, s.nb, s.nc, self._us, self._ys)
-        self._theta0 = _check_theta0(theta0, s.n_params)
+        self._theta0 = check_theta0(theta0, s.n_params)
         if history_every is not None:
             history_every = check_int(history_every, "history_every", lo=1)
         self._every = history_every
