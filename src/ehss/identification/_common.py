@@ -172,11 +172,13 @@ class RelsSettings(ArmaxOrders):
             return self.trace_bound
         return (self.na + self.nb + 1) * self.p0 + self.nc * self.alpha_c
 
-    def meta(self) -> dict[str, Any]:
-        """The settings an estimate records in its ``meta``: λ, P(0), bounds (α_c and
-        the bound of tr P as they are used)."""
-        return {"forgetting": self.forgetting, "p0": self.p0, "p0_c": self.alpha_c,
-                "trace_bound": self.trace_max, "c_radius": self.c_radius}
+    def meta(self, passes: int | None = None) -> dict[str, Any]:
+        """The settings an estimate records in its ``meta``: λ, P(0) (α_c as used), the
+        batch run's ``passes`` over the record when given, the bound of tr P as used
+        and the radius of C."""
+        head = {"forgetting": self.forgetting, "p0": self.p0, "p0_c": self.alpha_c}
+        runs = {} if passes is None else {"passes": passes}
+        return {**head, **runs, "trace_bound": self.trace_max, "c_radius": self.c_radius}
 
     def kernel(self, *, u_scale: float = 1.0, y_scale: float = 1.0,
                enabled: bool = True) -> _k.RelsSettings:

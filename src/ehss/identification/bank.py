@@ -112,8 +112,8 @@ def rels_multichannel(
         nv_s = float(np.mean(np.square(rec[3, n_samples // 2 :, c])))
         counts = block_counters(blocks[c])
         counts.pop("n_samples")
-        meta = {"method": s.method, "n_samples": int(n_samples), **s.meta(),
-                "passes": 1, "u_scale": su, "y_scale": sy, "channel": c, **counts}
+        meta = {"method": s.method, "n_samples": int(n_samples), **s.meta(passes=1),
+                "u_scale": su, "y_scale": sy, "channel": c, **counts}
         model = model_from_state(views[c], s, su, sy, nv_s, meta)
         model.check(warn=True)
         models.append(model)

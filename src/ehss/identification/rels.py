@@ -218,8 +218,8 @@ def rels(
         theta_s = views.theta.copy()
     totals.pop("n_samples")
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
-    meta = {"method": s.method, "n_samples": int(u.size), **s.meta(), "passes": passes,
-            "u_scale": su, "y_scale": sy, **totals}
+    meta = {"method": s.method, "n_samples": int(u.size), **s.meta(passes), "u_scale": su,
+            "y_scale": sy, **totals}
     model = model_from_state(views, s, su, sy, nv_s, meta)
     model.check(warn=True)
     return model
