@@ -39,10 +39,6 @@ from ehss.identification.model import ArmaxModel
 
 __all__ = ["rels_multichannel", "RelsBank"]
 
-#: θ̂ = θ0 and P = P(0) in one channel's block (a row of a bank); its views
-_start = start_state
-
-
 def _check_channels(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
     """u and y as (N, C) float64 arrays of finite samples, C ≥ 1 channels."""
     u = np.asarray(u, dtype=np.float64)
