@@ -287,6 +287,21 @@ def test_wrong_types_raise_type_error(rng, kwargs, message):
             RelsEstimator(**{**GOOD, **kwargs})
 
 
+def test_settings_resolve_their_defaults():
+    # P(0) = diag(α.., α_c..): α_c defaults to α, the bound of tr P to tr P(0)
+    s = RelsSettings(na=2, nb=1, nc=1, p0=10.0)
+    assert (s.alpha_c, s.trace_max) == (10.0, (2 + 1 + 1) * 10.0 + 1 * 10.0)
+    s = RelsSettings(na=2, nb=1, nc=2, p0=10.0, p0_c=0.5, method="rml")
+    assert (s.alpha_c, s.trace_max) == (0.5, 4 * 10.0 + 2 * 0.5)
+    k = s.kernel(u_scale=2.0, enabled=False)
+    assert (k.lam, k.alpha, k.alpha_c, k.trace_max, k.rml, k.enabled, k.u_scale) == (
+        1.0, 10.0, 0.5, 41.0, True, False, 2.0)
+    assert not RelsSettings(na=1, nb=0, nc=0, method="rml").kernel().rml  # RML needs a C
+    # plain Python numbers, whatever numbers were given
+    s = RelsSettings(na=np.int64(2), nb=np.int32(1), nc=0, p0=np.float32(100.0))
+    assert type(s.na) is int and type(s.nb) is int and type(s.p0) is float
+
+
 def test_settings_object_is_the_keywords(rng):
     u = rng.standard_normal(400)
     y = np.convolve(u, [0.0, 0.5, 0.25])[: u.size] + 0.01 * rng.standard_normal(u.size)

@@ -152,10 +152,10 @@ class RelsSettings(ArmaxOrders):
         super().__post_init__()
         _settle(self, "forgetting", check_real(self.forgetting, "forgetting", lo=0.0, hi=1.0,
                                                lo_open=True))
-        for name in ("p0", "p0_c", "trace_bound"):
-            value = getattr(self, name)
-            if value is not None or name == "p0":
-                _settle(self, name, check_real(value, name, lo=0.0, lo_open=True))
+        _settle(self, "p0", check_real(self.p0, "p0", lo=0.0, lo_open=True))
+        for name in ("p0_c", "trace_bound"):  # None: follow from p0 (properties below)
+            if getattr(self, name) is not None:
+                _settle(self, name, check_real(getattr(self, name), name, lo=0.0, lo_open=True))
         _settle(self, "c_radius", check_real(self.c_radius, "c_radius", lo=0.0, hi=1.0,
                                              lo_open=True))
         check_choice(self.method, "method", RELS_METHODS)
