@@ -155,10 +155,10 @@ class RelsBank:
         **keywords: Unpack[RelsKeywords],
     ) -> None:
         self._n_channels = check_int(n_channels, "n_channels", lo=1)
-        s = self._rels = rels_settings(settings, keywords)
+        s = self._settings = rels_settings(settings, keywords)
         self._us = self._per_channel("u_scale", u_scale)
         self._ys = self._per_channel("y_scale", y_scale)
-        self._settings = [s.kernel(u_scale=us, y_scale=ys)
+        self._channel_settings = [s.kernel(u_scale=us, y_scale=ys)
                           for us, ys in zip(self._us, self._ys, strict=True)]
         self._run = _b.bank_kernel(s.na, s.nb, s.nc, s.delay)
         self._sample = np.zeros((4, 1, self._n_channels))
@@ -171,15 +171,15 @@ class RelsBank:
     @property
     def settings(self) -> RelsSettings:
         """The orders and settings every channel shares."""
-        return self._rels
+        return self._settings
 
     def reset(self) -> None:
         """Every channel back to θ̂ = 0, P(0), empty regressor, counters cleared."""
-        blocks = _b.new_blocks(self._settings[0], self._n_channels)
+        blocks = _b.new_blocks(self._channel_settings[0], self._n_channels)
         self._views = []
-        for c, settings in enumerate(self._settings):
+        for c, settings in enumerate(self._channel_settings):
             blocks[c, : _k.N_SETTINGS] = [float(v) for v in settings]
-            self._views.append(start_state(blocks[c], settings, np.zeros(self._rels.n_params)))
+            self._views.append(start_state(blocks[c], settings, np.zeros(self._settings.n_params)))
         self._blocks = blocks
 
     @property
@@ -223,7 +223,7 @@ class RelsBank:
     @property
     def theta(self) -> np.ndarray:
         """θ̂ of every channel in physical units, shape (n_channels, n_params)."""
-        s = self._rels
+        s = self._settings
         return np.array([
             v.theta * theta_scale(s.na, s.nb, s.nc, us, ys)
             for v, us, ys in zip(self._views, self._us, self._ys, strict=True)])
@@ -239,7 +239,7 @@ class RelsBank:
         warning), as :attr:`RelsEstimator.model`."""
         c = check_int(channel, "channel", lo=0, hi=self._n_channels - 1)
         self._settle()
-        s = self._rels
+        s = self._settings
         us, ys = self._us[c], self._ys[c]
         meta = {"method": f"{s.method}-bank", **s.meta(), "u_scale": us,
                 "y_scale": ys, "channel": c, **block_counters(self._blocks[c])}

@@ -121,6 +121,7 @@ def estimate(
     """
     check_choice(method, "method", METHODS)
     check_choice(init, "init", INITS)
+    # the orders, and λ, α, α_c of the recursions, checked once whatever the method
     s = RelsSettings(**settings, method="rml" if method == "rml" else "rels")
     if method == "arx":
         model = arx_ls(u, y, na=s.na, nb=s.nb, delay=s.delay, dt=s.dt)

@@ -282,7 +282,7 @@ class RelsEstimator:
         settings: RelsSettings | None = None,
         **keywords: Unpack[RelsKeywords],
     ) -> None:
-        s = self._rels = rels_settings(settings, keywords)
+        s = self._settings = rels_settings(settings, keywords)
         self._us, self._ys = (check_real(v, name, lo=0.0, lo_open=True)
                               for name, v in (("u_scale", u_scale), ("y_scale", y_scale)))
         self._dvec = theta_scale(s.na, s.nb, s.nc, self._us, self._ys)
@@ -297,13 +297,13 @@ class RelsEstimator:
     @property
     def settings(self) -> RelsSettings:
         """The orders and settings of the estimator."""
-        return self._rels
+        return self._settings
 
     # ---------------------------------------------------------------- state
     def reset(self) -> None:
         """Back to θ̂(0), P(0), empty regressor, counters and history cleared."""
-        self._settings = self._rels.kernel(u_scale=self._us, y_scale=self._ys)
-        block, _ = new_state(self._settings, self._theta0 / self._dvec)
+        kernel = self._settings.kernel(u_scale=self._us, y_scale=self._ys)
+        block, _ = new_state(kernel, self._theta0 / self._dvec)
         self._attach(block)
         self._hist: list[np.ndarray] = []
         self._since = 0
@@ -330,7 +330,7 @@ class RelsEstimator:
         history_update = state.pop("_history_update")
         block = state.pop("_block")
         self.__dict__.update(state)
-        s = self._rels
+        s = self._settings
         self._run = _k.kernel_for(s.na, s.nb, s.nc, s.delay)
         self._attach(_k.aligned_copy(block))
         self._hist = list(self._hist)  # a shallow copy too keeps its own history
@@ -401,7 +401,7 @@ class RelsEstimator:
         for k in range(first):
             err[k] = self.update(u[k], y[k])
         rest = u.size - first
-        hist = np.empty((rest // self._every, self._rels.n_params))
+        hist = np.empty((rest // self._every, self._settings.n_params))
         if rest:  # else the samples above counted themselves (_update_with_history)
             rec = _k.record(u[first:], y[first:])
             self._run_record(rec, hist, self._every)
@@ -439,7 +439,7 @@ class RelsEstimator:
     def history(self) -> np.ndarray:
         """θ̂ every ``history_every`` samples, shape (n_records, n_params)."""
         if not self._hist:
-            return np.empty((0, self._rels.n_params))
+            return np.empty((0, self._settings.n_params))
         return np.array(self._hist)
 
     @property
@@ -451,7 +451,7 @@ class RelsEstimator:
     @property
     def model(self) -> ArmaxModel:
         """The current estimate as an :class:`ArmaxModel` (no stability warning)."""
-        s = self._rels
+        s = self._settings
         self._settle()
         meta = {"method": f"{s.method}-streaming", **s.meta(), "u_scale": self._us,
                 "y_scale": self._ys, **block_counters(self._block)}
