@@ -316,6 +316,10 @@ def test_settings_object_is_the_keywords(rng):
         rels(u, y, settings=RelsSettings(**kw), na=2)
     with pytest.raises(TypeError, match="must be a RelsSettings"):
         RelsEstimator(settings=kw)
+    with pytest.raises(TypeError, match=r"missing 2 required keyword-only arguments: 'nb'"):
+        rels(u, y, na=2)
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'lam'"):
+        RelsEstimator(**GOOD, lam=0.99)
     with pytest.raises(dataclasses.FrozenInstanceError):
         RelsSettings(**kw).na = 3  # type: ignore[misc]
 

@@ -81,7 +81,7 @@ class RelsKeywords(RecursionKeywords, total=False):
     method: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ArmaxOrders:
     """Orders of an ARMAX model A y = q^-d B u + C e and its sample period, checked.
 
@@ -115,7 +115,7 @@ class ArmaxOrders:
 RELS_METHODS = ("rels", "rml")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RelsSettings(ArmaxOrders):
     """Orders and settings of a RELS or RML estimator (paper eqs 19–22), checked once.
 
