@@ -39,7 +39,8 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from ehss.identification import _bank_kernels as B  # noqa: E402
 from ehss.identification import _kernels as K  # noqa: E402
-from ehss.identification.bank import RelsBank, _start  # noqa: E402
+from ehss.identification._common import RelsSettings, new_state, start_state  # noqa: E402
+from ehss.identification.bank import RelsBank  # noqa: E402
 from ehss.identification.rels import RelsEstimator  # noqa: E402
 
 R = importlib.import_module("ehss.identification.rels")
@@ -92,8 +93,8 @@ def runner_this(entry, na, nb, nc, lam, method):
     n = na + nb + 1 + nc
 
     def run(u, y):
-        s = R._settings(na, nb, nc, 1, lam, 1e6, 1e6, n * 1e6, 0.99, method)
-        block, _ = R._new_state(s, np.zeros(n))
+        s = RelsSettings(na=na, nb=nb, nc=nc, forgetting=lam, method=method).kernel()
+        block, _ = new_state(s, np.zeros(n))
         rec = K.record(u, y)
         t0 = time.thread_time()
         entry(block, rec, np.empty((0, n)), 1, True)
@@ -185,13 +186,13 @@ def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
     na, nb, nc, n_ch = 4, 3, 4, 8
     n = na + nb + 1 + nc
     u, y = record_of(n_samples, n_ch, seed=7)
-    s = R._settings(na, nb, nc, 1, 1.0, 1e6, 1e6, n * 1e6, 0.99, "rels")
+    s = RelsSettings(na=na, nb=nb, nc=nc).kernel()  # P(0) = 1e6 I, tr P <= n·1e6
     bank = B.bank_kernel(na, nb, nc, 1)
 
     def run_bank(uu, yy):
         blocks = B.new_blocks(s, n_ch)
         for c in range(n_ch):
-            _start(blocks[c], s, np.zeros(n))
+            start_state(blocks[c], s, np.zeros(n))
         rec = B.bank_record(uu, yy)
         t0 = time.thread_time()
         bank(blocks, rec, True)

@@ -56,3 +56,13 @@ def armax_data(rng, a, b, c, n, snr_db=None, delay=1, u=None):
     v = lfilter(c, a, rng.standard_normal(n))
     scale = np.sqrt(np.var(y0) / np.var(v) / 10 ** (snr_db / 10))
     return u, y0 + scale * v, scale**2
+
+
+def kernel_settings(na, nb, nc, delay, lam, alpha, alpha_c, trace_max, c_radius, method,
+                    enabled=True):
+    """The compiled RELS loop's settings, through the checked settings object."""
+    from ehss.identification import RelsSettings
+
+    s = RelsSettings(na=na, nb=nb, nc=nc, delay=delay, forgetting=lam, p0=alpha,
+                     p0_c=alpha_c, trace_bound=trace_max, c_radius=c_radius, method=method)
+    return s.kernel(enabled=enabled)

@@ -14,11 +14,14 @@ import pytest
 from numpy.testing import assert_allclose
 
 from ehss.errors import DataError, ParameterError
+from ehss.identification import RelsSettings
 from ehss.identification import _bank_kernels as B
-from ehss.identification.bank import RelsBank, _start, rels_multichannel
-from ehss.identification.rels import RelsEstimator, _counters, _settings, rels
+from ehss.identification._common import block_counters, start_state
+from ehss.identification.bank import RelsBank, rels_multichannel
+from ehss.identification.rels import RelsEstimator, rels
 
 from .naive import naive_rels
+from .systems import kernel_settings
 from .test_kernel import _assert_close_to_exact, _record
 
 #: one set of orders for every bank here: the bank loop compiles once (seconds)
@@ -39,10 +42,10 @@ def test_bank_channels_match_reference(rng, lam, method):
     na, nb, nc, d = ORDERS.values()
     n = na + nb + 1 + nc
     u, y = _channels(rng)
-    settings = _settings(na, nb, nc, d, lam, 1e4, 1e2, 1e4 * (na + nb + 1) + 1e2 * nc,
+    settings = kernel_settings(na, nb, nc, d, lam, 1e4, 1e2, 1e4 * (na + nb + 1) + 1e2 * nc,
                          0.99, method)
     blocks = B.new_blocks(settings, u.shape[1])
-    views = [_start(blocks[c], settings, np.zeros(n)) for c in range(u.shape[1])]
+    views = [start_state(blocks[c], settings, np.zeros(n)) for c in range(u.shape[1])]
     rec = B.bank_record(u, y)
     assert B.bank_kernel(na, nb, nc, d)(blocks, rec, True) == u.shape[0]
     for c in range(u.shape[1]):
@@ -53,7 +56,7 @@ def test_bank_channels_match_reference(rng, lam, method):
         for got, i, name in ((views[c].theta, 0, "theta"), (views[c].P, 1, "P"),
                              (rec[2, :, c], 2, "e"), (rec[3, :, c], 3, "xi")):
             _assert_close_to_exact(got, ref[i], exact[i], f"channel {c} {name}")
-        counters = _counters(blocks[c])
+        counters = block_counters(blocks[c])
         for key in ("resets", "c_projections", "trace_scalings"):
             assert counters[key] == ref[4][key], key
 
@@ -131,3 +134,24 @@ def test_bank_bad_settings():
         RelsBank(n_channels=0, **ORDERS)
     with pytest.raises(ParameterError, match="u_scale"):
         RelsBank(n_channels=2, **ORDERS, u_scale=[1.0, -1.0])
+    with pytest.raises(TypeError, match=r"n_channels=2.0 must be an integer, not float"):
+        RelsBank(n_channels=2.0, **ORDERS)
+    with pytest.raises(TypeError, match=r"y_scale='1' must be a real number, not str"):
+        RelsBank(n_channels=2, **ORDERS, y_scale=[1.0, "1"])
+    with pytest.raises(TypeError, match=r"nc=1.0 must be an integer, not float"):
+        RelsBank(n_channels=2, **{**ORDERS, "nc": 1.0})
+    with pytest.raises(TypeError, match="not both"):
+        RelsBank(n_channels=2, settings=RelsSettings(**ORDERS), na=3)
+
+
+def test_bank_takes_settings_as_an_object(rng):
+    u, y = _channels(rng, 300)
+    settings = RelsSettings(**ORDERS, forgetting=0.99)
+    by_object = rels_multichannel(u, y, settings=settings)
+    by_keywords = rels_multichannel(u, y, **ORDERS, forgetting=0.99)
+    for a, b in zip(by_object, by_keywords, strict=True):
+        assert np.array_equal(a.theta, b.theta) and a.meta == b.meta
+    bank = RelsBank(n_channels=3, settings=settings)
+    assert bank.settings is settings
+    assert np.array_equal(bank.update_many(u, y), RelsBank(
+        n_channels=3, **ORDERS, forgetting=0.99).update_many(u, y))

@@ -159,12 +159,12 @@ def test_select_order_with_rml(rng):
 
 def test_select_order_errors(rng):
     u = rng.standard_normal(300)
-    with pytest.raises(ParameterError, match="method='pem' must be one of arx, armax, oe, "
-                       "rels, rml"):
+    with pytest.raises(ParameterError, match="method='pem' must be one of 'arx', 'armax', "
+                       "'oe', 'rels', 'rml'"):
         select_order(u, u, na=[1], nb=[0], nc=[0], method="pem")
-    with pytest.raises(ParameterError, match=r"fit_tolerance=-1 must be a number >= 0"):
+    with pytest.raises(ParameterError, match=r"fit_tolerance=-1 must be in \[0, inf\)"):
         select_order(u, u, na=[1], nb=[0], nc=[0], fit_tolerance=-1)
-    with pytest.raises(ParameterError, match="init='warm' must be one of batch, zero"):
+    with pytest.raises(ParameterError, match="init='warm' must be one of 'batch', 'zero'"):
         select_order(u, u, na=[1], nb=[0], nc=[0], method="rml", init="warm")
     with pytest.raises(ParameterError, match="criterion='bic' must be one of"):
         select_order(u, u, na=[1], nb=[0], nc=[0], criterion="bic")
@@ -174,5 +174,12 @@ def test_select_order_errors(rng):
         select_order(u, u, na=[1], nb=[0], nc=[0], score=50.0)
     with pytest.raises(ParameterError, match=r"na=\[0\] must hold integers >= 1"):
         select_order(u, u, na=[0], nb=[0], nc=[0])
+    # a wrong type is a TypeError, a wrong value a ParameterError
+    with pytest.raises(TypeError, match=r"na=\[1.5\] must hold integers >= 1, not float"):
+        select_order(u, u, na=[1.5], nb=[0], nc=[0])
+    with pytest.raises(TypeError, match=r"method=3 must be one of .*, not int"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], method=3)
+    with pytest.raises(TypeError, match=r"fit_tolerance='0.1' must be a real number"):
+        select_order(u, u, na=[1], nb=[0], nc=[0], fit_tolerance="0.1")
     with pytest.raises(DataError, match=r"y\[3\]=nan is not finite"):
         arx_ls(u, np.r_[u[:3], np.nan, u[4:]], na=1, nb=0)

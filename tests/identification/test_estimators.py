@@ -80,14 +80,27 @@ def test_batch_start_records_its_origin(rng):
 
 
 @pytest.mark.parametrize("kw,match", [
-    ({"method": "els"}, r"method='els' must be one of arx, armax, oe, rels, rml"),
-    ({"method": "rml", "init": "warm"}, r"init='warm' must be one of batch, zero"),
-    ({"method": 3}, r"method=3 must be one of"),
+    ({"method": "els"}, r"method='els' must be one of 'arx', 'armax', 'oe', 'rels', 'rml'"),
+    ({"method": "rml", "init": "warm"}, r"init='warm' must be one of 'batch', 'zero'"),
+    ({"method": "arx", "na": 0}, r"na=0 must be an integer in \[1, inf\)"),
+    ({"method": "rels", "forgetting": 1.5}, r"forgetting=1.5 must be in \(0, 1\]"),
 ])
 def test_bad_method_or_init(rng, kw, match):
     u = rng.standard_normal(100)
     with pytest.raises(ParameterError, match=match):
-        estimate(u, u, na=1, nb=0, nc=0, **kw)
+        estimate(u, u, **{"na": 1, "nb": 0, "nc": 0, **kw})
+
+
+@pytest.mark.parametrize("kw,match", [
+    ({"method": 3}, r"method=3 must be one of .*, not int"),
+    ({"method": "rml", "init": None}, r"init=None must be one of .*, not NoneType"),
+    ({"method": "armax", "nb": 1.0}, r"nb=1.0 must be an integer, not float"),
+    ({"method": "rels", "p0": "1e6"}, r"p0='1e6' must be a real number, not str"),
+])
+def test_wrong_types_raise_type_error(rng, kw, match):
+    u = rng.standard_normal(100)
+    with pytest.raises(TypeError, match=match):
+        estimate(u, u, **{"na": 1, "nb": 0, "nc": 0, **kw})
 
 
 def test_unstable_arx_fit_warns(rng):

@@ -24,10 +24,11 @@ from numpy.testing import assert_allclose
 from scipy.signal import lfilter
 
 from ehss.identification import _kernels as K
-from ehss.identification.rels import RelsEstimator, _counters, _new_state, _settings
+from ehss.identification._common import block_counters, new_state
+from ehss.identification.rels import RelsEstimator
 
 from .naive import naive_rels
-from .systems import armax_data, system
+from .systems import armax_data, kernel_settings, system
 
 EPS = np.finfo(float).eps
 
@@ -37,11 +38,11 @@ def _run_kernel(u, y, na, nb, nc, delay, lam, alpha, trace_bound=None, c_radius=
     n = na + nb + 1 + nc
     ac = alpha if alpha_c is None else alpha_c
     tb = (na + nb + 1) * alpha + nc * ac if trace_bound is None else trace_bound
-    settings = _settings(na, nb, nc, delay, lam, alpha, ac, tb, c_radius, method)
-    block, views = _new_state(settings, np.zeros(n))
+    settings = kernel_settings(na, nb, nc, delay, lam, alpha, ac, tb, c_radius, method)
+    block, views = new_state(settings, np.zeros(n))
     rec = K.record(u, y)
     assert loop(block, rec, np.empty((0, n)), 1, True) == u.size
-    return views.theta.copy(), views.P.copy(), rec[2], rec[3], _counters(block), views
+    return views.theta.copy(), views.P.copy(), rec[2], rec[3], block_counters(block), views
 
 
 def _assert_close_to_exact(got, ref64, exact, name):
@@ -160,8 +161,8 @@ def test_rml_reset_clears_filtered_history(rng):
     u, y, _ = armax_data(rng, a, b, c, 600, snr_db=20.0)
     u, y = u / np.std(u), y / np.std(y)
     n = na + nb + 1 + nc
-    settings = _settings(na, nb, nc, d, 1.0, 1e3, 1e3, n * 1e3, 0.99, "rml")
-    block, views = _new_state(settings, np.zeros(n))
+    settings = kernel_settings(na, nb, nc, d, 1.0, 1e3, 1e3, n * 1e3, 0.99, "rml")
+    block, views = new_state(settings, np.zeros(n))
     rec = K.record(u[:300], y[:300])
     K.rels_run(block, rec, np.empty((0, n)), 1, True)
     xi = rec[3]
@@ -170,7 +171,7 @@ def test_rml_reset_clears_filtered_history(rng):
     K.rels_run(block, K.record(u[300:301], y[300:301]), np.empty((0, n)), 1, False)
     # a run of no samples applies the pending P update
     K.rels_run(block, np.empty((4, 0)), np.empty((0, n)), 1, True)
-    assert _counters(block)["resets"] == 1
+    assert block_counters(block)["resets"] == 1
     # after the reset ψ_f(300) = ψ̂(300) (zero history), now shifted into row 1
     psi_300 = np.r_[-y[299], -y[298], u[299], u[298], xi[299], xi[298]]
     assert_allclose(views.psi_f[1], psi_300, rtol=0, atol=0)
@@ -206,7 +207,7 @@ def test_schur_cohn_matches_roots(c):
 
 
 def test_settings_round_trip_through_the_block():
-    s = _settings(3, 2, 1, 2, 0.99, 1e6, 1e2, 5e6, 0.9, "rml", enabled=False)
+    s = kernel_settings(3, 2, 1, 2, 0.99, 1e6, 1e2, 5e6, 0.9, "rml", enabled=False)
     block = K.new_block(s)
     assert K.settings_of(block) == s
     K.set_enabled(block, True)
@@ -217,7 +218,7 @@ def test_state_views_tile_the_block_on_lines():
     # after the header (settings, counters, noise variance) the named views follow one
     # another without overlap, each on a 64-byte line of the line-aligned block, with
     # less than a line of padding before each; the streaming sample (io) ends the block
-    s = _settings(3, 2, 2, 2, 1.0, 1e6, 1e6, 8e6, 0.99, "rels")
+    s = kernel_settings(3, 2, 2, 2, 1.0, 1e6, 1e6, 8e6, 0.99, "rels")
     block = K.new_block(s)
     assert block.ctypes.data % (8 * K.LINE) == 0
     owner = np.full(block.size, -1)

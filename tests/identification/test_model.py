@@ -102,8 +102,10 @@ def test_predict_one_step_is_exact_on_armax_data(rng):
     f1 = c[1] - a[1]
     assert_allclose((y - m.predict(u, y, horizon=2))[2:], (xi + f1 * np.r_[0, xi[:-1]])[2:],
                     atol=1e-9)
-    with pytest.raises(ParameterError, match="horizon=0 must be an integer >= 1"):
+    with pytest.raises(ParameterError, match=r"horizon=0 must be an integer in \[1, inf\)"):
         m.predict(u, y, horizon=0)
+    with pytest.raises(TypeError, match=r"horizon=1.0 must be an integer, not float"):
+        m.predict(u, y, horizon=1.0)
 
 
 def test_unstable_model_warns():
@@ -145,6 +147,33 @@ def test_bad_model_fields(kwargs, message):
     base = dict(a=[1.0, -0.5], b=[1.0], c=[1.0, 0.2], delay=1, dt=1e-3)
     with pytest.raises(ParameterError, match=message):
         ArmaxModel(**{**base, **kwargs})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(a=["1", "-0.5"]), r"a=\['1', '-0.5'\] must be a sequence of real numbers"),
+        (dict(b=[1.0, None]), r"b=\[1.0, None\] must be a sequence of real numbers"),
+        (dict(c=[[1.0], [0.2, 0.1]]), r"c=.* must be a sequence of real numbers"),
+        (dict(delay=1.0), r"delay=1.0 must be an integer, not float"),
+        (dict(dt="1e-3"), r"dt='1e-3' must be a real number, not str"),
+        (dict(noise_variance="0.1"), r"noise_variance='0.1' must be a real number"),
+        (dict(offsets=1.0), r"offsets=1.0 must be a pair of numbers, not float"),
+        (dict(offsets=(0.0, "1")), r"offsets\[1\]='1' must be a real number"),
+    ],
+)
+def test_wrong_field_types_raise_type_error(kwargs, message):
+    base = dict(a=[1.0, -0.5], b=[1.0], c=[1.0, 0.2], delay=1, dt=1e-3)
+    with pytest.raises(TypeError, match=message):
+        ArmaxModel(**{**base, **kwargs})
+
+
+def test_rounding_digits_are_checked():
+    m = ArmaxModel(a=[1.0, -0.5], b=[1.0], dt=1e-3)
+    with pytest.raises(ParameterError, match=r"digits=0 must be an integer in \[1, inf\)"):
+        m.rounding_sensitivity(0)
+    with pytest.raises(TypeError, match=r"digits=4.0 must be an integer, not float"):
+        m.rounding_sensitivity(4.0)
 
 
 # ----------------------------------------------------------------- model files on load

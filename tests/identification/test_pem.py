@@ -100,14 +100,31 @@ def test_scaling_does_not_change_the_model(rng):
 @pytest.mark.parametrize("kw,match", [
     ({"radius": 1.0}, r"radius=1.0 must be in \(0, 1\)"),
     ({"radius": 0.0}, r"radius=0.0 must be in \(0, 1\)"),
-    ({"max_nfev": 0}, r"max_nfev=0 must be an integer >= 1"),
-    ({"nb": -1}, r"nb=-1 must be an integer >= 0"),
+    ({"max_nfev": 0}, r"max_nfev=0 must be an integer in \[1, inf\)"),
+    ({"nb": -1}, r"nb=-1 must be an integer in \[0, inf\)"),
+    ({"tol": -1e-3}, r"tol=-0.001 must be in \[0, inf\)"),
 ])
 def test_bad_settings(rng, kw, match):
     u = rng.standard_normal(200)
     args = {"nf": 1, "nb": 0, **kw}
     with pytest.raises(ParameterError, match=match):
         oe_pem(u, u, **args)
+    arma = {"na": 1, "nb": 0, "nc": 1, **kw}
+    with pytest.raises(ParameterError, match=match):
+        armax_pem(u, u, **arma)
+
+
+@pytest.mark.parametrize("kw,match", [
+    ({"radius": "0.9"}, r"radius='0.9' must be a real number, not str"),
+    ({"max_nfev": 10.0}, r"max_nfev=10.0 must be an integer, not float"),
+    ({"nb": None}, r"nb=None must be an integer, not NoneType"),
+])
+def test_wrong_types_raise_type_error(rng, kw, match):
+    u = rng.standard_normal(200)
+    with pytest.raises(TypeError, match=match):
+        oe_pem(u, u, **{"nf": 1, "nb": 0, **kw})
+    with pytest.raises(TypeError, match=match):
+        armax_pem(u, u, **{"na": 1, "nb": 0, "nc": 1, **kw})
 
 
 def test_schur_cohn_stability_test_matches_roots(rng):
@@ -279,8 +296,12 @@ def test_a_neighbour_start_can_only_lower_the_loss(rng):
 
 def test_theta0_of_the_wrong_size_is_refused(rng):
     u = rng.standard_normal(500)
-    with pytest.raises(ParameterError, match="theta0 must hold 4 finite coefficients"):
+    with pytest.raises(ParameterError, match=r"theta0 has shape \(2,\), must be \(4,\)"):
         armax_pem(u, u, na=1, nb=1, nc=1, theta0=[0.1, 0.2])
+    with pytest.raises(ParameterError, match=r"theta0=.* must be finite"):
+        armax_pem(u, u, na=1, nb=1, nc=1, theta0=[0.1, 0.2, np.nan, 0.0])
+    with pytest.raises(TypeError, match=r"theta0=.* must be a sequence of real numbers"):
+        armax_pem(u, u, na=1, nb=1, nc=1, theta0=["0.1", 0.2, 0.3, 0.0])
 
 
 def test_the_smaller_c_start_is_the_one_the_order_search_hands_over(rng):

@@ -7,9 +7,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ehss.identification import _kernels as K
-from ehss.identification.rels import RelsEstimator, _new_state, _settings
+from ehss.identification._common import new_state
+from ehss.identification.rels import RelsEstimator
 
-from .systems import armax_data, system
+from .systems import armax_data, kernel_settings, system
 
 
 def _block(block, u, y, n):
@@ -24,8 +25,8 @@ def test_p_spd_and_bounded_through_a_million_samples_of_constant_input(level, se
     rng = np.random.default_rng(seed)
     na, nb, nc, n = 2, 1, 1, 5
     alpha = 1e3
-    settings = _settings(na, nb, nc, 1, 0.99, alpha, alpha, n * alpha, 0.99, "rels")
-    state, views = _new_state(settings, np.zeros(n))
+    settings = kernel_settings(na, nb, nc, 1, 0.99, alpha, alpha, n * alpha, 0.99, "rels")
+    state, views = new_state(settings, np.zeros(n))
     a, b, c = system(2)
     u, y, _ = armax_data(rng, a, b, c, 4000, snr_db=40.0)
     _block(state, u, y, n)

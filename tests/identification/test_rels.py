@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import pickle
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from ehss.errors import DataError, ParameterError
+from ehss.identification import RelsSettings
 from ehss.identification.batch import arx_ls
 from ehss.identification.model import ArmaxModel
 from ehss.identification.rels import RelsEstimator, rels
@@ -239,21 +241,18 @@ GOOD = dict(na=2, nb=1, nc=1, delay=1)
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        (dict(na=0), r"na=0 must be an integer >= 1"),
-        (dict(na=1.5), r"na=1.5 must be an integer >= 1"),
-        (dict(nb=-1), r"nb=-1 must be an integer >= 0"),
-        (dict(nc=True), r"nc=True must be an integer >= 0"),
-        (dict(delay=-2), r"delay=-2 must be an integer >= 0"),
+        (dict(na=0), r"na=0 must be an integer in \[1, inf\)"),
+        (dict(nb=-1), r"nb=-1 must be an integer in \[0, inf\)"),
+        (dict(delay=-2), r"delay=-2 must be an integer in \[0, inf\)"),
         (dict(forgetting=0.0), r"forgetting=0.0 must be in \(0, 1\]"),
         (dict(forgetting=1.01), r"forgetting=1.01 must be in \(0, 1\]"),
         (dict(forgetting=float("nan")), r"forgetting=nan must be finite"),
-        (dict(p0=-1.0), r"p0=-1.0 must be > 0"),
-        (dict(p0="big"), r"p0='big' must be a real number"),
-        (dict(dt=0.0), r"dt=0.0 must be > 0"),
+        (dict(p0=-1.0), r"p0=-1.0 must be in \(0, inf\)"),
+        (dict(dt=0.0), r"dt=0.0 must be in \(0, inf\) s"),
         (dict(theta0=[1.0]), r"theta0 has shape \(1,\), must be \(5,\)"),
-        (dict(passes=0), r"passes=0 must be an integer >= 1"),
-        (dict(p0_c=0.0), r"p0_c=0.0 must be > 0"),
-        (dict(trace_bound=-1.0), r"trace_bound=-1.0 must be > 0"),
+        (dict(passes=0), r"passes=0 must be an integer in \[1, inf\)"),
+        (dict(p0_c=0.0), r"p0_c=0.0 must be in \(0, inf\)"),
+        (dict(trace_bound=-1.0), r"trace_bound=-1.0 must be in \(0, inf\)"),
         (dict(c_radius=1.5), r"c_radius=1.5 must be in \(0, 1\]"),
     ],
 )
@@ -261,6 +260,68 @@ def test_bad_parameters(rng, kwargs, message):
     u = rng.standard_normal(200)
     with pytest.raises(ParameterError, match=message):
         rels(u, u, **{**GOOD, **kwargs})
+    if "theta0" not in kwargs and "passes" not in kwargs:  # the settings on their own
+        with pytest.raises(ParameterError, match=message):
+            RelsSettings(**{**GOOD, **kwargs})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(na=1.5), r"na=1.5 must be an integer, not float"),
+        (dict(nc=True), r"nc=True must be an integer, not bool"),
+        (dict(delay="1"), r"delay='1' must be an integer, not str"),
+        (dict(p0="big"), r"p0='big' must be a real number, not str"),
+        (dict(forgetting=None), r"forgetting=None must be a real number, not NoneType"),
+        (dict(passes=2.0), r"passes=2.0 must be an integer, not float"),
+        (dict(theta0=["0"] * 5), r"theta0=\['0', .* must be a sequence of real numbers"),
+        (dict(method=None), r"method=None must be one of 'rels', 'rml', not NoneType"),
+    ],
+)
+def test_wrong_types_raise_type_error(rng, kwargs, message):
+    u = rng.standard_normal(200)
+    with pytest.raises(TypeError, match=message):
+        rels(u, u, **{**GOOD, **kwargs})
+    if "passes" not in kwargs:
+        with pytest.raises(TypeError, match=message):
+            RelsEstimator(**{**GOOD, **kwargs})
+
+
+def test_settings_resolve_their_defaults():
+    # P(0) = diag(α.., α_c..): α_c defaults to α, the bound of tr P to tr P(0)
+    s = RelsSettings(na=2, nb=1, nc=1, p0=10.0)
+    assert (s.alpha_c, s.trace_max) == (10.0, (2 + 1 + 1) * 10.0 + 1 * 10.0)
+    s = RelsSettings(na=2, nb=1, nc=2, p0=10.0, p0_c=0.5, method="rml")
+    assert (s.alpha_c, s.trace_max) == (0.5, 4 * 10.0 + 2 * 0.5)
+    k = s.kernel(u_scale=2.0, enabled=False)
+    assert (k.lam, k.alpha, k.alpha_c, k.trace_max, k.rml, k.enabled, k.u_scale) == (
+        1.0, 10.0, 0.5, 41.0, True, False, 2.0)
+    assert not RelsSettings(na=1, nb=0, nc=0, method="rml").kernel().rml  # RML needs a C
+    # plain Python numbers, whatever numbers were given
+    s = RelsSettings(na=np.int64(2), nb=np.int32(1), nc=0, p0=np.float32(100.0))
+    assert type(s.na) is int and type(s.nb) is int and type(s.p0) is float
+
+
+def test_settings_object_is_the_keywords(rng):
+    u = rng.standard_normal(400)
+    y = np.convolve(u, [0.0, 0.5, 0.25])[: u.size] + 0.01 * rng.standard_normal(u.size)
+    kw = dict(GOOD, forgetting=0.999, p0=1e4, method="rml")
+    by_keywords = rels(u, y, **kw)
+    by_settings = rels(u, y, settings=RelsSettings(**kw))
+    assert np.array_equal(by_settings.theta, by_keywords.theta)
+    assert by_settings.meta == by_keywords.meta
+    est = RelsEstimator(settings=RelsSettings(**kw))
+    assert est.settings == RelsSettings(**kw)
+    with pytest.raises(TypeError, match="not both"):
+        rels(u, y, settings=RelsSettings(**kw), na=2)
+    with pytest.raises(TypeError, match="must be a RelsSettings"):
+        RelsEstimator(settings=kw)
+    with pytest.raises(TypeError, match=r"missing 2 required keyword-only arguments: 'nb'"):
+        rels(u, y, na=2)
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'lam'"):
+        RelsEstimator(**GOOD, lam=0.99)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        RelsSettings(**kw).na = 3  # type: ignore[misc]
 
 
 @pytest.mark.parametrize(
@@ -354,12 +415,12 @@ def test_rml_without_c_part_is_rels(rng):
     assert_allclose(r2.b, r1.b, rtol=0, atol=0)
 
 
-@pytest.mark.parametrize("method", ["els", "RML", None])
+@pytest.mark.parametrize("method", ["els", "RML"])
 def test_bad_method(rng, method):
     u = rng.standard_normal(200)
-    with pytest.raises(ParameterError, match=r"method=.* must be 'rels' or 'rml'"):
+    with pytest.raises(ParameterError, match=r"method=.* must be one of 'rels', 'rml'"):
         rels(u, u, **GOOD, method=method)
-    with pytest.raises(ParameterError, match=r"method=.* must be 'rels' or 'rml'"):
+    with pytest.raises(ParameterError, match=r"method=.* must be one of 'rels', 'rml'"):
         RelsEstimator(**GOOD, method=method)
 
 

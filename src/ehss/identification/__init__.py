@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ehss.identification._common import ArmaxOrders, RelsSettings
 from ehss.identification.batch import armax_els, arx_ls
 from ehss.identification.delay import estimate_delay
 from ehss.identification.estimators import INITS, METHODS, estimate
@@ -14,6 +15,8 @@ __all__ = [
     "ArmaxModel",
     "RoundingSensitivity",
     "RelsEstimator",
+    "RelsSettings",
+    "ArmaxOrders",
     "rels",
     "arx_ls",
     "armax_els",

@@ -8,19 +8,19 @@ armax_pem`), the default ARMAX estimator.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Unpack
 
 import numpy as np
 
 from ehss.errors import IdentificationError
 from ehss.identification._common import (
+    ArmaxOrders,
+    OrderKeywords,
     check_batch,
-    first_sample,
-    order_arg,
     prediction_errors,
-    real_arg,
     regression_matrix,
     rms_scale,
+    solver_budget,
     stabilise,
     theta_scale,
 )
@@ -35,7 +35,9 @@ def arx_ls(u: Any, y: Any, *, na: int, nb: int, delay: int = 1, dt: float = 1.0)
     The first max(na, nb + d) samples only feed regressors. ``covariance`` is
     σ² (ΦᵀΦ)⁻¹ with σ² the residual variance (dof-corrected).
     """
-    u, y, na, nb, _, delay, dt = check_batch(u, y, na, nb, 0, delay, dt)
+    o = ArmaxOrders(na=na, nb=nb, nc=0, delay=delay, dt=dt)
+    u, y = check_batch(u, y, o)
+    na, nb, delay, dt = o.na, o.nb, o.delay, o.dt
     phi, t, _ = regression_matrix(u, y, None, na, nb, 0, delay)
     theta, *_ = np.linalg.lstsq(phi, t, rcond=None)
     res = t - phi @ theta
@@ -61,7 +63,8 @@ def els_theta(
     return theta
 
 
-def _els(us, ys, na, nb, nc, delay, max_iter, tol) -> tuple[np.ndarray, int]:
+def _els(us: np.ndarray, ys: np.ndarray, na: int, nb: int, nc: int, delay: int,
+         max_iter: int, tol: float) -> tuple[np.ndarray, int]:
     phi, t, _ = regression_matrix(us, ys, None, na, nb, 0, delay)
     theta = np.zeros(na + nb + 1 + nc)
     theta[: na + nb + 1] = np.linalg.lstsq(phi, t, rcond=None)[0]
@@ -72,7 +75,7 @@ def _els(us, ys, na, nb, nc, delay, max_iter, tol) -> tuple[np.ndarray, int]:
             phi, t, _ = regression_matrix(us, ys, e, na, nb, nc, delay)
             new = np.linalg.lstsq(phi, t, rcond=None)[0]
             new[na + nb + 1 :] = stabilise(new[na + nb + 1 :])
-            change = np.linalg.norm(new - theta) / max(np.linalg.norm(new), 1e-300)
+            change = np.linalg.norm(new - theta) / max(float(np.linalg.norm(new)), 1e-300)
             theta = new
             if change < tol:
                 break
@@ -80,16 +83,7 @@ def _els(us, ys, na, nb, nc, delay, max_iter, tol) -> tuple[np.ndarray, int]:
 
 
 def armax_els(
-    u: Any,
-    y: Any,
-    *,
-    na: int,
-    nb: int,
-    nc: int,
-    delay: int = 1,
-    dt: float = 1.0,
-    max_iter: int = 50,
-    tol: float = 1e-10,
+    u: Any, y: Any, *, max_iter: int = 50, tol: float = 1e-10, **orders: Unpack[OrderKeywords],
 ) -> ArmaxModel:
     """ARMAX model A y = q^-d B u + C e by extended least squares (ELS).
 
@@ -100,6 +94,17 @@ def armax_els(
     :func:`~ehss.identification.rels`. ELS is not the prediction-error optimum (its fixed
     point is biased where 1/C − 1/2 is not positive real); :func:`~ehss.identification.
     pem.armax_pem` starts from it and minimises Σε².
+
+    Parameters
+    ----------
+    u, y : array_like, shape (n_samples,)
+        Input and output (deviations from the operating point).
+    max_iter : int
+        Most least-squares iterations (≥ 1).
+    tol : float
+        Relative change of θ (≥ 0) below which the iterations stop.
+    na, nb, nc, delay, dt
+        Orders, input delay in samples (default 1) and sample period in s (default 1).
 
     Returns
     -------
@@ -124,9 +129,10 @@ def armax_els(
     >>> m.meta["method"], bool(abs(m.a[1] + 0.8) < 0.01)
     ('armax_els', True)
     """
-    u, y, na, nb, nc, delay, dt = check_batch(u, y, na, nb, nc, delay, dt)
-    max_iter = order_arg("max_iter", max_iter, 1)
-    tol = real_arg("tol", tol)
+    o = ArmaxOrders(**orders)
+    u, y = check_batch(u, y, o)
+    max_iter, tol = solver_budget(max_iter, "max_iter", tol)
+    na, nb, nc, delay, dt = o.na, o.nb, o.nc, o.delay, o.dt
     su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
     n = na + nb + 1 + nc
@@ -134,7 +140,7 @@ def armax_els(
     if not np.all(np.isfinite(theta)):
         raise IdentificationError("extended least squares diverged (non-finite θ)")
     e_full = prediction_errors(theta, us, ys, na, nb, nc, delay)
-    eps = e_full[first_sample(na, nb, nc, delay):]
+    eps = e_full[o.first_sample:]
     nv_s = float(eps @ eps / max(eps.size - n, 1))
     # covariance from the linearised regression at the solution: σ² (ΦᵀΦ)⁻¹
     phi, _, _ = regression_matrix(us, ys, e_full, na, nb, nc, delay)

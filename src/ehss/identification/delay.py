@@ -14,9 +14,8 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from ehss._checks import check_int
+from ehss._checks import as_record, check_int
 from ehss.errors import DataError
-from ehss.identification.rels import check_record
 
 __all__ = ["estimate_delay", "default_max_delay", "DelayScan", "scan_delays"]
 
@@ -113,7 +112,7 @@ def estimate_delay(u: Any, y: Any, *, max_delay: int | None = None) -> int | Non
     >>> estimate_delay(u, np.convolve(u, h)[: u.size])
     7
     """
-    u, y = check_record(u, y)
+    u, y = as_record(u, y)
     if max_delay is None:
         max_delay = default_max_delay(u.size)
     max_delay = check_int(max_delay, "max_delay", lo=0)
@@ -194,7 +193,7 @@ def scan_delays(u: Any, y: Any, *, max_delay: int | None = None) -> DelayScan:
     DataError
         If the record is too short for the taps (:func:`estimate_delay`).
     """
-    u, y = check_record(u, y)
+    u, y = as_record(u, y)
     half = u.size // 2
     # halves too short to look for even delay 0: the whole record alone, never supported
     split = default_max_delay(half) > 0
@@ -214,6 +213,7 @@ def scan_delays(u: Any, y: Any, *, max_delay: int | None = None) -> DelayScan:
                          delays=tuple(sorted({max(whole - 1, 0), whole})),
                          max_nb=_DEFAULT_MAX_NB, rise=None, max_delay=max_delay)
     rise = _rise(u, y, max_delay + 1 + _TAIL)
+    delays: tuple[int, ...]
     if rise is None:
         delays, max_nb = (0, 1), _DEFAULT_MAX_NB
     else:

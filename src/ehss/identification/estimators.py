@@ -34,15 +34,19 @@ use RML (or the batch "oe"/"armax") there.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Unpack
 
 import numpy as np
 from scipy.signal import lfilter
 
-from ehss.errors import ParameterError
+from ehss._checks import as_record, check_choice
 from ehss.identification import _kernels as _k
 from ehss.identification._common import (
-    check_settings,
+    RecursionKeywords,
+    RelsSettings,
+    block_counters,
+    model_from_state,
+    new_state,
     regression_matrix,
     rms_scale,
     theta_scale,
@@ -50,14 +54,7 @@ from ehss.identification._common import (
 from ehss.identification.batch import arx_ls
 from ehss.identification.model import ArmaxModel
 from ehss.identification.pem import armax_pem, oe_pem
-from ehss.identification.rels import (
-    _counters,
-    _model_from_state,
-    _new_state,
-    _settings,
-    check_record,
-    rels,
-)
+from ehss.identification.rels import rels
 
 __all__ = ["METHODS", "INITS", "estimate"]
 
@@ -71,16 +68,9 @@ def estimate(
     y: Any,
     *,
     method: str,
-    na: int,
-    nb: int,
-    nc: int,
-    delay: int = 1,
-    dt: float = 1.0,
     init: str = "batch",
-    forgetting: float = 1.0,
-    p0: float = 1e6,
-    p0_c: float | None = None,
     theta0: Any = None,
+    **settings: Unpack[RecursionKeywords],
 ) -> ArmaxModel:
     """Fit an ARMAX-family model of orders (na, nb, nc) and delay to one record.
 
@@ -112,8 +102,10 @@ def estimate(
 
     Raises
     ------
+    TypeError
+        For a ``method``, ``init``, order or setting of the wrong type.
     ParameterError
-        For an unknown ``method`` or ``init``, or impossible orders.
+        For an unknown ``method`` or ``init``, or impossible orders or settings.
     DataError
         For a bad or too short record.
 
@@ -127,29 +119,25 @@ def estimate(
     >>> np.round(m.a, 6).tolist()
     [1.0, -0.8]
     """
-    if not isinstance(method, str) or method not in METHODS:
-        raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
-    if not isinstance(init, str) or init not in INITS:
-        raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
+    check_choice(method, "method", METHODS)
+    check_choice(init, "init", INITS)
+    # the orders, and λ, α, α_c of the recursions, checked once whatever the method
+    s = RelsSettings(**settings, method="rml" if method == "rml" else "rels")
     if method == "arx":
-        model = arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
+        model = arx_ls(u, y, na=s.na, nb=s.nb, delay=s.delay, dt=s.dt)
         model.meta["stable"] = model.check(warn=True)  # an unstable fit is never silent
         return model
     if method == "armax":
-        return armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt, theta0=theta0,
-                         smaller_c=True)
+        return armax_pem(u, y, na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, dt=s.dt,
+                         theta0=theta0, smaller_c=True)
     if method == "oe":
-        return oe_pem(u, y, nf=na, nb=nb, delay=delay, dt=dt)
-    kw = {"na": na, "nb": nb, "nc": nc, "delay": delay, "dt": dt, "forgetting": forgetting,
-          "method": method}
+        return oe_pem(u, y, nf=s.na, nb=s.nb, delay=s.delay, dt=s.dt)
     if init == "zero":
-        return rels(u, y, p0=p0, p0_c=p0_c, **kw)
-    na, nb, nc, delay, forgetting, _, dt = check_settings(na, nb, nc, delay, forgetting,
-                                                           p0, dt)
-    start = armax_pem(u, y, na=na, nb=nb, nc=nc, delay=delay, dt=dt, theta0=theta0) if nc else \
-        arx_ls(u, y, na=na, nb=nb, delay=delay, dt=dt)
-    u, y = check_record(u, y)
-    return _recursion_from(start, u, y, method=method, forgetting=forgetting)
+        return rels(u, y, settings=s)
+    start = (armax_pem(u, y, na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, dt=s.dt, theta0=theta0)
+             if s.nc else arx_ls(u, y, na=s.na, nb=s.nb, delay=s.delay, dt=s.dt))
+    u, y = as_record(u, y)
+    return _recursion_from(start, u, y, method=method, forgetting=s.forgetting)
 
 
 def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: str,
@@ -169,9 +157,10 @@ def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: 
     P0 = _start_information(u, y, start, filtered=(method == "rml"))
     theta_s = start.theta / theta_scale(na, nb, nc, su, sy)
     alpha = float(np.mean(np.diag(P0)))  # what a reset of P returns to (α I)
-    settings = _settings(na, nb, nc, d, forgetting, alpha, alpha, float(np.trace(P0)),
-                         _C_RADIUS, method)
-    block, views = _new_state(settings, theta_s)
+    settings = RelsSettings(na=na, nb=nb, nc=nc, delay=d, dt=start.dt, forgetting=forgetting,
+                            p0=alpha, p0_c=alpha, trace_bound=float(np.trace(P0)),
+                            c_radius=_C_RADIUS, method=method)
+    block, views = new_state(settings.kernel(), theta_s)
     views.P[:] = P0
     r_c = float(np.max(np.abs(np.roots(start.c)))) if nc else 0.0
     settle = int(np.ceil(np.log(1e-3) / np.log(r_c))) if 0.0 < r_c < 1.0 else 0
@@ -185,12 +174,12 @@ def _recursion_from(start: ArmaxModel, u: np.ndarray, y: np.ndarray, *, method: 
     _k.rels_run(block, rec, no_hist, 1, True)
     xi = rec[3]  # the residuals of the adapting part (warm < u.size // 4)
     nv_s = float(np.mean(np.square(xi[u.size // 2 - warm :])))
-    counts = _counters(block)
+    counts = block_counters(block)
     counts.pop("n_samples", None)
     meta = {"method": method, "n_samples": int(u.size), "forgetting": forgetting,
             "init": "batch", "start_method": start.meta["method"], "warm_up": warm,
             "c_radius": _C_RADIUS, "u_scale": su, "y_scale": sy, **counts}
-    model = _model_from_state(views, na, nb, nc, d, start.dt, su, sy, nv_s, meta)
+    model = model_from_state(views, settings, su, sy, nv_s, meta)
     model.check(warn=True)
     return model
 

@@ -38,8 +38,30 @@ from ehss.errors import DataError, EhssWarning, ParameterError
 __all__ = ["ArmaxModel", "RoundingSensitivity"]
 
 
+def real_array(value: Any, name: str) -> np.ndarray:
+    """``value`` as a new float64 array (TypeError unless it holds real numbers:
+    strings, None, complex or a ragged nesting are refused)."""
+    try:
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "iuf":
+            raise TypeError(f"dtype {arr.dtype}")
+    except (TypeError, ValueError):  # a ragged list cannot even be an array
+        raise TypeError(f"{name}={show(value)} must be a sequence of real numbers, not "
+                        f"{type(value).__name__}") from None
+    return np.array(arr, dtype=np.float64, copy=True)
+
+
 def _coeffs(name: str, value: Any, *, monic: bool) -> np.ndarray:
-    arr = np.array(value, dtype=np.float64, copy=True).reshape(-1)
+    """``value`` as a read-only float64 vector of finite coefficients.
+
+    Raises
+    ------
+    TypeError
+        If ``value`` does not hold real numbers (see :func:`real_array`).
+    ParameterError
+        If it is empty, not finite or (``monic``) does not start with 1.
+    """
+    arr = real_array(value, name).reshape(-1)
     if arr.size == 0:
         raise ParameterError(f"{name}={value!r} must have at least one coefficient")
     if not np.all(np.isfinite(arr)):
@@ -51,19 +73,14 @@ def _coeffs(name: str, value: Any, *, monic: bool) -> np.ndarray:
 
 
 def _pair(name: str, value: Any) -> tuple[float, float]:
-    """``value`` as a pair of finite floats."""
+    """``value`` as a pair of finite floats (TypeError if it is not a pair of real
+    numbers, ParameterError if one is not finite)."""
     try:
         lo, hi = value
     except (TypeError, ValueError):
-        raise ParameterError(f"{name}={value!r} must be a pair of numbers") from None
-    out = []
-    for x in (lo, hi):
-        if not is_real(x):
-            raise ParameterError(f"{name}={value!r} must be a pair of numbers")
-        if not math.isfinite(float(x)):
-            raise ParameterError(f"{name}={value!r} must be finite")
-        out.append(float(x))
-    return out[0], out[1]
+        raise TypeError(f"{name}={show(value)} must be a pair of numbers, not "
+                        f"{type(value).__name__}") from None
+    return check_real(lo, f"{name}[0]"), check_real(hi, f"{name}[1]")
 
 
 def _jsonable(obj: Any) -> Any:
@@ -168,6 +185,9 @@ class ArmaxModel:
         object.__setattr__(self, "delay", check_int(self.delay, "delay", lo=0))
         object.__setattr__(self, "dt", check_real(self.dt, "dt", lo=0.0, lo_open=True,
                                                   unit="s"))
+        if not is_real(self.noise_variance):
+            raise TypeError(f"noise_variance={show(self.noise_variance)} must be a real "
+                            f"number, not {type(self.noise_variance).__name__}")
         object.__setattr__(self, "noise_variance", float(self.noise_variance))
         if self.covariance is not None:
             cov = np.array(self.covariance, dtype=np.float64, copy=True)
@@ -349,8 +369,7 @@ class ArmaxModel:
         """
         from scipy.signal import lfilter
 
-        if not is_integer(horizon) or horizon < 1:
-            raise ParameterError(f"horizon={horizon!r} must be an integer >= 1")
+        horizon = check_int(horizon, "horizon", lo=1)
         u = np.asarray(u, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
         if u.shape != y.shape or u.ndim != 1:
@@ -444,8 +463,7 @@ class ArmaxModel:
         """
         from scipy.optimize import linear_sum_assignment
 
-        if not is_integer(digits) or digits < 1:
-            raise ParameterError(f"digits={digits!r} must be an integer >= 1")
+        digits = check_int(digits, "digits", lo=1)
 
         def rnd(v: np.ndarray) -> np.ndarray:
             return np.array([float(f"{x:.{digits}g}") for x in v])
@@ -638,7 +656,18 @@ def _fields_from_dict(d: Any) -> dict[str, Any]:
     if not np.any(b):
         raise DataError("field 'b' is all zeros: the model has no path from input to output")
     c = _polynomial(d, "c", monic=True) if d.get("c") is not None else np.ones(1)
-    delay = d["delay"]
+    delay = _field_delay(d["delay"])
+    dt = _field_dt(d["dt"])
+    return dict(a=a, b=b, c=c, delay=delay, dt=dt,
+                noise_variance=_field_noise_variance(d.get("noise_variance")),
+                covariance=_field_covariance(d.get("covariance"),
+                                             a.size + b.size + c.size - 2),
+                meta=_field_meta(d.get("meta"), a, b), offsets=_field_offsets(d.get("offsets")),
+                band_hz=_field_band(d.get("band_hz"), dt))
+
+
+def _field_delay(delay: Any) -> int:
+    """The field 'delay': a whole number of samples in [0, MAX_DELAY]."""
     if isinstance(delay, float) and delay.is_integer():
         delay = int(delay)  # some JSON writers give every number a decimal point
     if not is_integer(delay):
@@ -646,50 +675,73 @@ def _fields_from_dict(d: Any) -> dict[str, Any]:
                         f"[0, {MAX_DELAY}]")
     if not 0 <= delay <= MAX_DELAY:
         raise DataError(f"field 'delay' = {delay} must be in [0, {MAX_DELAY}] samples")
-    dt = _number(d["dt"], "dt")
+    return int(delay)
+
+
+def _field_dt(value: Any) -> float:
+    """The field 'dt': a sample period whose rate is in ``SAMPLE_RATE_RANGE_HZ``."""
+    dt = _number(value, "dt")
     lo_fs, hi_fs = SAMPLE_RATE_RANGE_HZ
     if not 1.0 / hi_fs <= dt <= 1.0 / lo_fs:
         raise DataError(f"field 'dt' = {dt!r} s must be a sample period in "
                         f"[{1.0 / hi_fs:g}, {1.0 / lo_fs:g}] s")
-    nv = d.get("noise_variance")
-    if nv is not None:
-        nv = _number(nv, "noise_variance")
-        if nv < 0:
-            raise DataError(f"field 'noise_variance' = {nv!r} must be >= 0")
-    cov = d.get("covariance")
-    if cov is not None:
-        n = a.size + b.size + c.size - 2
-        if not isinstance(cov, list) or len(cov) != n or not all(
-                isinstance(row, list) and len(row) == n for row in cov):
-            raise DataError(f"field 'covariance' must be a list of {n} rows of {n} numbers "
-                            "for these orders (a square matrix)")
-        cov = np.array([_number_list(row, f"covariance[{i}]", max_len=n)
-                        for i, row in enumerate(cov)])
-    meta = d.get("meta")
+    return dt
+
+
+def _field_noise_variance(value: Any) -> float:
+    """The field 'noise_variance' (≥ 0), NaN when it is absent."""
+    if value is None:
+        return math.nan
+    nv = _number(value, "noise_variance")
+    if nv < 0:
+        raise DataError(f"field 'noise_variance' = {nv!r} must be >= 0")
+    return nv
+
+
+def _field_covariance(cov: Any, n: int) -> np.ndarray | None:
+    """The field 'covariance': n rows of n numbers, or None."""
+    if cov is None:
+        return None
+    if not isinstance(cov, list) or len(cov) != n or not all(
+            isinstance(row, list) and len(row) == n for row in cov):
+        raise DataError(f"field 'covariance' must be a list of {n} rows of {n} numbers "
+                        "for these orders (a square matrix)")
+    return np.array([_number_list(row, f"covariance[{i}]", max_len=n)
+                     for i, row in enumerate(cov)])
+
+
+def _field_meta(meta: Any, a: np.ndarray, b: np.ndarray) -> dict[str, Any]:
+    """The field 'meta': an object (empty when absent), its known factors checked."""
     if meta is None:
-        meta = {}
+        return {}
     if not isinstance(meta, dict):
         raise DataError(f"field 'meta' must be an object, not {_json_type(meta)}")
     if meta.get("known_factors") is not None:
         _check_known_factors(meta["known_factors"], a, b)
-    off = d.get("offsets")
-    if off is not None:
-        if not isinstance(off, dict) or set(off) != {"input", "output"}:
-            raise DataError("field 'offsets' must be an object with the numbers 'input' and "
-                            f"'output', got {show(off)}")
-        off = (_number(off["input"], "offsets.input"), _number(off["output"], "offsets.output"))
-    band = d.get("band_hz")
-    if band is not None:
-        if not isinstance(band, list) or len(band) != 2:
-            raise DataError(f"field 'band_hz' = {show(band)} must be a list [lo, hi] in Hz")
-        lo, hi = (_number(x, f"band_hz[{i}]") for i, x in enumerate(band))
-        if not 0.0 <= lo < hi <= 0.5 / dt * (1 + 1e-12):
-            raise DataError(f"field 'band_hz' = {show(band)} must satisfy 0 <= lo < hi <= "
-                            f"fs/2 = {0.5 / dt:g} Hz")
-        band = (lo, hi)
-    return dict(a=a, b=b, c=c, delay=int(delay), dt=dt,
-                noise_variance=math.nan if nv is None else nv, covariance=cov, meta=meta,
-                offsets=off, band_hz=band)
+    return meta
+
+
+def _field_offsets(off: Any) -> tuple[float, float] | None:
+    """The field 'offsets': {"input": number, "output": number}, or None."""
+    if off is None:
+        return None
+    if not isinstance(off, dict) or set(off) != {"input", "output"}:
+        raise DataError("field 'offsets' must be an object with the numbers 'input' and "
+                        f"'output', got {show(off)}")
+    return _number(off["input"], "offsets.input"), _number(off["output"], "offsets.output")
+
+
+def _field_band(band: Any, dt: float) -> tuple[float, float] | None:
+    """The field 'band_hz': [lo, hi] in Hz with 0 <= lo < hi <= fs/2, or None."""
+    if band is None:
+        return None
+    if not isinstance(band, list) or len(band) != 2:
+        raise DataError(f"field 'band_hz' = {show(band)} must be a list [lo, hi] in Hz")
+    lo, hi = (_number(x, f"band_hz[{i}]") for i, x in enumerate(band))
+    if not 0.0 <= lo < hi <= 0.5 / dt * (1 + 1e-12):
+        raise DataError(f"field 'band_hz' = {show(band)} must satisfy 0 <= lo < hi <= "
+                        f"fs/2 = {0.5 / dt:g} Hz")
+    return lo, hi
 
 
 def _check_known_factors(known: Any, a: np.ndarray, b: np.ndarray) -> None:

@@ -29,12 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from ehss._checks import is_integer, is_real
+from ehss._checks import as_record, check_choice, check_int_list, check_real
 from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification._grid import check_jobs, fit_grid
 from ehss.identification.estimators import INITS, METHODS, estimate
 from ehss.identification.model import ArmaxModel
-from ehss.identification.rels import check_record
 
 __all__ = ["OrderRow", "OrderSelection", "select_order"]
 
@@ -81,16 +80,6 @@ class OrderSelection:
     criterion: str
     model: ArmaxModel
     method: str = "armax"
-
-
-def _candidates(name: str, v: Any, minimum: int) -> list[int]:
-    vals = [v] if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else list(v)
-    if not vals:
-        raise ParameterError(f"{name}={v!r} must list at least one order")
-    for x in vals:
-        if not is_integer(x) or x < minimum:
-            raise ParameterError(f"{name}={v!r} must hold integers >= {minimum}")
-    return [int(x) for x in vals]
 
 
 def select_order(
@@ -169,30 +158,12 @@ def select_order(
     IdentificationError
         If no candidate is stable (with a finite score).
     """
-    if criterion is None:
-        criterion = "aic" if score is None else "fit"
-    if criterion not in _CRITERIA:
-        raise ParameterError(f"criterion={criterion!r} must be one of {_CRITERIA}")
-    if not isinstance(method, str) or method not in METHODS:
-        raise ParameterError(f"method={method!r} must be one of {', '.join(METHODS)}")
-    if not isinstance(init, str) or init not in INITS:
-        raise ParameterError(f"init={init!r} must be one of {', '.join(INITS)}")
-    if criterion == "fit" and score is None:
-        raise ParameterError("criterion='fit' needs a score (the fit on validation data)")
-    if score is not None and not callable(score):
-        raise TypeError(f"score must be callable, not {type(score).__name__}")
-    if admissible is not None and not callable(admissible):
-        raise TypeError(f"admissible must be callable, not {type(admissible).__name__}")
-    tol = fit_tolerance
-    if not is_real(tol) or not (math.isfinite(tol) and tol >= 0):
-        raise ParameterError(f"fit_tolerance={fit_tolerance!r} must be a number >= 0")
-    u, y = check_record(u, y)
-    ncs = _candidates("nc", nc, 0)
-    if method in ("arx", "oe"):
-        ncs = [0]
+    criterion, tol = _check_choices(criterion, score, method, init, fit_tolerance, admissible)
+    u, y = as_record(u, y)
+    ncs = [0] if method in ("arx", "oe") else check_int_list(nc, "nc", lo=0)
     grid = list(itertools.product(
-        _candidates("na", na, 1), _candidates("nb", nb, 0), ncs,
-        _candidates("delay", delay, 0),
+        check_int_list(na, "na", lo=1), check_int_list(nb, "nb", lo=0), ncs,
+        check_int_list(delay, "delay", lo=0),
     ))
     jobs = check_jobs(jobs)
 
@@ -209,8 +180,35 @@ def select_order(
     for i, m in fit_grid(grid, fit, jobs=jobs, neighbours=(method == "armax")):
         rows.append(_failed(grid[i], score) if m is None else _score(m, u, y, score))
         models.append(m)
-    if not rows:  # pragma: no cover - _candidates forbids empty grids
+    if not rows:  # pragma: no cover - check_int_list forbids empty grids
         raise DataError(f"no candidate orders for {u.size} samples")
+    i = _pick(rows, models, criterion, tol, admissible, method)
+    return OrderSelection(table=tuple(rows), best=rows[i], criterion=criterion,
+                          model=_fitted(models[i]), method=method)
+
+
+def _check_choices(
+    criterion: str | None, score: Callable[[ArmaxModel], float] | None, method: str,
+    init: str, fit_tolerance: float, admissible: Callable[[ArmaxModel], bool] | None,
+) -> tuple[str, float]:
+    """The criterion (by default "fit" with a score, else "aic") and the fit tolerance of
+    :func:`select_order`, the other choices checked."""
+    if criterion is None:
+        criterion = "aic" if score is None else "fit"
+    check_choice(criterion, "criterion", _CRITERIA)
+    check_choice(method, "method", METHODS)
+    check_choice(init, "init", INITS)
+    if criterion == "fit" and score is None:
+        raise ParameterError("criterion='fit' needs a score (the fit on validation data)")
+    for name, f in (("score", score), ("admissible", admissible)):
+        if f is not None and not callable(f):
+            raise TypeError(f"{name} must be callable, not {type(f).__name__}")
+    return criterion, check_real(fit_tolerance, "fit_tolerance", lo=0.0)
+
+
+def _pick(rows: list[OrderRow], models: list[ArmaxModel | None], criterion: str, tol: float,
+          admissible: Callable[[ArmaxModel], bool] | None, method: str) -> int:
+    """Index of the best stable candidate (see :func:`select_order`)."""
     key = (lambda r: -r.fit) if criterion == "fit" else (lambda r: getattr(r, criterion))
     ok = [i for i, r in enumerate(rows) if r.stable and math.isfinite(key(r))]
     if not ok:
@@ -219,14 +217,20 @@ def select_order(
             f"{method!r}; try lower orders, another method or a longer record"
         )
     if admissible is not None:
-        passing = [j for j in ok if admissible(models[j])]
+        passing = [j for j in ok if admissible(_fitted(models[j]))]
         ok = passing or ok
     i = min(ok, key=lambda j: key(rows[j]))
     if criterion == "fit":
         near = [j for j in ok if rows[j].fit >= rows[i].fit - tol]
         i = min(near, key=lambda j: (rows[j].n_params, j))
-    return OrderSelection(table=tuple(rows), best=rows[i], criterion=criterion,
-                          model=models[i], method=method)
+    return i
+
+
+def _fitted(model: ArmaxModel | None) -> ArmaxModel:
+    """A stable candidate's model (only a fitted candidate is stable)."""
+    if model is None:  # pragma: no cover - a failed candidate is listed as unstable
+        raise IdentificationError("a candidate listed as stable was not fitted")
+    return model
 
 
 def _failed(c: tuple[int, int, int, int],

@@ -51,21 +51,23 @@ Safeguards:
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Unpack
 
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from ehss.errors import IdentificationError, ParameterError
+from ehss.errors import IdentificationError
 from ehss.identification import _pem_kernels as _pk
 from ehss.identification._common import (
+    ArmaxOrders,
+    OrderKeywords,
     check_batch,
-    order_arg,
-    radius_arg,
-    real_arg,
+    check_theta0,
     regression_matrix,
     rms_scale,
+    root_radius,
+    solver_budget,
     stabilise,
     theta_scale,
 )
@@ -158,16 +160,12 @@ def armax_pem(
     u: Any,
     y: Any,
     *,
-    na: int,
-    nb: int,
-    nc: int,
-    delay: int = 1,
-    dt: float = 1.0,
     radius: float = 0.999,
     max_nfev: int = 200,
     tol: float = 1e-10,
     theta0: Any = None,
     smaller_c: bool = False,
+    **orders: Unpack[OrderKeywords],
 ) -> ArmaxModel:
     """ARMAX model A y = q^-d B u + C e by prediction-error minimisation.
 
@@ -175,12 +173,6 @@ def armax_pem(
     ----------
     u, y : array_like, shape (n_samples,)
         Input and output (deviations from the operating point).
-    na, nb, nc : int
-        Orders of A (≥ 1), B (nb + 1 coefficients) and C (≥ 0; nc = 0 gives ARX).
-    delay : int
-        Input delay d in samples.
-    dt : float
-        Sample period (s).
     radius : float
         Roots of C are kept inside this radius (0 < radius < 1).
     max_nfev : int
@@ -198,6 +190,12 @@ def armax_pem(
         start of the order search, which passes that fit as ``theta0`` instead of
         fitting it again, so that a refit of a pick gives the same model. (For nc = 1
         the neighbour, C = 1, is the ARX start.)
+    na, nb, nc : int
+        Orders of A (≥ 1), B (nb + 1 coefficients) and C (≥ 0; nc = 0 gives ARX).
+    delay : int
+        Input delay d in samples (default 1).
+    dt : float
+        Sample period (s, default 1).
 
     Returns
     -------
@@ -223,10 +221,13 @@ def armax_pem(
     >>> bool(abs(m.a[1] + 0.8) < 0.01 and abs(m.c[1] - 0.5) < 0.05)
     True
     """
-    u, y, na, nb, nc, delay, dt = check_batch(u, y, na, nb, nc, delay, dt)
-    radius = radius_arg("radius", radius)
-    max_nfev = order_arg("max_nfev", max_nfev, 1)
-    tol = real_arg("tol", tol)
+    o = ArmaxOrders(**orders)
+    u, y = check_batch(u, y, o)
+    radius = root_radius(radius)
+    max_nfev, tol = solver_budget(max_nfev, "max_nfev", tol)
+    na, nb, nc, delay, dt = o.na, o.nb, o.nc, o.delay, o.dt
+    if theta0 is not None and nc:  # ignored for nc = 0
+        theta0 = check_theta0(theta0, o.n_params)
     if theta0 is None and smaller_c and nc >= 2:
         theta0 = _smaller_c_theta(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol)
     model = _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0)
@@ -295,12 +296,9 @@ def _armax_starts(us, ys, na, nb, nc, delay, radius, max_nfev, tol):
 
 def _given_start(theta0: Any, dvec: np.ndarray, na: int, nb: int, nc: int,
                  radius: float) -> np.ndarray:
-    """``theta0`` (physical units) on the scaled data, its C stabilised inside radius."""
-    t = np.array(theta0, dtype=np.float64).reshape(-1)
-    if t.size != dvec.size or not np.all(np.isfinite(t)):
-        raise ParameterError(f"theta0 must hold {dvec.size} finite coefficients "
-                             f"(na + nb + 1 + nc), got {np.asarray(theta0).size}")
-    t = t / dvec
+    """``theta0`` (physical units, checked) on the scaled data, its C stabilised inside
+    radius."""
+    t = theta0 / dvec
     n_ab = na + nb + 1
     t[n_ab:] = stabilise(t[n_ab:], radius)
     return t
@@ -418,10 +416,11 @@ def oe_pem(
     >>> bool(abs(m.a[1] + 0.8) < 0.01) and bool(np.array_equal(m.a, m.c))
     True
     """
-    u, y, nf, nb, _, delay, dt = check_batch(u, y, nf, nb, 0, delay, dt)
-    radius = radius_arg("radius", radius)
-    max_nfev = order_arg("max_nfev", max_nfev, 1)
-    tol = real_arg("tol", tol)
+    o = ArmaxOrders(na=nf, nb=nb, nc=0, delay=delay, dt=dt)
+    u, y = check_batch(u, y, o)
+    radius = root_radius(radius)
+    max_nfev, tol = solver_budget(max_nfev, "max_nfev", tol)
+    nf, nb, delay, dt = o.na, o.nb, o.delay, o.dt
     su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
     theta, name, losses, nfev_total, k0 = _oe_fit(us, ys, nf, nb, delay, radius, max_nfev, tol)

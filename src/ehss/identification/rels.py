@@ -45,117 +45,31 @@ to RML as well (a reset of P also restarts the filter 1/Ĉ from rest).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Unpack
 
 import numpy as np
 
-from ehss._checks import as_record, is_real
-from ehss.errors import DataError, IdentificationError, ParameterError
+from ehss._checks import as_record, check_int, check_real, is_real
+from ehss.errors import DataError
 from ehss.identification import _kernels as _k
-from ehss.identification._common import check_settings as _check_settings
-from ehss.identification._common import order_arg as _order
-from ehss.identification._common import real_arg as _real
-from ehss.identification._common import rms_scale as _rms_scale
-from ehss.identification._common import theta_scale as _theta_scale
+from ehss.identification._common import (
+    ArmaxOrders,
+    RelsKeywords,
+    RelsSettings,
+    block_counters,
+    check_theta0,
+    model_from_state,
+    new_state,
+    record_scales,
+    rels_settings,
+    theta_scale,
+    too_short,
+)
 from ehss.identification.model import ArmaxModel
 
 __all__ = ["rels", "RelsEstimator", "specialise_rels"]
 
-_METHODS = ("rels", "rml")
-
-
 # ---------------------------------------------------------------- validation helpers
-def _check_method(method: Any) -> str:
-    if not isinstance(method, str) or method not in _METHODS:
-        raise ParameterError(f"method={method!r} must be 'rels' or 'rml'")
-    return method
-
-
-def _check_p0_c(p0_c: Any, alpha: float) -> float:
-    if p0_c is None:
-        return alpha
-    value = _real("p0_c", p0_c)
-    if value <= 0:
-        raise ParameterError(f"p0_c={p0_c!r} must be > 0")
-    return value
-
-
-def _check_theta0(theta0: Any, n: int) -> np.ndarray:
-    if theta0 is None:
-        return np.zeros(n)
-    t = np.asarray(theta0, dtype=np.float64)
-    if t.shape != (n,):
-        raise ParameterError(f"theta0 has shape {t.shape}, must be ({n},) = na + nb + 1 + nc")
-    if not np.all(np.isfinite(t)):
-        raise ParameterError(f"theta0={theta0!r} must be finite")
-    return t.copy()
-
-
-def check_record(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Validate an input/output record: 1-D, equal length, finite; contiguous float64."""
-    return as_record(u, y)
-
-
-def _settings(
-    na: int, nb: int, nc: int, delay: int, lam: float, alpha: float, alpha_c: float,
-    trace_bound: float, c_radius: float, method: str, enabled: bool = True,
-    u_scale: float = 1.0, y_scale: float = 1.0,
-) -> _k.RelsSettings:
-    """The kernel's settings, as plain Python scalars (one compiled signature)."""
-    return _k.RelsSettings(
-        na=int(na), nb=int(nb), nc=int(nc), delay=int(delay), lam=float(lam),
-        alpha=float(alpha), alpha_c=float(alpha_c), trace_max=float(trace_bound),
-        c_radius=float(c_radius), rml=bool(method == "rml" and nc > 0),
-        enabled=bool(enabled), u_scale=float(u_scale), y_scale=float(y_scale),
-    )
-
-
-def _new_state(
-    settings: _k.RelsSettings, theta0_scaled: np.ndarray
-) -> tuple[np.ndarray, _k.RelsState]:
-    """(block, views): θ̂ = θ0, P = P(0), regressors and counters zero."""
-    s = settings
-    block = _k.new_block(settings)
-    views = _k.state_views(block)
-    views.theta[:] = theta0_scaled
-    nab = s.na + s.nb + 1
-    views.P[:] = np.diag(np.r_[np.full(nab, s.alpha), np.full(s.nc, s.alpha_c)])
-    return block, views
-
-
-def _counters(block: np.ndarray) -> dict[str, int]:
-    """The counters of the estimator in ``block``, by name."""
-    counts = block[_k.N_SETTINGS : _k.NOISE_VAR]
-    return {name: int(v) for name, v in zip(_k.COUNTER_NAMES, counts, strict=True)}
-
-
-def _model_from_state(
-    views: _k.RelsState, na: int, nb: int, nc: int, delay: int, dt: float, u_scale: float,
-    y_scale: float, noise_variance_scaled: float, meta: dict,
-) -> ArmaxModel:
-    dvec = _theta_scale(na, nb, nc, u_scale, y_scale)
-    theta_s = views.theta
-    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # checked below
-        theta = theta_s * dvec
-        nv = float(np.float64(noise_variance_scaled) * np.float64(y_scale) ** 2)
-        # cov(θ̂) ≈ σ² P for λ = 1 (P ≈ (Σψψᵀ)⁻¹); de-scaled with D: D P D σ²
-        cov = noise_variance_scaled * (views.P * dvec[:, None] * dvec[None, :])
-    if not np.all(np.isfinite(cov)):
-        cov = None
-    # a coefficient that overflowed, or a non-zero one that underflowed to zero or
-    # lost its precision (subnormal), cannot be written in physical units
-    tiny = np.finfo(float).tiny
-    lost = (np.abs(theta_s) >= tiny) & ~(np.abs(theta) >= tiny)
-    if not np.all(np.isfinite(theta)) or np.any(lost):
-        raise IdentificationError(
-            f"the estimate does not fit float64 in physical units (u scale {u_scale:.3g}, "
-            f"y scale {y_scale:.3g}: b = b_scaled·{y_scale:.3g}/{u_scale:.3g}); rescale "
-            "u and y to closer magnitudes"
-        )
-    return ArmaxModel.from_theta(theta, na=na, nb=nb, nc=nc, delay=delay, dt=dt,
-                                 noise_variance=nv, covariance=cov, meta=meta)
-
-
 def _sample(name: str, value: Any) -> float:
     """One streaming sample as a Python float (TypeError for anything but a real number)."""
     if not is_real(value):
@@ -191,8 +105,8 @@ def specialise_rels(*, na: int, nb: int, nc: int, delay: int = 1) -> None:
     --------
     >>> specialise_rels(na=2, nb=1, nc=1, delay=1)  # doctest: +SKIP
     """
-    na, nb, nc, delay, *_ = _check_settings(na, nb, nc, delay, 1.0, 1.0, 1.0)
-    _k.kernel_for(na, nb, nc, delay, compile_now=True)
+    o = ArmaxOrders(na=na, nb=nb, nc=nc, delay=delay)
+    _k.kernel_for(o.na, o.nb, o.nc, o.delay, compile_now=True)
 
 
 # ---------------------------------------------------------------- batch
@@ -200,19 +114,10 @@ def rels(
     u: Any,
     y: Any,
     *,
-    na: int,
-    nb: int,
-    nc: int,
-    delay: int = 1,
-    forgetting: float = 1.0,
-    p0: float = 1e6,
     theta0: Any = None,
-    dt: float = 1.0,
     passes: int = 1,
-    p0_c: float | None = None,
-    trace_bound: float | None = None,
-    c_radius: float = 0.99,
-    method: str = "rels",
+    settings: RelsSettings | None = None,
+    **keywords: Unpack[RelsKeywords],
 ) -> ArmaxModel:
     """Identify an ARMAX model from a whole record with RELS, eqs (19)–(22), or RML.
 
@@ -251,6 +156,9 @@ def rels(
         and P update from the regressor filtered through 1/Ĉ (see the module notes).
         Use "rml" with nc = na when the disturbance is mostly white noise at the
         output (output-error records), where RELS is biased. With nc = 0 both are RLS.
+    settings : RelsSettings, optional
+        All the above but ``theta0`` and ``passes`` in one checked object, instead of
+        the keywords.
 
     Returns
     -------
@@ -267,6 +175,8 @@ def rels(
         Non-1-D, unequal-length, non-finite or too short records, or u and y so far
         apart in magnitude that b = b_scaled·RMS(y)/RMS(u) leaves float64 (any common
         magnitude works: the record is scaled by its RMS, formed without overflow).
+    TypeError
+        Orders or settings of the wrong type (``na=1.5``, ``p0="big"``).
     ParameterError
         Impossible orders or settings.
     IdentificationError
@@ -287,63 +197,30 @@ def rels(
     >>> np.round(m.a, 6).tolist(), np.round(m.b, 6).tolist()
     ([1.0, -0.8], [0.5])
     """
-    na, nb, nc, delay, lam, alpha, dt = _check_settings(na, nb, nc, delay, forgetting, p0, dt)
-    alpha_c = _check_p0_c(p0_c, alpha)
-    method = _check_method(method)
-    passes = _order("passes", passes, 1)
-    n = na + nb + 1 + nc
-    tr0 = (na + nb + 1) * alpha + nc * alpha_c
-    tb = tr0 if trace_bound is None else _real("trace_bound", trace_bound)
-    if tb <= 0:
-        raise ParameterError(f"trace_bound={trace_bound!r} must be > 0")
-    c_radius = _real("c_radius", c_radius)
-    if not 0.0 < c_radius <= 1.0:
-        raise ParameterError(f"c_radius={c_radius!r} must be in (0, 1]")
-    theta0 = _check_theta0(theta0, n)
-    u, y = check_record(u, y)
-    need = max(na, nb + delay, nc) + n + 1
-    if u.size < need:
-        raise DataError(
-            f"{u.size} samples are too few for na={na}, nb={nb}, nc={nc}, delay={delay}: "
-            f"need at least {need}"
-        )
-    su, sy = _rms_scale(u), _rms_scale(y)
+    s = rels_settings(settings, keywords)
+    passes = check_int(passes, "passes", lo=1)
+    theta0 = check_theta0(theta0, s.n_params)
+    u, y = as_record(u, y)
+    too_short(u.size, s)
+    su, sy, dvec = record_scales(u, y, s)
     us, ys = u / su, y / sy
-    dvec = _theta_scale(na, nb, nc, su, sy)
-    if not np.all((dvec >= np.finfo(float).tiny) & np.isfinite(dvec)):
-        raise DataError(
-            f"u and y are too far apart in magnitude for float64 (RMS of u {su:.3g}, of y "
-            f"{sy:.3g}: b would be scaled by {sy:.3g}/{su:.3g}); rescale them"
-        )
     theta_s = theta0 / dvec
-    settings = _settings(na, nb, nc, delay, lam, alpha, alpha_c, tb, c_radius, method)
-    hist = np.empty((0, n))
-    run = _k.kernel_for(na, nb, nc, delay)
+    kernel = s.kernel()
+    hist = np.empty((0, s.n_params))
+    run = _k.kernel_for(s.na, s.nb, s.nc, s.delay)
     totals = dict.fromkeys(_k.COUNTER_NAMES, 0)
     rec = _k.record(us, ys)
     xi = rec[3]  # ξ̂ of the last pass
     for _ in range(passes):
-        block, views = _new_state(settings, theta_s)
+        block, views = new_state(kernel, theta_s)
         run(block, rec, hist, 1, True)
-        totals = {key: totals[key] + v for key, v in _counters(block).items()}
+        totals = {key: totals[key] + v for key, v in block_counters(block).items()}
         theta_s = views.theta.copy()
-    totals_d = dict(totals)
-    totals_d.pop("n_samples")
+    totals.pop("n_samples")
     nv_s = float(np.mean(np.square(xi[u.size // 2 :])))
-    meta = {
-        "method": method,
-        "n_samples": int(u.size),
-        "forgetting": lam,
-        "p0": alpha,
-        "p0_c": alpha_c,
-        "passes": passes,
-        "trace_bound": tb,
-        "c_radius": c_radius,
-        "u_scale": su,
-        "y_scale": sy,
-        **totals_d,
-    }
-    model = _model_from_state(views, na, nb, nc, delay, dt, su, sy, nv_s, meta)
+    meta = {"method": s.method, "n_samples": int(u.size), **s.meta(passes), "u_scale": su,
+            "y_scale": sy, **totals}
+    model = model_from_state(views, s, su, sy, nv_s, meta)
     model.check(warn=True)
     return model
 
@@ -373,6 +250,9 @@ class RelsEstimator:
     method : {"rels", "rml"}
         As in :func:`rels`: the paper's RELS, or recursive maximum likelihood (RPEM
         for ARMAX, Ljung & Söderström 1983) for output-error-like disturbances.
+    settings : RelsSettings, optional
+        The orders and settings (all the above but ``theta0``, ``history_every``,
+        ``u_scale`` and ``y_scale``) in one checked object, instead of the keywords.
 
     Notes
     -----
@@ -395,62 +275,35 @@ class RelsEstimator:
     def __init__(
         self,
         *,
-        na: int,
-        nb: int,
-        nc: int,
-        delay: int = 1,
-        forgetting: float = 1.0,
-        p0: float = 1e6,
         theta0: Any = None,
-        trace_bound: float | None = None,
         history_every: int | None = None,
-        dt: float = 1.0,
         u_scale: float = 1.0,
         y_scale: float = 1.0,
-        c_radius: float = 0.99,
-        p0_c: float | None = None,
-        method: str = "rels",
+        settings: RelsSettings | None = None,
+        **keywords: Unpack[RelsKeywords],
     ) -> None:
-        na, nb, nc, delay, lam, alpha, dt = _check_settings(
-            na, nb, nc, delay, forgetting, p0, dt
-        )
-        n = na + nb + 1 + nc
-        self._orders = (na, nb, nc, delay)
-        self._n = n
-        self._lam, self._alpha, self._dt = lam, alpha, dt
-        self._alpha_c = _check_p0_c(p0_c, alpha)
-        self._method = _check_method(method)
-        tr0 = (na + nb + 1) * alpha + nc * self._alpha_c
-        tb = tr0 if trace_bound is None else _real("trace_bound", trace_bound)
-        if tb <= 0:
-            raise ParameterError(f"trace_bound={trace_bound!r} must be > 0")
-        self._trace_bound = tb
-        c_radius = _real("c_radius", c_radius)
-        if not 0.0 < c_radius <= 1.0:
-            raise ParameterError(f"c_radius={c_radius!r} must be in (0, 1]")
-        self._c_radius = c_radius
-        for name, v in (("u_scale", u_scale), ("y_scale", y_scale)):
-            if _real(name, v) <= 0:
-                raise ParameterError(f"{name}={v!r} must be > 0")
-        self._us, self._ys = float(u_scale), float(y_scale)
-        self._dvec = _theta_scale(na, nb, nc, self._us, self._ys)
-        self._theta0 = _check_theta0(theta0, n)
+        s = self._settings = rels_settings(settings, keywords)
+        self._us, self._ys = (check_real(v, name, lo=0.0, lo_open=True)
+                              for name, v in (("u_scale", u_scale), ("y_scale", y_scale)))
+        self._dvec = theta_scale(s.na, s.nb, s.nc, self._us, self._ys)
+        self._theta0 = check_theta0(theta0, s.n_params)
         if history_every is not None:
-            history_every = _order("history_every", history_every, 1)
+            history_every = check_int(history_every, "history_every", lo=1)
         self._every = history_every
-        self._run = _k.kernel_for(na, nb, nc, delay)
-        self._no_hist = np.empty((0, n))
+        self._run = _k.kernel_for(s.na, s.nb, s.nc, s.delay)
+        self._no_hist = np.empty((0, s.n_params))
         self.reset()
+
+    @property
+    def settings(self) -> RelsSettings:
+        """The orders and settings of the estimator."""
+        return self._settings
 
     # ---------------------------------------------------------------- state
     def reset(self) -> None:
         """Back to θ̂(0), P(0), empty regressor, counters and history cleared."""
-        na, nb, nc, delay = self._orders
-        self._settings = _settings(
-            na, nb, nc, delay, self._lam, self._alpha, self._alpha_c, self._trace_bound,
-            self._c_radius, self._method, u_scale=self._us, y_scale=self._ys,
-        )
-        block, _ = _new_state(self._settings, self._theta0 / self._dvec)
+        kernel = self._settings.kernel(u_scale=self._us, y_scale=self._ys)
+        block, _ = new_state(kernel, self._theta0 / self._dvec)
         self._attach(block)
         self._hist: list[np.ndarray] = []
         self._since = 0
@@ -462,7 +315,8 @@ class RelsEstimator:
         self._block = block
         self._views = _k.state_views(block)
         self._io_rec = self._views.io.reshape((4, 1))
-        self._io = memoryview(self._views.io)  # u, y written and e read per sample
+        # a memoryview of the float64 io: u, y written and e read per sample
+        self._io: Any = self._views.io.data
 
     def __getstate__(self) -> dict[str, Any]:
         # the views and the memoryview are rebuilt on the copy's own block, and the
@@ -476,7 +330,8 @@ class RelsEstimator:
         history_update = state.pop("_history_update")
         block = state.pop("_block")
         self.__dict__.update(state)
-        self._run = _k.kernel_for(*self._orders)
+        s = self._settings
+        self._run = _k.kernel_for(s.na, s.nb, s.nc, s.delay)
         self._attach(_k.aligned_copy(block))
         self._hist = list(self._hist)  # a shallow copy too keeps its own history
         if history_update:
@@ -534,7 +389,7 @@ class RelsEstimator:
 
     def update_many(self, u: Any, y: Any) -> np.ndarray:
         """Process a block of samples; return their a-priori prediction errors."""
-        u, y = check_record(u, y)
+        u, y = as_record(u, y)
         if self._every is None:
             rec = _k.record(u, y)
             self._run_record(rec, self._no_hist, 1)
@@ -546,7 +401,7 @@ class RelsEstimator:
         for k in range(first):
             err[k] = self.update(u[k], y[k])
         rest = u.size - first
-        hist = np.empty((rest // self._every, self._n))
+        hist = np.empty((rest // self._every, self._settings.n_params))
         if rest:  # else the samples above counted themselves (_update_with_history)
             rec = _k.record(u[first:], y[first:])
             self._run_record(rec, hist, self._every)
@@ -584,32 +439,21 @@ class RelsEstimator:
     def history(self) -> np.ndarray:
         """θ̂ every ``history_every`` samples, shape (n_records, n_params)."""
         if not self._hist:
-            return np.empty((0, self._n))
+            return np.empty((0, self._settings.n_params))
         return np.array(self._hist)
 
     @property
     def counters(self) -> dict[str, int]:
         """n_samples, resets, c_projections, trace_scalings, skipped."""
         self._settle()  # the pending P update's guards may count
-        return _counters(self._block)
+        return block_counters(self._block)
 
     @property
     def model(self) -> ArmaxModel:
         """The current estimate as an :class:`ArmaxModel` (no stability warning)."""
-        na, nb, nc, delay = self._orders
+        s = self._settings
         self._settle()
-        meta = {
-            "method": f"{self._method}-streaming",
-            "forgetting": self._lam,
-            "p0": self._alpha,
-            "p0_c": self._alpha_c,
-            "trace_bound": self._trace_bound,
-            "c_radius": self._c_radius,
-            "u_scale": self._us,
-            "y_scale": self._ys,
-            **_counters(self._block),
-        }
-        return _model_from_state(
-            self._views, na, nb, nc, delay, self._dt, self._us, self._ys,
-            float(self._block[_k.NOISE_VAR]), meta,
-        )
+        meta = {"method": f"{s.method}-streaming", **s.meta(), "u_scale": self._us,
+                "y_scale": self._ys, **block_counters(self._block)}
+        return model_from_state(self._views, s, self._us, self._ys,
+                                float(self._block[_k.NOISE_VAR]), meta)
