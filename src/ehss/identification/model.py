@@ -32,7 +32,7 @@ from ehss._checks import (
     is_real,
     show,
 )
-from ehss._files import atomic_path
+from ehss._files import atomic_path, read_small_file
 from ehss.errors import DataError, EhssWarning, ParameterError
 
 __all__ = ["ArmaxModel", "RoundingSensitivity"]
@@ -547,20 +547,7 @@ class ArmaxModel:
         """
         path = Path(path)
         where = f"model file {str(path)!r}"
-        try:
-            if path.is_dir():
-                raise DataError(f"{where} is a folder")
-            if path.exists() and not path.is_file():
-                raise DataError(f"{where} is not a regular file (a pipe or a device?)")
-            size = path.stat().st_size
-            if size > MAX_MODEL_FILE_BYTES:
-                raise DataError(f"{where} is {size} bytes, more than a model file holds "
-                                f"(at most {MAX_MODEL_FILE_BYTES})")
-            raw = path.read_bytes()
-        except FileNotFoundError:
-            raise DataError(f"{where} does not exist") from None
-        except OSError as exc:
-            raise DataError(f"cannot read {where}: {exc.strerror or exc}") from None
+        raw = read_small_file(path, where, max_bytes=MAX_MODEL_FILE_BYTES)
         if not raw.strip():
             raise DataError(f"{where} is empty")
         try:
