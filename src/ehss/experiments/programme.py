@@ -24,10 +24,10 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ehss import signals
 from ehss._checks import check_int
+from ehss._warm import warm_up
 from ehss.control.known import known_factors
 from ehss.errors import DataError, ParameterError
 from ehss.experiments.compensation_demo import CompensationDemo, demonstrate
@@ -41,7 +41,7 @@ from ehss.experiments.loop_identification import (
 from ehss.experiments.pool import collect, submit
 from ehss.experiments.steps import StepTest, step_tests
 from ehss.frequency import FrequencyResponse
-from ehss.identification import OrderSelection, rels, select_order
+from ehss.identification import OrderSelection, select_order
 from ehss.linear import closed_loop_radius
 from ehss.params import GRAVITY_M_S2, RigParams, preset
 from ehss.simulation import SimulationResult, simulate
@@ -268,22 +268,6 @@ def _trim(sim: SimulationResult, skip: int) -> SimulationResult:
     )
 
 
-def _compile_shared_kernels(params: RigParams) -> None:
-    """Compile (or load from numba's cache) the kernels both strands of the programme use
-    that the step tests have not: the closed loop on a writable reference (the step
-    tests' references are read-only arrays, a type of their own to numba), and RELS
-    and RML, by a short fit each.
-
-    The record is a noise-free first-order ARMAX response, so the fits are well posed;
-    the kernels' argument types, and so the compiled code, are those of any record.
-    """
-    simulate("position", np.zeros(10), params=params, seed=0)
-    u = np.random.default_rng(0).standard_normal(200)
-    y = lfilter([0.0, 0.5], [1.0, -0.5], u)
-    for method in ("rels", "rml"):
-        rels(u, y, na=1, nb=0, nc=1, method=method)
-
-
 def run_programme(
     params: RigParams | None = None,
     settings: ProgrammeSettings | None = None,
@@ -323,7 +307,7 @@ def run_programme(
         # The step tests have compiled most of the kernels the demonstrations use; the
         # rest are compiled here: with an empty numba cache, the two processes would
         # otherwise both compile them at once, twice the work for the same code.
-        _compile_shared_kernels(params)
+        warm_up(["simulation", "identification"])  # both strands' kernels, once
         for name, call in demo_calls.items():
             say(f"{name} loop: feed-forward compensation (second process)")
             pending[name] = submit(executor, call)
