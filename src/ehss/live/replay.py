@@ -120,7 +120,7 @@ def _recorded_samples(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
     DataError
         If the file cannot be read, its ``fields`` attribute is not a JSON list of
         distinct names, its samples are not a real matrix with one column per field and
-        at least one row, or its rate is not a positive finite number.
+        at least one row, every one finite, or its rate is not a positive finite number.
     """
     where = str(path)
     try:
@@ -145,6 +145,7 @@ def _recorded_samples(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
                         f"{len(names)}) for the fields {names}")
     if data.shape[0] == 0:
         raise DataError(f"{where!r} holds no samples: nothing to replay")
+    _check_finite(where, names, data)
     try:
         rate = float(rate_attr)
     except (TypeError, ValueError):
@@ -153,6 +154,19 @@ def _recorded_samples(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
         raise DataError(f"{where!r}: its sample rate attribute 'fs' must be a positive "
                         f"number, got {rate_attr!r}")
     return tuple(names), np.ascontiguousarray(data), rate
+
+
+def _check_finite(where: str, names: list[str], data: np.ndarray) -> None:
+    """Refuse a recording with a NaN or infinite sample, naming the first: its field,
+    its row of ``samples`` counted from 1, and its time when a ``t`` field holds it."""
+    bad = ~np.isfinite(data)
+    if not bad.any():
+        return
+    row, col = (int(k) for k in np.argwhere(bad)[0])
+    t = data[row, names.index("t")] if "t" in names else math.nan
+    at = f" (t = {float(t):g} s)" if math.isfinite(t) else ""
+    raise DataError(f"{where!r}: field {names[col]!r} has a non-finite value "
+                    f"({float(data[row, col])!r}) at sample row {row + 1}{at}")
 
 
 def _renamed(path: Path, fields: tuple[str, ...], columns: tuple[str, ...],
