@@ -73,6 +73,28 @@ def test_a_bad_record_is_refused_in_every_format(tmp_path, refused, suffix, kind
              "out.json"], tmp_path, f"r{suffix}", *words)
 
 
+@pytest.mark.parametrize("suffix", [".npz", ".parquet", ".h5"])
+def test_a_binary_record_cut_short_is_refused(tmp_path, refused, suffix):
+    whole = tmp_path / f"whole{suffix}"
+    _write(whole, _columns())
+    data = whole.read_bytes()
+    whole.unlink()
+    (tmp_path / f"r{suffix}").write_bytes(data[: len(data) // 2])
+    refused(["live", "--replay", f"r{suffix}", "--speed", "inf", "--quiet"], tmp_path,
+            f"r{suffix}")
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".parquet", ".h5"])
+def test_a_text_column_in_a_binary_record_is_refused(tmp_path, refused, suffix):
+    cols: dict = _columns()
+    cols["ref1"] = np.array([f"{x:.3f}" for x in cols["ref1"]])
+    if suffix == ".h5":
+        cols["ref1"] = cols["ref1"].astype("S")
+    _write(tmp_path / f"r{suffix}", cols)
+    refused(["live", "--replay", f"r{suffix}", "--speed", "inf", "--quiet"], tmp_path,
+            f"r{suffix}", "'ref1'")
+
+
 CSV_TEXTS = {
     "no bytes": b"",
     "header only": b"t,ref1,fb1\n",

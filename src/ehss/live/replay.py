@@ -79,6 +79,7 @@ def replay_record(
                 names = ("t", "reference", "output") if "t" in table.columns else (
                     "reference", "output")
                 return _renamed(path, ("t", "ref1", "fb1")[-len(names):], names, fs)
+            _read_partners(path, tuple(table.columns))
             raise DataError(f"{str(path)!r} has no ref<k>/fb<k> columns (it has "
                             f"{list(table.columns)[:8]}): name the reference and feedback "
                             "as --fields t=TIME,ref1=COLUMN,fb1=COLUMN")
@@ -94,6 +95,20 @@ def _channel_fields(columns: tuple[str, ...]) -> tuple[str, ...]:
         c[2:] for c in columns if c.startswith("fb")}
     return tuple(c for c in columns if c == "t" or (c.startswith("ref") and c[3:] in pairs)
                  or (c.startswith("fb") and c[2:] in pairs))
+
+
+def _read_partners(path: Path, columns: tuple[str, ...]) -> None:
+    """Read by name the missing partner of each unpaired ``ref<k>``/``fb<k>`` column.
+
+    Reading every column of a file keeps only the numeric ones; asked for by name, a
+    partner that is there but holds text is refused as such (and one that is not there
+    is named with the columns the file has)."""
+    for c in columns:
+        k = c[3:] if c.startswith("ref") else c[2:] if c.startswith("fb") else None
+        if k is not None and f"ref{k}" in columns and f"fb{k}" in columns:
+            continue
+        if k is not None:
+            ehss.read_columns(path, [f"fb{k}" if c.startswith("ref") else f"ref{k}"])
 
 
 def _open_complete(path: Path) -> h5py.File:
