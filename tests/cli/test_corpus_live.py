@@ -221,6 +221,9 @@ OUTPUTS = {
     "record onto an existing file": (["--record", "old.h5"], ("old.h5",)),
     "report into a missing folder": (["--report", "none/out.json"], ("none",)),
     "record and report the same": (["--record", "o.h5", "--report", "o.h5"], ("o.h5",)),
+    "report under a file": (["--report", "r.csv/out.json"], ("r.csv",)),
+    "report onto a read-only file": (["--report", "ro.json"], ("ro.json",)),
+    "record onto a read-only file": (["--record", "ro.h5"], ("ro.h5",)),
 }
 
 
@@ -229,6 +232,9 @@ def test_outputs_never_replace_an_input_or_a_file(good, refused, case):
     (good / "sub").mkdir()
     (good / "sub" / "keep.txt").write_text("kept")
     (good / "old.h5").write_bytes(b"an older recording")
+    for name in ("ro.json", "ro.h5"):
+        (good / name).write_text("kept")
+        (good / name).chmod(0o444)
     extra, words = OUTPUTS[case]
     refused([*REPLAY, *extra], good, *words)
 
