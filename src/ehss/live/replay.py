@@ -104,11 +104,14 @@ def _read_partners(path: Path, columns: tuple[str, ...]) -> None:
     partner that is there but holds text is refused as such (and one that is not there
     is named with the columns the file has)."""
     for c in columns:
-        k = c[3:] if c.startswith("ref") else c[2:] if c.startswith("fb") else None
-        if k is not None and f"ref{k}" in columns and f"fb{k}" in columns:
+        if c.startswith("ref"):
+            partner = f"fb{c[3:]}"
+        elif c.startswith("fb"):
+            partner = f"ref{c[2:]}"
+        else:
             continue
-        if k is not None:
-            ehss.read_columns(path, [f"fb{k}" if c.startswith("ref") else f"ref{k}"])
+        if partner not in columns:
+            ehss.read_columns(path, [partner])
 
 
 def _open_complete(path: Path) -> h5py.File:
