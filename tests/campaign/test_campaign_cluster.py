@@ -93,9 +93,10 @@ def test_interrupt_then_resume(cluster, archive, reference, tmp_path):
 def test_unreachable_scheduler_is_one_line(tmp_path):
     from .conftest import free_port
 
+    (tmp_path / "x.csv").write_text("")  # a record named on the command line must exist
     res = run_cli("batch", "--out", str(tmp_path / "u"), "--scheduler",
-                  f"tcp://127.0.0.1:{free_port()}", "--connect-timeout", "0.5", "x.csv",
-                  timeout=60)
+                  f"tcp://127.0.0.1:{free_port()}", "--connect-timeout", "0.5",
+                  str(tmp_path / "x.csv"), timeout=60)
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "cannot reach the Dask scheduler" in lines[0], res.stderr

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ehss._checks import check_choice, check_int, check_real
+from ehss._checks import check_band, check_choice, check_int, check_real, show
 from ehss.campaign.engine import (
     Task,
     check_same_campaign,
@@ -116,6 +116,14 @@ class BatchSettings:
         if self.fs is not None:
             check_real(self.fs, "fs", lo=0.0, lo_open=True, unit="Hz")
         check_int(self.seed, "seed", lo=0)
+        if self.time_column is not None and not isinstance(self.time_column, str):
+            raise ParameterError(f"time_column={show(self.time_column)} must be a column "
+                                 "name")
+        if self.band_hz is not None:
+            check_band(self.band_hz, "band_hz")
+        check_choice(self.detrend, "detrend", ("mean", "linear", None))
+        if self.decimate not in ("auto", None):
+            check_int(self.decimate, "decimate", lo=1)
 
     def summary(self) -> dict[str, Any]:
         """Plain values for JSON."""
@@ -149,7 +157,11 @@ def _table(doc: dict, name: str, accepted: set[str], where: str) -> dict:
 
 def _channels(doc: dict, where: str) -> tuple[Channel, ...]:
     out = []
-    for i, c in enumerate(doc.get("channels", [])):
+    channels = doc.get("channels", [])
+    if not isinstance(channels, list):
+        raise ParameterError(f"{where}: 'channels' must be [[channels]] tables, got "
+                             f"{show(channels)}")
+    for i, c in enumerate(channels):
         if not (isinstance(c, dict) and {"input", "output"} <= set(c)
                 and set(c) <= {"name", "input", "output"}):
             raise ParameterError(f"{where}: [[channels]] entry {i + 1} must have input, "
@@ -211,7 +223,11 @@ def load_manifest(
         out_fields = {f.name for f in dataclasses.fields(OutlierRule)}
         kwargs = {k: doc[k] for k in ("time_column", "fs", "seed") if k in doc}
         root = Path(path).parent
-        kwargs["records"] = tuple(str(root / r) for r in doc.get("records", []))
+        records = doc.get("records", [])
+        if not isinstance(records, list) or not all(isinstance(r, str) for r in records):
+            raise ParameterError(f"{where}: 'records' must be a list of files or globs, "
+                                 f"got {show(records)}")
+        kwargs["records"] = tuple(str(root / r) for r in records)
         kwargs["channels"] = _channels(doc, where)
         kwargs.update({k: tuple(v) if isinstance(v, list) else None if v == "none" else v
                        for k, v in wf.items()})
@@ -222,7 +238,12 @@ def load_manifest(
             raise ParameterError(f"{where}: {exc}") from None
     given = {"orders": orders, "method": method, "fs": fs, "band_hz": band_hz}
     kwargs.update({k: v for k, v in given.items() if v is not None})
-    return BatchSettings(**kwargs)
+    try:
+        return BatchSettings(**kwargs)
+    except TypeError as exc:  # a value of the file that is not of its kind
+        if path is None:
+            raise
+        raise ParameterError(f"{where}: {exc}") from None
 
 
 def _read_toml(path: str | Path) -> tuple[dict, str]:

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ehss._checks import check_choice, check_int, check_real
+from ehss._checks import check_choice, check_int, check_real, is_real, show
 from ehss.campaign.batch import _read_toml, to_plain
 from ehss.campaign.engine import (
     Task,
@@ -120,6 +120,10 @@ def _distribution(name: str, spec: Any, params: RigParams) -> Distribution:
     kind = spec["distribution"]
     nominal = _nominal(params, name)
     keys = set(spec) - {"distribution"}
+    text = next((k for k in sorted(keys) if not is_real(spec[k])), None)
+    if text is not None:
+        raise ParameterError(f"[parameters.{name!r}]: {text} = {show(spec[text])} must be "
+                             "a number")
     forms = {("uniform", frozenset({"low", "high"})): lambda: (spec["low"], spec["high"]),
              ("uniform", frozenset({"rel"})):
                  lambda: (nominal * (1 - spec["rel"]), nominal * (1 + spec["rel"])),

@@ -11,7 +11,7 @@ import sys
 from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFolder
 
-__all__ = ["register", "run", "add_cluster_arguments"]
+__all__ = ["register", "run", "add_cluster_arguments", "check_cluster_arguments"]
 
 
 def add_cluster_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,6 +25,41 @@ def add_cluster_arguments(p: argparse.ArgumentParser) -> None:
                    help="how long to wait for --scheduler (default: %(default)s s)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar and no dashboard link")
+
+
+def check_cluster_arguments(args: argparse.Namespace) -> None:
+    """Refuse, before the campaign folder is made, a negative --workers, a --connect-timeout
+    that is no time and a --scheduler address Dask has no transport for."""
+    from ehss._checks import check_int, check_real
+    from ehss.errors import ParameterError
+
+    if args.workers is not None:
+        check_int(args.workers, "--workers", lo=0)
+    check_real(args.connect_timeout, "--connect-timeout", lo=0.0, lo_open=True, unit="s")
+    if args.scheduler is not None:
+        from distributed.comm import get_address_host, registry
+        from distributed.comm.addressing import parse_address
+
+        try:
+            scheme, _ = parse_address(args.scheduler)
+            registry.get_backend(scheme)
+            get_address_host(args.scheduler)
+        except (ValueError, TypeError) as exc:
+            raise ParameterError(f"--scheduler {args.scheduler!r} is not a Dask scheduler "
+                                 f"address such as tcp://HOST:8786 ({exc})") from None
+
+
+def _named_records(records: list[str]) -> None:
+    """Refuse a record named without a wildcard that does not exist: a typing error, not
+    a record of the campaign that failed."""
+    import glob
+    from pathlib import Path
+
+    from ehss.errors import DataError
+
+    for pattern in records:
+        if not glob.has_magic(pattern) and not Path(pattern).exists():
+            raise DataError(f"{pattern!r}: no such file")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -65,11 +100,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import polars as pl
 
+    from ehss._checks import check_band
     from ehss.campaign import batch, load_manifest
 
+    check_cluster_arguments(args)
+    if args.band is not None:
+        check_band(args.band, "--band")
     settings = load_manifest(args.manifest, orders=tuple(args.orders) if args.orders else None,
                              method=args.method, fs=args.fs,
                              band_hz=tuple(args.band) if args.band else None)
+    _named_records(args.records)
     frame = batch(args.records or None, args.out, settings=settings,
                   scheduler=args.scheduler, workers=args.workers, quiet=args.quiet,
                   connect_timeout_s=args.connect_timeout)

@@ -224,7 +224,7 @@ def _iterated(args: argparse.Namespace, model: Any, r: np.ndarray, fs: float,
     state: Any = None
     log: list[dict[str, Any]] = []
     if args.previous is not None:
-        state, log = _previous(args.previous, u, model_offsets(model, offsets)[0])
+        state, log = _previous(args.previous, u, model_offsets(model, offsets)[0], fs)
     method = "frf" if args.method == "frf" else "model"
     options = build_options(args, UpdateOptions, method=method, band_hz=band,
                             inverse_method="stable" if method == "frf" else args.method)
@@ -341,11 +341,17 @@ def _say(args: argparse.Namespace, model: Any, result: Any, band: tuple[float, f
           f"inverse within {band[0]:g}-{band[1]:g} Hz{gains}")
 
 
-def _previous(path: str, played: np.ndarray, u0: float) -> tuple[Any, list]:
-    """Iteration state of a drive file written by this command, checked against the run."""
-    from ehss.io import read_columns, read_metadata
+def _previous(path: str, played: np.ndarray, u0: float, fs: float) -> tuple[Any, list]:
+    """Iteration state of a drive file written by this command, checked against the run
+    (its samples, and its rate when it has a time column)."""
+    from ehss.io import read_columns, read_metadata, sample_rate
 
     table = read_columns(path)
+    if table.time_column is not None:
+        rate = sample_rate(table)
+        if abs(rate - fs) > 1e-9 * fs:
+            raise DataError(f"{path!r} is sampled at {rate:g} Hz, the run at {fs:g} Hz: "
+                            "not the drive that was played")
     if "drive" not in table.columns:
         raise DataError(f"{path!r} has no column 'drive': not a drive file of this command")
     drive = np.asarray(table["drive"], dtype=float)

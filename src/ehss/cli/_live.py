@@ -9,13 +9,18 @@ import signal
 import sys
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import ehss
-from ehss._checks import check_real
+from ehss._checks import check_band, check_real
 from ehss._provenance import versions
 from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import DataError, ParameterError
+
+if TYPE_CHECKING:
+    from ehss.live.channel import EstimatorSettings
+    from ehss.live.detect import DetectionSettings
 
 __all__ = ["register", "run", "add_rig_arguments", "rig_or_replay", "WIRE_FORMAT"]
 
@@ -64,6 +69,8 @@ def _check_positive(name: str, value: float, *, allow_inf: bool = False) -> floa
 
 #: length of a simulated rig run without --duration, s
 RIG_DURATION_S = 60.0
+#: stream time before detection without --learn, s
+LEARN_S = 10.0
 
 
 def _rig_only(args: argparse.Namespace, command: str) -> None:
@@ -87,16 +94,25 @@ def rig_or_replay(args: argparse.Namespace, command: str):
     from ehss.live.rig import parse_event, rig_record
 
     _check_positive("--speed", args.speed, allow_inf=True)
+    if args.fs is not None:
+        _check_positive("--fs", args.fs)
     if args.rig is not None:
         events = tuple(parse_event(e) for e in args.event)
         params = ehss.load_params(args.params) if args.params else ehss.preset(args.preset)
         duration = RIG_DURATION_S if args.duration is None else args.duration
         _check_positive("--duration", duration)
+        late = [text for text, e in zip(args.event, events, strict=True)
+                if e.time_s >= duration]
+        if late:
+            raise ParameterError(f"--event {late[0]!r} comes after the end of the "
+                                 f"{duration:g} s run: it would never happen")
         source = f"--params {args.params}" if args.params else f"--preset {args.preset}"
         warn_if_unstable(command, params, args.rig, source)
         return rig_record(args.rig, n_channels=args.channels, duration_s=duration,
                           fs=args.fs, params=params, events=events, seed=args.seed)
     _rig_only(args, command)
+    if args.fields is not None and not args.fields.strip():
+        raise ParameterError("--fields is empty: name the columns to take, or leave it out")
     if not args.fields or "=" not in args.fields:
         fields = parse_fields(args.fields) if args.fields else None
         return replay_record(args.replay, fields=fields, fs=args.fs)
@@ -182,9 +198,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--clear", type=float, default=2.0, metavar="S",
                    help="the test below half its threshold this long clears an alarm "
                    "(default: %(default)s s)")
-    d.add_argument("--learn", type=float, default=10.0, metavar="S",
+    d.add_argument("--learn", type=float, metavar="S",
                    help="stream time before detection; the baseline is identified over it "
-                   "when none is given, and the test calibrated (default: %(default)s s)")
+                   f"when none is given, and the test calibrated (default: {LEARN_S} s)")
     d.add_argument("--recent", type=float, default=5.0, metavar="S",
                    help="look-back of --compare recent; a change that lasts this long is "
                    "learned anew (default: %(default)s s)")
@@ -269,7 +285,34 @@ def _source(args: argparse.Namespace):
         except ValueError as exc:
             raise ParameterError(f"--allow {args.allow!r}: {exc}") from None
     layout, samples, fs = rig_or_replay(args, "live")
+    span = samples.shape[0] / fs
+    if args.replay is not None and args.learn is not None and args.learn >= span:
+        # an explicit --learn; the default one ends in a warning after the replay
+        raise ParameterError(f"--learn {args.learn:g} s is not shorter than the record "
+                             f"{str(args.replay)!r} ({span:g} s): detection would never "
+                             "start")
     return PacedSource(layout, samples, fs, speed=args.speed)
+
+
+def _check_run_options(args: argparse.Namespace) -> None:
+    """Refuse a --target without --udp and a --stop-after that is not a positive time."""
+    if args.target is not None and args.udp is None:
+        raise ParameterError("--target applies to --compensate with --udp only (the "
+                             "simulated rig takes its compensator without datagrams)")
+    if args.stop_after is not None:
+        _check_positive("--stop-after", args.stop_after)
+
+
+def _check_at_rate(est: EstimatorSettings, det: DetectionSettings, source: Any) -> None:
+    """The settings that mean something only at the stream's rate, checked before the
+    session reports itself ready when the source knows its rate (a rig or a replay): the
+    memory longer than a sample and the band below Nyquist."""
+    fs = source.fs
+    if fs is None:
+        return
+    est.lam(fs)
+    if det.band_hz is not None:
+        check_band(det.band_hz, "--band", fs=fs)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -284,6 +327,7 @@ def run(args: argparse.Namespace) -> int:
         for flag, value in (("--rms", args.rms), ("--target", args.target)):
             if value is not None:
                 raise ParameterError(f"{flag} applies to --compensate only")
+    _check_run_options(args)
     if args.compensate is not None:
         from ehss.cli._live_compensate import run_compensated
 
@@ -298,12 +342,14 @@ def run(args: argparse.Namespace) -> int:
     det = DetectionSettings(compare=args.compare, false_alarm_hours=args.false_alarm_hours,
                             frf_db=args.frf_db, gain_db=args.gain_db,
                             pole_shift=args.pole_shift, clear_s=args.clear,
-                            learn_s=args.learn, recent_s=args.recent,
+                            learn_s=LEARN_S if args.learn is None else args.learn,
+                            recent_s=args.recent,
                             band_hz=None if args.band is None else tuple(args.band))
     source = _source(args)
     dashboard = None
     summary = None
     try:
+        _check_at_rate(est, det, source)
         baselines = _baselines(args.baseline, source.layout.channels)
         if args.dashboard is not None:
             from ehss.live.dashboard import Dashboard
@@ -382,8 +428,8 @@ def run(args: argparse.Namespace) -> int:
           f"counters {report.counters}, lag p99 {report.lag_ms['p99']:.2f} ms",
           file=sys.stderr)
     if untested:
-        why = (f"the stream ended within --learn {args.learn:g} s"
-               if report.stream_s < args.learn else "see the messages above")
+        why = (f"the stream ended within --learn {det.learn_s:g} s"
+               if report.stream_s < det.learn_s else "see the messages above")
         print(f"ehss live: warning: detection never started on channel"
               f"{'s' if len(untested) > 1 else ''} {', '.join(untested)} ({why}): no alarm "
               "could be raised there", file=sys.stderr)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 
 from ehss.cli import command_help
-from ehss.cli._batch import add_cluster_arguments
+from ehss.cli._batch import add_cluster_arguments, check_cluster_arguments
 from ehss.cli._outputs import InputFile, OutputFolder
 
 __all__ = ["register", "run"]
@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ehss.campaign import montecarlo
 
+    check_cluster_arguments(args)
     frame = montecarlo(args.spec, args.out, scheduler=args.scheduler, workers=args.workers,
                        quiet=args.quiet, connect_timeout_s=args.connect_timeout,
                        samples=args.samples, seed=args.seed)

@@ -47,9 +47,12 @@ def run(args: argparse.Namespace) -> int:
 
     address = parse_address(args.to, destination=True)
     layout, samples, fs = rig_or_replay(args, "stream")
-    spp = args.samples_per_packet or max(1, round(fs / 1000.0))
-    if spp < 1:
-        raise ParameterError(f"--samples-per-packet={spp} must be >= 1")
+    spp = (max(1, round(fs / 1000.0)) if args.samples_per_packet is None
+           else args.samples_per_packet)
+    if not 1 <= spp <= layout.max_samples_per_datagram:
+        raise ParameterError(f"--samples-per-packet {spp}: a datagram holds 1 to "
+                             f"{layout.max_samples_per_datagram} samples of "
+                             f"{layout.n_fields} fields (at most 65507 bytes)")
     print(f"ehss stream: {samples.shape[0]} samples of {layout.n_fields} fields "
           f"({','.join(layout.fields)}) at {fs:g} Hz to {address[0]}:{address[1]}, "
           f"{spp} per datagram", file=sys.stderr, flush=True)

@@ -79,6 +79,7 @@ def replay_record(
                 names = ("t", "reference", "output") if "t" in table.columns else (
                     "reference", "output")
                 return _renamed(path, ("t", "ref1", "fb1")[-len(names):], names, fs)
+            _read_partners(path, tuple(table.columns))
             raise DataError(f"{str(path)!r} has no ref<k>/fb<k> columns (it has "
                             f"{list(table.columns)[:8]}): name the reference and feedback "
                             "as --fields t=TIME,ref1=COLUMN,fb1=COLUMN")
@@ -94,6 +95,23 @@ def _channel_fields(columns: tuple[str, ...]) -> tuple[str, ...]:
         c[2:] for c in columns if c.startswith("fb")}
     return tuple(c for c in columns if c == "t" or (c.startswith("ref") and c[3:] in pairs)
                  or (c.startswith("fb") and c[2:] in pairs))
+
+
+def _read_partners(path: Path, columns: tuple[str, ...]) -> None:
+    """Read by name the missing partner of each unpaired ``ref<k>``/``fb<k>`` column.
+
+    Reading every column of a file keeps only the numeric ones; asked for by name, a
+    partner that is there but holds text is refused as such (and one that is not there
+    is named with the columns the file has)."""
+    for c in columns:
+        if c.startswith("ref"):
+            partner = f"fb{c[3:]}"
+        elif c.startswith("fb"):
+            partner = f"ref{c[2:]}"
+        else:
+            continue
+        if partner not in columns:
+            ehss.read_columns(path, [partner])
 
 
 def _open_complete(path: Path) -> h5py.File:
@@ -120,7 +138,7 @@ def _recorded_samples(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
     DataError
         If the file cannot be read, its ``fields`` attribute is not a JSON list of
         distinct names, its samples are not a real matrix with one column per field and
-        at least one row, or its rate is not a positive finite number.
+        at least one row, every one finite, or its rate is not a positive finite number.
     """
     where = str(path)
     try:
@@ -145,6 +163,7 @@ def _recorded_samples(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
                         f"{len(names)}) for the fields {names}")
     if data.shape[0] == 0:
         raise DataError(f"{where!r} holds no samples: nothing to replay")
+    _check_finite(where, names, data)
     try:
         rate = float(rate_attr)
     except (TypeError, ValueError):
@@ -153,6 +172,19 @@ def _recorded_samples(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
         raise DataError(f"{where!r}: its sample rate attribute 'fs' must be a positive "
                         f"number, got {rate_attr!r}")
     return tuple(names), np.ascontiguousarray(data), rate
+
+
+def _check_finite(where: str, names: list[str], data: np.ndarray) -> None:
+    """Refuse a recording with a NaN or infinite sample, naming the first: its field,
+    its row of ``samples`` counted from 1, and its time when a ``t`` field holds it."""
+    bad = ~np.isfinite(data)
+    if not bad.any():
+        return
+    row, col = (int(k) for k in np.argwhere(bad)[0])
+    t = data[row, names.index("t")] if "t" in names else math.nan
+    at = f" (t = {float(t):g} s)" if math.isfinite(t) else ""
+    raise DataError(f"{where!r}: field {names[col]!r} has a non-finite value "
+                    f"({float(data[row, col])!r}) at sample row {row + 1}{at}")
 
 
 def _renamed(path: Path, fields: tuple[str, ...], columns: tuple[str, ...],
