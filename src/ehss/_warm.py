@@ -11,12 +11,20 @@ them, so the code compiled is the code later calls run; nothing is checked.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import TypedDict
 
 import numpy as np
 
 from ehss._checks import check_choice
 
 __all__ = ["WARM_UP_KINDS", "warm_up"]
+
+
+class _Orders(TypedDict):
+    na: int
+    nb: int
+    nc: int
+    delay: int
 
 #: What :func:`warm_up` can prepare: the closed-loop simulator (one kernel serves every
 #: loop), batch RELS and RML (:func:`ehss.identification.rels`), the streaming
@@ -62,7 +70,7 @@ def warm_up(
     >>> warm_up(["simulation"])  # doctest: +SKIP
     """
     chosen = [check_choice(k, "kind", WARM_UP_KINDS) for k in kinds]
-    orders = {"na": na, "nb": nb, "nc": nc, "delay": delay}  # the estimators check them
+    orders = _Orders(na=na, nb=nb, nc=nc, delay=delay)  # the estimators check them
     chosen_methods = [check_choice(m, "method", ("rels", "rml")) for m in methods]
     if "specialised" in chosen:  # first: the estimators below then run it
         from ehss.identification.rels import specialise_rels
@@ -93,7 +101,7 @@ def _first_order_record() -> tuple[np.ndarray, np.ndarray]:
     return u, np.asarray(lfilter([0.0, 0.5], [1.0, -0.5], u), dtype=np.float64)
 
 
-def _warm_identification(orders: dict[str, int], methods: list[str]) -> None:
+def _warm_identification(orders: _Orders, methods: list[str]) -> None:
     """Batch RELS/RML, one short fit each."""
     from ehss.identification import rels
 
@@ -102,7 +110,7 @@ def _warm_identification(orders: dict[str, int], methods: list[str]) -> None:
         rels(u, y, method=method, **orders)
 
 
-def _warm_streaming(orders: dict[str, int], methods: list[str]) -> None:
+def _warm_streaming(orders: _Orders, methods: list[str]) -> None:
     """The streaming estimator's one-sample step and its block update."""
     from ehss.identification import RelsEstimator
 
