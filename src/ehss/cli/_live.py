@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import signal
 import sys
 import threading
-from pathlib import Path
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
 
 import ehss
 from ehss._checks import check_real
@@ -17,7 +21,8 @@ from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import DataError, ParameterError
 
-__all__ = ["register", "run", "add_rig_arguments", "rig_or_replay", "WIRE_FORMAT"]
+__all__ = ["register", "run", "add_rig_arguments", "rig_or_replay", "WIRE_FORMAT", "Display",
+           "estimation_settings", "finish", "stop_on_sigterm"]
 
 WIRE_FORMAT = """\
 wire format (--udp): one UDP datagram = a 16-byte little-endian header, then n >= 1
@@ -78,7 +83,8 @@ def _rig_only(args: argparse.Namespace, command: str) -> None:
                              f"simulated run){hint}")
 
 
-def rig_or_replay(args: argparse.Namespace, command: str):
+def rig_or_replay(args: argparse.Namespace, command: str
+                  ) -> tuple[Any, np.ndarray, float]:
     """``(layout, samples, fs)`` of ``--rig LOOP`` or ``--replay FILE``; ``command``
     names the command in a warning (a simulated loop its gains leave unstable)."""
     from ehss.cli._params import warn_if_unstable
@@ -235,9 +241,8 @@ def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
 
     out = {}
     for item in items:
-        ch, sep, path = item.rpartition("=")
-        if not sep:
-            ch, path = None, item
+        given, sep, path = item.rpartition("=")
+        ch = given if sep else None
         try:
             model = ehss.ArmaxModel.load_json(path)
         except (OSError, ValueError, KeyError) as exc:
@@ -248,7 +253,7 @@ def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
     return out
 
 
-def _source(args: argparse.Namespace):
+def _source(args: argparse.Namespace) -> Any:
     from ehss.live.layout import RecordLayout, parse_fields
     from ehss.live.source import PacedSource
     from ehss.live.udp import UdpSource, parse_address
@@ -272,25 +277,11 @@ def _source(args: argparse.Namespace):
     return PacedSource(layout, samples, fs, speed=args.speed)
 
 
-def run(args: argparse.Namespace) -> int:
+def estimation_settings(args: argparse.Namespace) -> tuple[Any, Any]:
+    """The estimator's and the change detection's settings from the options."""
     from ehss.live.channel import EstimatorSettings
     from ehss.live.detect import DetectionSettings
-    from ehss.live.session import LiveSession
-    from ehss.live.summary import TerminalSummary
 
-    if args.record is not None and Path(args.record).exists():
-        raise DataError(f"{args.record!r} exists: a recording is never overwritten")
-    if args.compensate is None:
-        for flag, value in (("--rms", args.rms), ("--target", args.target)):
-            if value is not None:
-                raise ParameterError(f"{flag} applies to --compensate only")
-    if args.compensate is not None:
-        from ehss.cli._live_compensate import run_compensated
-
-        _check_positive("--speed", args.speed, allow_inf=True)
-        duration = RIG_DURATION_S if args.duration is None else args.duration
-        _check_positive("--duration", duration)
-        return run_compensated(args, duration)
     est = EstimatorSettings(na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
                             method=args.method, memory_s=args.memory,
                             forgetting=args.forgetting, p0=args.p0, u_scale=args.u_scale,
@@ -300,86 +291,136 @@ def run(args: argparse.Namespace) -> int:
                             pole_shift=args.pole_shift, clear_s=args.clear,
                             learn_s=args.learn, recent_s=args.recent,
                             band_hz=None if args.band is None else tuple(args.band))
-    source = _source(args)
-    dashboard = None
-    summary = None
-    try:
-        baselines = _baselines(args.baseline, source.layout.channels)
+    return est, det
+
+
+class Display:
+    """The terminal summary (unless --quiet) and the dashboard (with --dashboard): what
+    a session publishes and logs goes there."""
+
+    #: kinds of event printed as they happen
+    LOGGED = ("alarm", "clear", "message", "compensator", "compensator_refused",
+              "compensator_alarm", "compensator_clear")
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        from ehss.live.summary import TerminalSummary
+
+        self.dashboard: Any = None
+        self.summary: Any = None
         if args.dashboard is not None:
             from ehss.live.dashboard import Dashboard
 
-            dashboard = Dashboard(host=args.bind, port=args.dashboard)
-            dashboard.start()
-            print(f"ehss live: dashboard at {dashboard.url}", file=sys.stderr, flush=True)
+            self.dashboard = Dashboard(host=args.bind, port=args.dashboard)
+            self.dashboard.start()
+            print(f"ehss live: dashboard at {self.dashboard.url}", file=sys.stderr, flush=True)
         if not args.quiet:
-            summary = TerminalSummary(sys.stderr)
-        publish = None
-        if dashboard is not None or summary is not None:
-            def publish(snap: dict) -> None:
-                if dashboard is not None:
-                    dashboard.publish(snap)
-                if summary is not None:
-                    summary.update(snap)
+            self.summary = TerminalSummary(sys.stderr)
 
-        def log(event: dict) -> None:
-            if event["kind"] in ("alarm", "clear", "message"):
-                line = json.dumps({k: v for k, v in event.items() if k != "wall"})
-                if summary is not None:
-                    summary.note(line)
-                else:
-                    print(f"ehss live: {line}", file=sys.stderr, flush=True)
+    @property
+    def publish(self) -> Callable[[Any], None] | None:
+        """Where snapshots go (None when nothing shows them)."""
+        return None if self.dashboard is None and self.summary is None else self._publish
 
+    def _publish(self, snap: Any) -> None:
+        if self.dashboard is not None:
+            self.dashboard.publish(snap)
+        if self.summary is not None:
+            self.summary.update(snap)
+
+    def log(self, event: dict) -> None:
+        """Print an event worth a line as it happens."""
+        if event["kind"] in self.LOGGED:
+            line = json.dumps({k: v for k, v in event.items() if k != "wall"})
+            if self.summary is not None:
+                self.summary.note(line)
+            else:
+                print(f"ehss live: {line}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.summary is not None:
+            self.summary.close()
+        if self.dashboard is not None:
+            self.dashboard.stop()
+
+
+@contextlib.contextmanager
+def stop_on_sigterm() -> Iterator[threading.Event]:
+    """An event set by SIGTERM (in the main thread), so that a run ends cleanly."""
+    stop = threading.Event()
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGTERM)
+    if main:
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        yield stop
+    finally:
+        if main:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    from ehss.live.recording import check_new_recording
+
+    if args.record is not None:
+        check_new_recording(args.record)
+    if args.compensate is None:
+        for flag, value in (("--rms", args.rms), ("--target", args.target)):
+            if value is not None:
+                raise ParameterError(f"{flag} applies to --compensate only")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ehss.live.session import LiveSession
+
+    _check_options(args)
+    if args.compensate is not None:
+        from ehss.cli._live_compensate import run_compensated
+
+        _check_positive("--speed", args.speed, allow_inf=True)
+        duration = RIG_DURATION_S if args.duration is None else args.duration
+        _check_positive("--duration", duration)
+        return run_compensated(args, duration)
+    est, det = estimation_settings(args)
+    source = _source(args)
+    display = None
+    try:
+        baselines = _baselines(args.baseline, source.layout.channels)
+        display = Display(args)
         session = LiveSession(
             source, est=est, det=det, baselines=baselines, record=args.record,
-            update_s=args.update, publish=publish, h1=dashboard is not None,
-            batch_s=args.batch,
-            settings={"argv": sys.argv[1:]}, log=log,
+            update_s=args.update, publish=display.publish,
+            h1=display.dashboard is not None, batch_s=args.batch,
+            settings={"argv": sys.argv[1:]}, log=display.log,
         )
         where = (f"listening on {source.address[0]}:{source.address[1]}"
                  if hasattr(source, "address") else "running")
         print(f"ehss live: ready, {where}", file=sys.stderr, flush=True)
-        stop = threading.Event()
-        previous = signal.getsignal(signal.SIGTERM)
-        if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, lambda *_: stop.set())
-        try:
-            report = session.run(duration_s=args.stop_after, stop=stop,
-                                 idle_stop_s=args.idle_stop)
-        except KeyboardInterrupt:
-            report = None
-        finally:
-            if threading.current_thread() is threading.main_thread():
-                signal.signal(signal.SIGTERM, previous)
+        with stop_on_sigterm() as stop:
+            try:
+                report = session.run(duration_s=args.stop_after, stop=stop,
+                                     idle_stop_s=args.idle_stop)
+            except KeyboardInterrupt:
+                report = None
     finally:
         source.close()
-        if summary is not None:
-            summary.close()
-        if dashboard is not None:
-            dashboard.stop()
+        if display is not None:
+            display.close()
     if report is None:
         print("ehss live: interrupted; the recording is closed", file=sys.stderr)
         return 130
-    out = {
-        "samples": report.samples, "stream_s": report.stream_s, "wall_s": report.wall_s,
-        "cpu_s": report.cpu_s, "active_wall_s": report.active_wall_s,
-        "active_cpu_s": report.active_cpu_s,
-        "cpu_share": report.active_cpu_s / report.active_wall_s
-        if report.active_wall_s > 0 else math.nan,
-        "counters": report.counters, "lag_ms": report.lag_ms,
-        "setup_ms": session.setup_ms,
-        "settings": {"estimator": session.est.to_dict(), "detection": session.det.to_dict(),
-                     "forgetting": session.est.lam(session.fs) if session.fs else None},
-        "alarms": report.alarms,
-        "final_theta": {k: (None if v is None else v.tolist())
-                        for k, v in report.final_theta.items()},
-        "versions": versions(),
-    }
-    untested = [p.name for p in session.channels if not p.detector.started]
-    out["detection_started"] = {p.name: p.detector.started for p in session.channels}
+    finish(args, report)
+    return 0
+
+
+def finish(args: argparse.Namespace, report: Any, extra: dict | None = None) -> None:
+    """The last lines of a session (samples, alarms, counters, lag; a warning for the
+    channels where detection never started), and the --report file."""
+    started = report.detection_started
+    untested = [name for name, ok in started.items() if not ok]
     n_alarms = len([a for a in report.alarms if a["kind"] == "alarm"])
     print(f"ehss live: {report.samples} samples per channel ({report.stream_s:.1f} s), "
           f"{'no detection' if untested and not n_alarms else f'{n_alarms} alarms'}, "
-          f"counters {report.counters}, lag p99 {report.lag_ms['p99']:.2f} ms",
+          f"counters {report.counters}, lag p99 {report.lag_ms.p99:.2f} ms",
           file=sys.stderr)
     if untested:
         why = (f"the stream ended within --learn {args.learn:g} s"
@@ -388,5 +429,5 @@ def run(args: argparse.Namespace) -> int:
               f"{'s' if len(untested) > 1 else ''} {', '.join(untested)} ({why}): no alarm "
               "could be raised there", file=sys.stderr)
     if args.report:
-        ehss.write_json(args.report, out)
-    return 0
+        ehss.write_json(args.report, {**report.to_dict(), "versions": versions(),
+                                      **(extra or {})})
