@@ -21,8 +21,9 @@ from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import DataError, ParameterError
 
-__all__ = ["register", "run", "add_rig_arguments", "rig_or_replay", "WIRE_FORMAT", "Display",
-           "estimation_settings", "finish", "stop_on_sigterm"]
+__all__ = ["register", "run", "add_command", "add_rig_arguments", "rig_or_replay",
+           "WIRE_FORMAT", "Display", "baselines", "estimation_settings", "finish",
+           "stop_on_sigterm"]
 
 WIRE_FORMAT = """\
 wire format (--udp): one UDP datagram = a 16-byte little-endian header, then n >= 1
@@ -116,18 +117,130 @@ def rig_or_replay(args: argparse.Namespace, command: str
                          columns=tuple(c.strip() for _, _, c in pairs))
 
 
+def add_command(sub: argparse._SubParsersAction, name: str, description: str,
+                example: str) -> argparse.ArgumentParser:
+    """A live command's parser: its description followed by the wire format."""
+    return sub.add_parser(name, help=command_help(name), epilog=f"example: {example}",
+                          formatter_class=argparse.RawDescriptionHelpFormatter,
+                          description=f"{description}\n\n{WIRE_FORMAT}")
+
+
+#: Options of ``ehss live`` by group: (flag, argparse keywords).
+_OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
+    "source": (
+        ("--fields", dict(metavar="t,ref1,fb1,...", help=(
+            "--udp: the fields of one sample, in wire order (required); --replay: the "
+            "columns to take, each as a field or as FIELD=COLUMN for a file with its own "
+            "names (t=time_s,ref1=cmd,fb1=pos)"))),
+        ("--fs", dict(type=float, metavar="HZ", help=(
+            "sample rate (default: the parameter set's, the file's, or from the t field)"))),
+        ("--allow", dict(metavar="IP[,IP...]",
+                         help="--udp: accept datagrams from these senders only")),
+    ),
+    "estimation": (
+        ("--na", dict(type=int, default=4, metavar="N", help="order of A (default: 4)")),
+        ("--nb", dict(type=int, default=3, metavar="N", help="order of B (default: 3)")),
+        ("--nc", dict(type=int, default=4, metavar="N", help="order of C (default: 4)")),
+        ("--delay", dict(type=int, default=1, metavar="D", help="delay (default: 1)")),
+        ("--method", dict(choices=("rels", "rml"), default="rml", help=(
+            "rml (default): recursive maximum likelihood, unbiased when the feedback "
+            "carries mostly sensor noise; rels: the paper's eqs (19)-(22)"))),
+        ("--memory", dict(type=float, default=0.3, metavar="S", help=(
+            "memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: %(default)s s)"))),
+        ("--forgetting", dict(type=float, metavar="LAMBDA", help="λ itself")),
+        ("--p0", dict(type=float, default=1e6, metavar="ALPHA", help=(
+            "P(0) = α I on the scaled data; tr P(0) also bounds tr P (default: "
+            "%(default)g)"))),
+        ("--u-scale", dict(type=float, metavar="U", help=(
+            "scale of the references (default: RMS of the first 0.5 s)"))),
+        ("--y-scale", dict(type=float, metavar="Y", help=(
+            "scale of the feedbacks (default: RMS of the first 0.5 s)"))),
+        ("--baseline", dict(action="append", default=[], metavar="[CH=]MODEL.json",
+                            type=InputFile, help=(
+            "baseline model (ehss identify) for channel CH, or all channels; the "
+            "estimator starts from it (repeatable)"))),
+        ("--batch", dict(type=float, default=0.002, metavar="S", help=(
+            "after a datagram, wait up to S s for more before updating (the estimators' "
+            "cost is mostly per call; default: %(default)s s)"))),
+    ),
+    "change detection": (
+        ("--compare", dict(choices=("baseline", "recent"), default="baseline", help=(
+            "test against the baseline, or against the loop --recent s ago"))),
+        ("--false-alarm-hours", dict(type=float, default=24.0, metavar="H", help=(
+            "mean running time between false alarms, per channel, hours: the sequential "
+            "test's threshold is set for it from the statistics of the learning time "
+            "(default: %(default)g, one a day)"))),
+        ("--frf-db", dict(type=float, default=math.inf, metavar="DB", help=(
+            "also require the RMS dB distance of the responses over the band beyond DB "
+            "for an alarm (default: off; recorded all the same)"))),
+        ("--gain-db", dict(type=float, default=math.inf, metavar="DB", help=(
+            "also require the gain change at the band's lower edge beyond DB "
+            "(default: off)"))),
+        ("--pole-shift", dict(type=float, default=math.inf, metavar="FRACTION", help=(
+            "also require the relative shift of the dominant pole in the band beyond "
+            "FRACTION (default: off)"))),
+        ("--clear", dict(type=float, default=2.0, metavar="S", help=(
+            "the test below half its threshold this long clears an alarm (default: "
+            "%(default)s s)"))),
+        ("--learn", dict(type=float, default=10.0, metavar="S", help=(
+            "stream time before detection; the baseline is identified over it when none "
+            "is given, and the test calibrated (default: %(default)s s)"))),
+        ("--recent", dict(type=float, default=5.0, metavar="S", help=(
+            "look-back of --compare recent; a change that lasts this long is learned "
+            "anew (default: %(default)s s)"))),
+        ("--band", dict(nargs=2, type=float, metavar=("LO", "HI"), help=(
+            "analysis band, Hz (default: the baseline's, else where the reference's "
+            "spectrum is within 20 dB of its peak)"))),
+        ("--update", dict(type=float, default=0.1, metavar="S", help=(
+            "evaluation period, s of stream time (default: %(default)s)"))),
+    ),
+    "compensation": (
+        ("--compensate", dict(choices=("preview", "causal"), help=(
+            "--rig: adapt each channel's inverse-model compensator while the rig runs "
+            "(preview: the reference known ahead, a drive file streamed; causal: made "
+            "online); guarded updates, cross-faded in by the target's filter; runs with "
+            "the terminal summary, --dashboard (a compensation panel) and --record (the "
+            "desired reference as des<k> beside the drive, and each compensator event); "
+            "the figures go to stderr and --report"))),
+        ("--rms", dict(type=float, metavar="X", help=(
+            "--compensate: RMS of the rig's reference in the loop's unit (default the "
+            "rig's, e.g. 0.001 m; a compensated drive must stay within the rig's limits, "
+            "which 0.0005 m over 0.5-20 Hz does); with --udp the RMS of the target's "
+            "reference"))),
+        ("--target", dict(metavar="HOST:PORT", help=(
+            "--compensate with --udp: where the compensator datagrams go "
+            "(ehss.target.datagram); the stream must carry des<k>, each channel's "
+            "desired reference, beside ref<k> (drive) and fb<k>"))),
+    ),
+    "output": (
+        ("--record", dict(metavar="FILE.h5", type=OutputFile, help=(
+            "record samples, estimates and events (HDF5, readable while running; never "
+            "overwritten)"))),
+        ("--dashboard", dict(type=int, metavar="PORT", help=(
+            "serve the dashboard on this port (0: any free port)"))),
+        ("--bind", dict(default="127.0.0.1", metavar="HOST", help=(
+            "dashboard address (default: %(default)s; anything else prints a warning and "
+            "requires a token)"))),
+        ("--quiet", dict(action="store_true", help="no terminal summary")),
+        ("--stop-after", dict(type=float, metavar="S",
+                              help="stop after S s of stream time")),
+        ("--idle-stop", dict(type=float, metavar="S", help=(
+            "--udp: stop when no datagram came for S s (after the first)"))),
+        ("--report", dict(metavar="FILE.json", type=OutputFile, help=(
+            "write the session's figures (counters, lag, CPU, alarms) there"))),
+    ),
+}
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "live",
-        help=command_help("live"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Identify every channel of a running rig online with recursive "
-        "estimation and forgetting,\ncompare each model with a baseline (or the recent "
-        "past), raise alarms when it changes,\nrecord everything to HDF5 and show it in a "
-        "terminal summary and a local web dashboard.\n\n" + WIRE_FORMAT,
-        epilog="example: ehss live --rig position --channels 2 --event 30:mass_kg=350@1 "
-        "--record run.h5 --dashboard 5006",
-    )
+    p = add_command(
+        sub, "live",
+        "Identify every channel of a running rig online with recursive estimation and "
+        "forgetting,\ncompare each model with a baseline (or the recent past), raise "
+        "alarms when it changes,\nrecord everything to HDF5 and show it in a terminal "
+        "summary and a local web dashboard.",
+        "ehss live --rig position --channels 2 --event 30:mass_kg=350@1 --record run.h5 "
+        "--dashboard 5006")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--udp", metavar="HOST:PORT",
                      help="listen for datagrams of a real-time target (see the wire format)")
@@ -136,107 +249,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--replay", metavar="FILE", type=InputFile,
                      help="a recording of ehss live, or a CSV/MAT/HDF5/NPZ file with "
                      "t, ref<k>, fb<k> columns")
-    p.add_argument("--fields", metavar="t,ref1,fb1,...",
-                   help="--udp: the fields of one sample, in wire order (required); "
-                   "--replay: the columns to take, each as a field or as FIELD=COLUMN for a "
-                   "file with its own names (t=time_s,ref1=cmd,fb1=pos)")
-    p.add_argument("--fs", type=float, metavar="HZ",
-                   help="sample rate (default: the parameter set's, the file's, or from the "
-                   "t field)")
-    p.add_argument("--allow", metavar="IP[,IP...]",
-                   help="--udp: accept datagrams from these senders only")
+    for flag, kwargs in _OPTIONS["source"]:
+        p.add_argument(flag, **kwargs)
     add_rig_arguments(p)
-    e = p.add_argument_group("estimation")
-    e.add_argument("--na", type=int, default=4, metavar="N", help="order of A (default: 4)")
-    e.add_argument("--nb", type=int, default=3, metavar="N", help="order of B (default: 3)")
-    e.add_argument("--nc", type=int, default=4, metavar="N", help="order of C (default: 4)")
-    e.add_argument("--delay", type=int, default=1, metavar="D", help="delay (default: 1)")
-    e.add_argument("--method", choices=("rels", "rml"), default="rml",
-                   help="rml (default): recursive maximum likelihood, unbiased when the "
-                   "feedback carries mostly sensor noise; rels: the paper's eqs (19)-(22)")
-    e.add_argument("--memory", type=float, default=0.3, metavar="S",
-                   help="memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: "
-                   "%(default)s s)")
-    e.add_argument("--forgetting", type=float, metavar="LAMBDA", help="λ itself")
-    e.add_argument("--p0", type=float, default=1e6, metavar="ALPHA",
-                   help="P(0) = α I on the scaled data; tr P(0) also bounds tr P "
-                   "(default: %(default)g)")
-    e.add_argument("--u-scale", type=float, metavar="U",
-                   help="scale of the references (default: RMS of the first 0.5 s)")
-    e.add_argument("--y-scale", type=float, metavar="Y",
-                   help="scale of the feedbacks (default: RMS of the first 0.5 s)")
-    e.add_argument("--baseline", action="append", default=[], metavar="[CH=]MODEL.json",
-                   type=InputFile,
-                   help="baseline model (ehss identify) for channel CH, or all channels; the "
-                   "estimator starts from it (repeatable)")
-    d = p.add_argument_group("change detection")
-    d.add_argument("--compare", choices=("baseline", "recent"), default="baseline",
-                   help="test against the baseline, or against the loop --recent s ago")
-    d.add_argument("--false-alarm-hours", type=float, default=24.0, metavar="H",
-                   help="mean running time between false alarms, per channel, hours: the "
-                   "sequential test's threshold is set for it from the statistics of the "
-                   "learning time (default: %(default)g, one a day)")
-    d.add_argument("--frf-db", type=float, default=math.inf, metavar="DB",
-                   help="also require the RMS dB distance of the responses over the band "
-                   "beyond DB for an alarm (default: off; recorded all the same)")
-    d.add_argument("--gain-db", type=float, default=math.inf, metavar="DB",
-                   help="also require the gain change at the band's lower edge beyond DB "
-                   "(default: off)")
-    d.add_argument("--pole-shift", type=float, default=math.inf, metavar="FRACTION",
-                   help="also require the relative shift of the dominant pole in the band "
-                   "beyond FRACTION (default: off)")
-    d.add_argument("--clear", type=float, default=2.0, metavar="S",
-                   help="the test below half its threshold this long clears an alarm "
-                   "(default: %(default)s s)")
-    d.add_argument("--learn", type=float, default=10.0, metavar="S",
-                   help="stream time before detection; the baseline is identified over it "
-                   "when none is given, and the test calibrated (default: %(default)s s)")
-    d.add_argument("--recent", type=float, default=5.0, metavar="S",
-                   help="look-back of --compare recent; a change that lasts this long is "
-                   "learned anew (default: %(default)s s)")
-    d.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="analysis band, Hz (default: the baseline's, else where the "
-                   "reference's spectrum is within 20 dB of its peak)")
-    e.add_argument("--batch", type=float, default=0.002, metavar="S",
-                   help="after a datagram, wait up to S s for more before updating (the "
-                   "estimators' cost is mostly per call; default: %(default)s s)")
-    d.add_argument("--update", type=float, default=0.1, metavar="S",
-                   help="evaluation period, s of stream time (default: %(default)s)")
-    c = p.add_argument_group("compensation")
-    c.add_argument("--compensate", choices=("preview", "causal"),
-                   help="--rig: adapt each channel's inverse-model compensator while the rig "
-                        "runs (preview: the reference known ahead, a drive file streamed; "
-                        "causal: made online); guarded updates, cross-faded in by the "
-                        "target's filter; the log and figures go to stderr and --report")
-    c.add_argument("--rms", type=float, metavar="X",
-                   help="--compensate: RMS of the rig's reference in the loop's unit (default "
-                        "the rig's, e.g. 0.001 m; a compensated drive must stay within the "
-                        "rig's limits, which 0.0005 m over 0.5-20 Hz does); with --udp "
-                        "the RMS of the target's reference")
-    c.add_argument("--target", metavar="HOST:PORT",
-                   help="--compensate with --udp: where the compensator datagrams go "
-                        "(ehss.target.datagram); the stream must carry des<k>, each "
-                        "channel's desired reference, beside ref<k> (drive) and fb<k>")
-    o = p.add_argument_group("output")
-    o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
-                   help="record samples, estimates and events (HDF5, readable while "
-                   "running; never overwritten)")
-    o.add_argument("--dashboard", type=int, metavar="PORT",
-                   help="serve the dashboard on this port (0: any free port)")
-    o.add_argument("--bind", default="127.0.0.1", metavar="HOST",
-                   help="dashboard address (default: %(default)s; anything else prints "
-                   "a warning and requires a token)")
-    o.add_argument("--quiet", action="store_true", help="no terminal summary")
-    o.add_argument("--stop-after", type=float, metavar="S",
-                   help="stop after S s of stream time")
-    o.add_argument("--idle-stop", type=float, metavar="S",
-                   help="--udp: stop when no datagram came for S s (after the first)")
-    o.add_argument("--report", metavar="FILE.json", type=OutputFile,
-                   help="write the session's figures (counters, lag, CPU, alarms) there")
+    for title, options in _OPTIONS.items():
+        if title != "source":
+            group = p.add_argument_group(title)
+            for flag, kwargs in options:
+                group.add_argument(flag, **kwargs)
     p.set_defaults(func=run)
 
 
-def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
+def baselines(items: list[str], channels: tuple[str, ...]) -> dict:
+    """The --baseline models per channel name."""
     from ehss.live.detect import check_baseline
 
     out = {}
@@ -384,10 +409,10 @@ def run(args: argparse.Namespace) -> int:
     source = _source(args)
     display = None
     try:
-        baselines = _baselines(args.baseline, source.layout.channels)
+        models = baselines(args.baseline, source.layout.channels)
         display = Display(args)
         session = LiveSession(
-            source, est=est, det=det, baselines=baselines, record=args.record,
+            source, est=est, det=det, baselines=models, record=args.record,
             update_s=args.update, publish=display.publish,
             h1=display.dashboard is not None, batch_s=args.batch,
             settings={"argv": sys.argv[1:]}, log=display.log,

@@ -37,6 +37,7 @@ class _Channel:
     refusals: int = 0
     last_reason: str = ""
     model: str = ""
+    decisions_seen: int = 0
 
 
 @dataclass
@@ -69,11 +70,13 @@ class CompensationMonitor:
     n_freq: int = 128
     _ch: list[_Channel] = field(init=False, repr=False)
     _n: int = field(init=False, default=0)
+    _loads_seen: int = field(init=False, default=0)
     freq_hz: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._ch = [_Channel(str(name), collections.deque(maxlen=self.keep))
                     for name in self.channels]
+        self._index = {ch.name: k for k, ch in enumerate(self._ch)}
         self._stretch = max(1, int(round(self.stretch_s * self.fs)))
         lo = max(self.band_hz[0], 1e-3)
         self.freq_hz = np.geomspace(lo, max(self.band_hz[1], 1.001 * lo), self.n_freq)
@@ -148,11 +151,20 @@ class CompensationMonitor:
 
     def follow(self, loop: Any) -> None:
         """Take each channel's state from an :class:`~ehss.live.compensate.AdaptiveLoop`
-        (its adapters' current designs and judgements, and its loads)."""
+        (its adapters' current designs and judgements, and its loads); what was counted
+        before is not counted again."""
+        for load in loop.loads[self._loads_seen:]:
+            k = self._index[load["channel"]]
+            self._ch[k].loads += 1
+            self._ch[k].model = load.get("model", "")
+        self._loads_seen = len(loop.loads)
         for k, ad in enumerate(loop.adapters):
-            loads = [ld for ld in loop.loads if ld["channel"] == ad.name]
-            refused = [d for d in ad.compensator.log if not d.accepted]
-            self.update(k, design=ad.compensator.current, loads=len(loads),
-                        refusals=len(refused),
-                        last_reason=refused[-1].reason if refused else "",
-                        model=loads[-1].get("model", "") if loads else "")
+            ch = self._ch[k]
+            log = ad.compensator.log
+            for d in log[ch.decisions_seen:]:
+                if not d.accepted:
+                    ch.refusals += 1
+                    ch.last_reason = d.reason
+            ch.decisions_seen = len(log)
+            self.update(k, design=ad.compensator.current, loads=ch.loads,
+                        refusals=ch.refusals, last_reason=ch.last_reason, model=ch.model)
