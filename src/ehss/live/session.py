@@ -120,6 +120,31 @@ class LiveReport:
         }
 
 
+class _Publisher:
+    """Where snapshots go, how often, and what they carry besides the channels: the rate
+    meter, the sliding H1 estimates (for the dashboard), the compensation's state."""
+
+    def __init__(self, publish: Callable[[SessionSnapshot], None] | None, every_s: float,
+                 h1: SlidingH1 | None,
+                 compensation: Callable[[], CompensationSnapshot] | None) -> None:
+        self._publish = publish
+        self._every_s = float(every_s)
+        self._last = -math.inf
+        self.rate = RateMeter()
+        self.h1 = h1
+        self.compensation = compensation
+
+    def due(self) -> bool:
+        """Whether a snapshot is due (``every_s`` of wall time after the last)."""
+        return self._publish is not None and \
+            time.monotonic() - self._last >= self._every_s
+
+    def publish(self, snap: SessionSnapshot) -> None:
+        self._last = time.monotonic()
+        if self._publish is not None:
+            self._publish(snap)
+
+
 class _Clock:
     """Wall-clock and CPU time of the whole run and of the span that had data."""
 
@@ -197,13 +222,11 @@ class LiveSession:
                                  f"stream has {', '.join(self.layout.channels)}")
         self._record_path = None if record is None else check_new_recording(record)
         self._update_s = float(update_s)
-        self._publish = publish
-        self._display_s = float(display_s)
-        self._h1 = SlidingH1() if h1 else None
+        self._display = _Publisher(publish, display_s, SlidingH1() if h1 else None,
+                                   compensation)
         self._batch_s = float(batch_s)
         self._settings = dict(settings or {})
         self._log = log
-        self._compensation = compensation
         self.fs: float | None = source.fs
         _warm_up(est)
         self.channels: list[ChannelProcessor] = []
@@ -214,8 +237,6 @@ class LiveSession:
         self._scheduler: EvaluationScheduler | None = None
         self._history = EvaluationHistory(est.n_params)
         self._lag = LagMeter()
-        self._rate = RateMeter()
-        self._last_publish = -math.inf
         self._skip_lag = False
         self.setup_ms = math.nan
         self._clock: _Clock | None = None
@@ -315,21 +336,22 @@ class LiveSession:
     # ------------------------------------------------------------------ display
     def snapshot(self) -> SessionSnapshot:
         """The state for a display (small, picklable)."""
-        rate = self._rate.update(self._n)
-        if self._h1 is not None:
-            self._h1.renew_next(self.channels)
+        display = self._display
+        rate = display.rate.update(self._n)
+        if display.h1 is not None:
+            display.h1.renew_next(self.channels)
         return SessionSnapshot(
             t_s=self.t_s, fs=self.fs, samples=self._n, rate_sps=rate,
             counters=dict(self.source.counters), lag_ms=self.lag_ms(),
             events=tuple(e for e in self.events if e["kind"] in _SHOWN)[-50:],
             channels=tuple(self._channel_snapshot(k, p) for k, p in enumerate(self.channels)),
             history=self._history.snapshot(), theta_names=self._theta_names(),
-            compensation=None if self._compensation is None else self._compensation(),
+            compensation=None if display.compensation is None else display.compensation(),
         )
 
     def _channel_snapshot(self, k: int, proc: ChannelProcessor) -> ChannelSnapshot:
         grid, h, h_ref = proc.model_response()
-        h1 = None if self._h1 is None else self._h1.get(k)
+        h1 = None if self._display.h1 is None else self._display.h1.get(k)
         return ChannelSnapshot(
             name=proc.name, learning=proc.learning, alarm=proc.detector.active,
             figures=tuple(proc.figures.tolist()),
@@ -348,10 +370,8 @@ class LiveSession:
                      + [f"c{i}" for i in range(1, e.nc + 1)])
 
     def _maybe_publish(self) -> None:
-        if self._publish is not None and self.fs and \
-                time.monotonic() - self._last_publish >= self._display_s:
-            self._last_publish = time.monotonic()
-            self._publish(self.snapshot())
+        if self.fs and self._display.due():
+            self._display.publish(self.snapshot())
 
     # ------------------------------------------------------------------ run
     def run(self, *, duration_s: float | None = None, stop: threading.Event | None = None,
