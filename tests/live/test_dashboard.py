@@ -3,15 +3,18 @@ alarm after a payload change. Skipped, with the reason, where no browser is inst
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import select
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ehss.live.dashboard import Dashboard
@@ -54,6 +57,12 @@ def _browser():
     return webdriver.Chrome(service=Service(DRIVER), options=opts)
 
 
+def _drain(stream) -> None:
+    with contextlib.suppress(OSError, ValueError):   # closed by _stop
+        while stream.read(4096):
+            pass
+
+
 def _start_live(argv: list[str]) -> tuple[subprocess.Popen, str | None]:
     """``ehss live ARGV`` in its own process, and the dashboard's URL once printed."""
     env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -69,16 +78,20 @@ def _start_live(argv: list[str]) -> tuple[subprocess.Popen, str | None]:
             break
         m = re.search(r"dashboard at (http://127\.0\.0\.1:\d+/)", line)
         url = m.group(1) if m else None
+    # the rest of its log is read as it comes, so that a full pipe never holds it up
+    threading.Thread(target=_drain, args=(live.stderr,), daemon=True).start()
     return live, url
 
 
-def _open(driver, url: str | None) -> None:
+def _open(driver, url: str | None, live: subprocess.Popen) -> None:
     assert url, "the dashboard did not start"
     driver.set_page_load_timeout(60)
     driver.get(url)
     # BokehJS comes from the ehss server itself, not from a CDN
-    scripts = re.findall(r'<script[^>]+src="([^"]+)"', driver.page_source)
-    assert scripts and all(s.startswith("/static/") for s in scripts), scripts
+    page = driver.page_source
+    scripts = re.findall(r'<script[^>]+src="([^"]+)"', page)
+    assert scripts and all(s.startswith("/static/") for s in scripts), \
+        (scripts, live.poll(), page[:300])
 
 
 def _stop(driver, live: subprocess.Popen) -> None:
@@ -99,7 +112,7 @@ def test_dashboard_in_headless_chromium(tmp_path):
                              "--event", "8:mass_kg=350@1", "--learn", "4", "--speed", "2",
                              "--dashboard", "0", "--quiet"])
     try:
-        _open(driver, url)
+        _open(driver, url, live)
         seen = []
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:
@@ -149,21 +162,24 @@ def test_compensation_panel_in_headless_chromium(tmp_path):
                              "--dashboard", "0", "--quiet", "--record",
                              str(tmp_path / "run.h5")])
     try:
-        _open(driver, url)
+        _open(driver, url, live)
         state = None
-        deadline = time.monotonic() + 90
+        deadline = time.monotonic() + 150
         while time.monotonic() < deadline:
             state = driver.execute_script(_COMPENSATION_JS)
-            # a few stretches after the first inverse was loaded
-            if state and state[4] and len(state[2]) > 20:
+            # 10 s of stretches, the first inverse loaded at 2 s and in well before
+            if state and state[4] and len(state[2]) > 40:
                 break
             time.sleep(0.5)
-        assert state and state[1], "the compensation panel never showed"
+        assert state and state[1], f"the compensation panel never showed: {state}"
         text, _, with_, without, mag, f = state
         assert "channel 1:" in text and "loaded" in text, text
-        # the inverse's response spans the band, the error fell below the rig's without
+        assert len(with_) > 40, f"only {len(with_)} stretches shown"
+        # the inverse's response spans the band; over the latest 2 s the error is far
+        # below the rig's without compensation (about 60 times on this rig)
         assert mag and 0.5 <= min(f) and max(f) <= 20.0 * (1 + 1e-9)
-        assert with_[-1] < without[-1] / 2, (with_[-5:], without[-5:])
+        recent = slice(-8, None)
+        assert np.median(with_[recent]) < np.median(without[recent]) / 2, (with_, without)
         driver.save_screenshot(str(tmp_path / "compensation.png"))
     finally:
         _stop(driver, live)

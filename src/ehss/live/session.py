@@ -16,6 +16,7 @@ after each block it hands the source, and :meth:`LiveSession.close` at the end.
 
 from __future__ import annotations
 
+import collections
 import math
 import threading
 import time
@@ -232,6 +233,7 @@ class LiveSession:
         self.channels: list[ChannelProcessor] = []
         self.recorder: LiveRecorder | None = None
         self.events: list[dict] = []
+        self._inbox: collections.deque[tuple[dict, float]] = collections.deque()
         self._held: list[Block] = []
         self._n = 0
         self._scheduler: EvaluationScheduler | None = None
@@ -283,8 +285,13 @@ class LiveSession:
 
     def add_event(self, record: dict, t_s: float | None = None) -> None:
         """Log, record and keep an event (a JSON-able dict with a ``kind``) at stream
-        time ``t_s`` (default: now in the stream)."""
-        self._event(record, t_s)
+        time ``t_s`` (default: now in the stream). Safe from any thread: the event is
+        taken in by the session's next :meth:`step` (or :meth:`close`)."""
+        self._inbox.append((record, self.t_s if t_s is None else t_s))
+
+    def _take_events(self) -> None:
+        while self._inbox:
+            self._event(*self._inbox.popleft())
 
     def _event(self, record: dict, t_s: float | None = None) -> None:
         record = {"t_s": self.t_s if t_s is None else t_s, "wall": time.time(), **record}
@@ -411,6 +418,7 @@ class LiveSession:
         if self._clock is None:
             self.start()
         assert self._clock is not None
+        self._take_events()
         blocks = self._gather(self.source.poll(0.0 if self._pending else wait_s))
         if blocks:
             self._process(blocks, duration_s)
@@ -425,6 +433,7 @@ class LiveSession:
         if not self._closed:
             self._closed = True
             try:
+                self._take_events()
                 self._finish_evaluations()
                 if self.fs:
                     self._event({"kind": "stop", "counters": dict(self.source.counters),
