@@ -86,9 +86,16 @@ def _start_live(argv: list[str]) -> tuple[subprocess.Popen, str | None]:
 def _open(driver, url: str | None, live: subprocess.Popen) -> None:
     assert url, "the dashboard did not start"
     driver.set_page_load_timeout(60)
-    driver.get(url)
+    page = ""
+    for _ in range(5):
+        # on a loaded machine the browser sometimes reports the load of an empty page
+        # before the server's answer: ask again
+        driver.get(url)
+        page = driver.page_source
+        if page:
+            break
+        time.sleep(2)
     # BokehJS comes from the ehss server itself, not from a CDN
-    page = driver.page_source
     scripts = re.findall(r'<script[^>]+src="([^"]+)"', page)
     assert scripts and all(s.startswith("/static/") for s in scripts), \
         (scripts, live.poll(), page[:300])
