@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import signal
 import sys
 import threading
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
 
 import ehss
 from ehss._checks import check_band, check_real
@@ -18,11 +21,9 @@ from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.errors import DataError, ParameterError
 
-if TYPE_CHECKING:
-    from ehss.live.channel import EstimatorSettings
-    from ehss.live.detect import DetectionSettings
-
-__all__ = ["register", "run", "add_rig_arguments", "rig_or_replay", "WIRE_FORMAT"]
+__all__ = ["register", "run", "add_command", "add_rig_arguments", "rig_or_replay",
+           "WIRE_FORMAT", "Display", "baselines", "estimation_settings", "finish",
+           "stop_on_sigterm"]
 
 WIRE_FORMAT = """\
 wire format (--udp): one UDP datagram = a 16-byte little-endian header, then n >= 1
@@ -85,7 +86,8 @@ def _rig_only(args: argparse.Namespace, command: str) -> None:
                              f"simulated run){hint}")
 
 
-def rig_or_replay(args: argparse.Namespace, command: str):
+def rig_or_replay(args: argparse.Namespace, command: str
+                  ) -> tuple[Any, np.ndarray, float]:
     """``(layout, samples, fs)`` of ``--rig LOOP`` or ``--replay FILE``; ``command``
     names the command in a warning (a simulated loop its gains leave unstable)."""
     from ehss.cli._params import warn_if_unstable
@@ -126,18 +128,130 @@ def rig_or_replay(args: argparse.Namespace, command: str):
                          columns=tuple(c.strip() for _, _, c in pairs))
 
 
+def add_command(sub: argparse._SubParsersAction, name: str, description: str,
+                example: str) -> argparse.ArgumentParser:
+    """A live command's parser: its description followed by the wire format."""
+    return sub.add_parser(name, help=command_help(name), epilog=f"example: {example}",
+                          formatter_class=argparse.RawDescriptionHelpFormatter,
+                          description=f"{description}\n\n{WIRE_FORMAT}")
+
+
+#: Options of ``ehss live`` by group: (flag, argparse keywords).
+_OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
+    "source": (
+        ("--fields", dict(metavar="t,ref1,fb1,...", help=(
+            "--udp: the fields of one sample, in wire order (required); --replay: the "
+            "columns to take, each as a field or as FIELD=COLUMN for a file with its own "
+            "names (t=time_s,ref1=cmd,fb1=pos)"))),
+        ("--fs", dict(type=float, metavar="HZ", help=(
+            "sample rate (default: the parameter set's, the file's, or from the t field)"))),
+        ("--allow", dict(metavar="IP[,IP...]",
+                         help="--udp: accept datagrams from these senders only")),
+    ),
+    "estimation": (
+        ("--na", dict(type=int, default=4, metavar="N", help="order of A (default: 4)")),
+        ("--nb", dict(type=int, default=3, metavar="N", help="order of B (default: 3)")),
+        ("--nc", dict(type=int, default=4, metavar="N", help="order of C (default: 4)")),
+        ("--delay", dict(type=int, default=1, metavar="D", help="delay (default: 1)")),
+        ("--method", dict(choices=("rels", "rml"), default="rml", help=(
+            "rml (default): recursive maximum likelihood, unbiased when the feedback "
+            "carries mostly sensor noise; rels: the paper's eqs (19)-(22)"))),
+        ("--memory", dict(type=float, default=0.3, metavar="S", help=(
+            "memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: %(default)s s)"))),
+        ("--forgetting", dict(type=float, metavar="LAMBDA", help="λ itself")),
+        ("--p0", dict(type=float, default=1e6, metavar="ALPHA", help=(
+            "P(0) = α I on the scaled data; tr P(0) also bounds tr P (default: "
+            "%(default)g)"))),
+        ("--u-scale", dict(type=float, metavar="U", help=(
+            "scale of the references (default: RMS of the first 0.5 s)"))),
+        ("--y-scale", dict(type=float, metavar="Y", help=(
+            "scale of the feedbacks (default: RMS of the first 0.5 s)"))),
+        ("--baseline", dict(action="append", default=[], metavar="[CH=]MODEL.json",
+                            type=InputFile, help=(
+            "baseline model (ehss identify) for channel CH, or all channels; the "
+            "estimator starts from it (repeatable)"))),
+        ("--batch", dict(type=float, default=0.002, metavar="S", help=(
+            "after a datagram, wait up to S s for more before updating (the estimators' "
+            "cost is mostly per call; default: %(default)s s)"))),
+    ),
+    "change detection": (
+        ("--compare", dict(choices=("baseline", "recent"), default="baseline", help=(
+            "test against the baseline, or against the loop --recent s ago"))),
+        ("--false-alarm-hours", dict(type=float, default=24.0, metavar="H", help=(
+            "mean running time between false alarms, per channel, hours: the sequential "
+            "test's threshold is set for it from the statistics of the learning time "
+            "(default: %(default)g, one a day)"))),
+        ("--frf-db", dict(type=float, default=math.inf, metavar="DB", help=(
+            "also require the RMS dB distance of the responses over the band beyond DB "
+            "for an alarm (default: off; recorded all the same)"))),
+        ("--gain-db", dict(type=float, default=math.inf, metavar="DB", help=(
+            "also require the gain change at the band's lower edge beyond DB "
+            "(default: off)"))),
+        ("--pole-shift", dict(type=float, default=math.inf, metavar="FRACTION", help=(
+            "also require the relative shift of the dominant pole in the band beyond "
+            "FRACTION (default: off)"))),
+        ("--clear", dict(type=float, default=2.0, metavar="S", help=(
+            "the test below half its threshold this long clears an alarm (default: "
+            "%(default)s s)"))),
+        ("--learn", dict(type=float, metavar="S", help=(
+            "stream time before detection; the baseline is identified over it when none "
+            f"is given, and the test calibrated (default: {LEARN_S:g} s)"))),
+        ("--recent", dict(type=float, default=5.0, metavar="S", help=(
+            "look-back of --compare recent; a change that lasts this long is learned "
+            "anew (default: %(default)s s)"))),
+        ("--band", dict(nargs=2, type=float, metavar=("LO", "HI"), help=(
+            "analysis band, Hz (default: the baseline's, else where the reference's "
+            "spectrum is within 20 dB of its peak)"))),
+        ("--update", dict(type=float, default=0.1, metavar="S", help=(
+            "evaluation period, s of stream time (default: %(default)s)"))),
+    ),
+    "compensation": (
+        ("--compensate", dict(choices=("preview", "causal"), help=(
+            "--rig: adapt each channel's inverse-model compensator while the rig runs "
+            "(preview: the reference known ahead, a drive file streamed; causal: made "
+            "online); guarded updates, cross-faded in by the target's filter; runs with "
+            "the terminal summary, --dashboard (a compensation panel) and --record (the "
+            "desired reference as des<k> beside the drive, and each compensator event); "
+            "the figures go to stderr and --report"))),
+        ("--rms", dict(type=float, metavar="X", help=(
+            "--compensate: RMS of the rig's reference in the loop's unit (default the "
+            "rig's, e.g. 0.001 m; a compensated drive must stay within the rig's limits, "
+            "which 0.0005 m over 0.5-20 Hz does); with --udp the RMS of the target's "
+            "reference"))),
+        ("--target", dict(metavar="HOST:PORT", help=(
+            "--compensate with --udp: where the compensator datagrams go "
+            "(ehss.target.datagram); the stream must carry des<k>, each channel's "
+            "desired reference, beside ref<k> (drive) and fb<k>"))),
+    ),
+    "output": (
+        ("--record", dict(metavar="FILE.h5", type=OutputFile, help=(
+            "record samples, estimates and events (HDF5, readable while running; never "
+            "overwritten)"))),
+        ("--dashboard", dict(type=int, metavar="PORT", help=(
+            "serve the dashboard on this port (0: any free port)"))),
+        ("--bind", dict(default="127.0.0.1", metavar="HOST", help=(
+            "dashboard address (default: %(default)s; anything else prints a warning and "
+            "requires a token)"))),
+        ("--quiet", dict(action="store_true", help="no terminal summary")),
+        ("--stop-after", dict(type=float, metavar="S",
+                              help="stop after S s of stream time")),
+        ("--idle-stop", dict(type=float, metavar="S", help=(
+            "--udp: stop when no datagram came for S s (after the first)"))),
+        ("--report", dict(metavar="FILE.json", type=OutputFile, help=(
+            "write the session's figures (counters, lag, CPU, alarms) there"))),
+    ),
+}
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "live",
-        help=command_help("live"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Identify every channel of a running rig online with recursive "
-        "estimation and forgetting,\ncompare each model with a baseline (or the recent "
-        "past), raise alarms when it changes,\nrecord everything to HDF5 and show it in a "
-        "terminal summary and a local web dashboard.\n\n" + WIRE_FORMAT,
-        epilog="example: ehss live --rig position --channels 2 --event 30:mass_kg=350@1 "
-        "--record run.h5 --dashboard 5006",
-    )
+    p = add_command(
+        sub, "live",
+        "Identify every channel of a running rig online with recursive estimation and "
+        "forgetting,\ncompare each model with a baseline (or the recent past), raise "
+        "alarms when it changes,\nrecord everything to HDF5 and show it in a terminal "
+        "summary and a local web dashboard.",
+        "ehss live --rig position --channels 2 --event 30:mass_kg=350@1 --record run.h5 "
+        "--dashboard 5006")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--udp", metavar="HOST:PORT",
                      help="listen for datagrams of a real-time target (see the wire format)")
@@ -146,114 +260,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--replay", metavar="FILE", type=InputFile,
                      help="a recording of ehss live, or a CSV/MAT/HDF5/NPZ file with "
                      "t, ref<k>, fb<k> columns")
-    p.add_argument("--fields", metavar="t,ref1,fb1,...",
-                   help="--udp: the fields of one sample, in wire order (required); "
-                   "--replay: the columns to take, each as a field or as FIELD=COLUMN for a "
-                   "file with its own names (t=time_s,ref1=cmd,fb1=pos)")
-    p.add_argument("--fs", type=float, metavar="HZ",
-                   help="sample rate (default: the parameter set's, the file's, or from the "
-                   "t field)")
-    p.add_argument("--allow", metavar="IP[,IP...]",
-                   help="--udp: accept datagrams from these senders only")
+    for flag, kwargs in _OPTIONS["source"]:
+        p.add_argument(flag, **kwargs)
     add_rig_arguments(p)
-    e = p.add_argument_group("estimation")
-    e.add_argument("--na", type=int, default=4, metavar="N", help="order of A (default: 4)")
-    e.add_argument("--nb", type=int, default=3, metavar="N", help="order of B (default: 3)")
-    e.add_argument("--nc", type=int, default=4, metavar="N", help="order of C (default: 4)")
-    e.add_argument("--delay", type=int, default=1, metavar="D", help="delay (default: 1)")
-    e.add_argument("--method", choices=("rels", "rml"), default="rml",
-                   help="rml (default): recursive maximum likelihood, unbiased when the "
-                   "feedback carries mostly sensor noise; rels: the paper's eqs (19)-(22)")
-    e.add_argument("--memory", type=float, default=0.3, metavar="S",
-                   help="memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: "
-                   "%(default)s s)")
-    e.add_argument("--forgetting", type=float, metavar="LAMBDA", help="λ itself")
-    e.add_argument("--p0", type=float, default=1e6, metavar="ALPHA",
-                   help="P(0) = α I on the scaled data; tr P(0) also bounds tr P "
-                   "(default: %(default)g)")
-    e.add_argument("--u-scale", type=float, metavar="U",
-                   help="scale of the references (default: RMS of the first 0.5 s)")
-    e.add_argument("--y-scale", type=float, metavar="Y",
-                   help="scale of the feedbacks (default: RMS of the first 0.5 s)")
-    e.add_argument("--baseline", action="append", default=[], metavar="[CH=]MODEL.json",
-                   type=InputFile,
-                   help="baseline model (ehss identify) for channel CH, or all channels; the "
-                   "estimator starts from it (repeatable)")
-    d = p.add_argument_group("change detection")
-    d.add_argument("--compare", choices=("baseline", "recent"), default="baseline",
-                   help="test against the baseline, or against the loop --recent s ago")
-    d.add_argument("--false-alarm-hours", type=float, default=24.0, metavar="H",
-                   help="mean running time between false alarms, per channel, hours: the "
-                   "sequential test's threshold is set for it from the statistics of the "
-                   "learning time (default: %(default)g, one a day)")
-    d.add_argument("--frf-db", type=float, default=math.inf, metavar="DB",
-                   help="also require the RMS dB distance of the responses over the band "
-                   "beyond DB for an alarm (default: off; recorded all the same)")
-    d.add_argument("--gain-db", type=float, default=math.inf, metavar="DB",
-                   help="also require the gain change at the band's lower edge beyond DB "
-                   "(default: off)")
-    d.add_argument("--pole-shift", type=float, default=math.inf, metavar="FRACTION",
-                   help="also require the relative shift of the dominant pole in the band "
-                   "beyond FRACTION (default: off)")
-    d.add_argument("--clear", type=float, default=2.0, metavar="S",
-                   help="the test below half its threshold this long clears an alarm "
-                   "(default: %(default)s s)")
-    d.add_argument("--learn", type=float, metavar="S",
-                   help="stream time before detection; the baseline is identified over it "
-                   f"when none is given, and the test calibrated (default: {LEARN_S} s)")
-    d.add_argument("--recent", type=float, default=5.0, metavar="S",
-                   help="look-back of --compare recent; a change that lasts this long is "
-                   "learned anew (default: %(default)s s)")
-    d.add_argument("--band", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="analysis band, Hz (default: the baseline's, else where the "
-                   "reference's spectrum is within 20 dB of its peak)")
-    e.add_argument("--batch", type=float, default=0.002, metavar="S",
-                   help="after a datagram, wait up to S s for more before updating (the "
-                   "estimators' cost is mostly per call; default: %(default)s s)")
-    d.add_argument("--update", type=float, default=0.1, metavar="S",
-                   help="evaluation period, s of stream time (default: %(default)s)")
-    c = p.add_argument_group("compensation")
-    c.add_argument("--compensate", choices=("preview", "causal"),
-                   help="--rig: adapt each channel's inverse-model compensator while the rig "
-                        "runs (preview: the reference known ahead, a drive file streamed; "
-                        "causal: made online); guarded updates, cross-faded in by the "
-                        "target's filter; the log and figures go to stderr and --report")
-    c.add_argument("--rms", type=float, metavar="X",
-                   help="--compensate: RMS of the rig's reference in the loop's unit (default "
-                        "the rig's, e.g. 0.001 m; a compensated drive must stay within the "
-                        "rig's limits, which 0.0005 m over 0.5-20 Hz does); with --udp "
-                        "the RMS of the target's reference")
-    c.add_argument("--target", metavar="HOST:PORT",
-                   help="--compensate with --udp: where the compensator datagrams go "
-                        "(ehss.target.datagram); the stream must carry des<k>, each "
-                        "channel's desired reference, beside ref<k> (drive) and fb<k>")
-    o = p.add_argument_group("output")
-    o.add_argument("--record", metavar="FILE.h5", type=OutputFile,
-                   help="record samples, estimates and events (HDF5, readable while "
-                   "running; never overwritten)")
-    o.add_argument("--dashboard", type=int, metavar="PORT",
-                   help="serve the dashboard on this port (0: any free port)")
-    o.add_argument("--bind", default="127.0.0.1", metavar="HOST",
-                   help="dashboard address (default: %(default)s; anything else prints "
-                   "a warning and requires a token)")
-    o.add_argument("--quiet", action="store_true", help="no terminal summary")
-    o.add_argument("--stop-after", type=float, metavar="S",
-                   help="stop after S s of stream time")
-    o.add_argument("--idle-stop", type=float, metavar="S",
-                   help="--udp: stop when no datagram came for S s (after the first)")
-    o.add_argument("--report", metavar="FILE.json", type=OutputFile,
-                   help="write the session's figures (counters, lag, CPU, alarms) there")
+    for title, options in _OPTIONS.items():
+        if title != "source":
+            group = p.add_argument_group(title)
+            for flag, kwargs in options:
+                group.add_argument(flag, **kwargs)
     p.set_defaults(func=run)
 
 
-def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
+def baselines(items: list[str], channels: tuple[str, ...]) -> dict:
+    """The --baseline models per channel name."""
     from ehss.live.detect import check_baseline
 
     out = {}
     for item in items:
-        ch, sep, path = item.rpartition("=")
-        if not sep:
-            ch, path = None, item
+        given, sep, path = item.rpartition("=")
+        ch = given if sep else None
         try:
             model = ehss.ArmaxModel.load_json(path)
         except (OSError, ValueError, KeyError) as exc:
@@ -264,7 +289,7 @@ def _baselines(items: list[str], channels: tuple[str, ...]) -> dict:
     return out
 
 
-def _source(args: argparse.Namespace):
+def _source(args: argparse.Namespace) -> Any:
     from ehss.live.layout import RecordLayout, parse_fields
     from ehss.live.source import PacedSource
     from ehss.live.udp import UdpSource, parse_address
@@ -294,8 +319,101 @@ def _source(args: argparse.Namespace):
     return PacedSource(layout, samples, fs, speed=args.speed)
 
 
-def _check_run_options(args: argparse.Namespace) -> None:
-    """Refuse a --target without --udp and a --stop-after that is not a positive time."""
+def learn_s(args: argparse.Namespace) -> float:
+    """Stream time before detection: --learn, or its default."""
+    return LEARN_S if args.learn is None else float(args.learn)
+
+
+def estimation_settings(args: argparse.Namespace) -> tuple[Any, Any]:
+    """The estimator's and the change detection's settings from the options."""
+    from ehss.live.channel import EstimatorSettings
+    from ehss.live.detect import DetectionSettings
+
+    est = EstimatorSettings(na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
+                            method=args.method, memory_s=args.memory,
+                            forgetting=args.forgetting, p0=args.p0, u_scale=args.u_scale,
+                            y_scale=args.y_scale)
+    det = DetectionSettings(compare=args.compare, false_alarm_hours=args.false_alarm_hours,
+                            frf_db=args.frf_db, gain_db=args.gain_db,
+                            pole_shift=args.pole_shift, clear_s=args.clear,
+                            learn_s=learn_s(args), recent_s=args.recent,
+                            band_hz=None if args.band is None else tuple(args.band))
+    return est, det
+
+
+class Display:
+    """The terminal summary (unless --quiet) and the dashboard (with --dashboard): what
+    a session publishes and logs goes there."""
+
+    #: kinds of event printed as they happen
+    LOGGED = ("alarm", "clear", "message", "compensator", "compensator_refused",
+              "compensator_alarm", "compensator_clear")
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        from ehss.live.summary import TerminalSummary
+
+        self.dashboard: Any = None
+        self.summary: Any = None
+        if args.dashboard is not None:
+            from ehss.live.dashboard import Dashboard
+
+            self.dashboard = Dashboard(host=args.bind, port=args.dashboard)
+            self.dashboard.start()
+            print(f"ehss live: dashboard at {self.dashboard.url}", file=sys.stderr, flush=True)
+        if not args.quiet:
+            self.summary = TerminalSummary(sys.stderr)
+
+    @property
+    def publish(self) -> Callable[[Any], None] | None:
+        """Where snapshots go (None when nothing shows them)."""
+        return None if self.dashboard is None and self.summary is None else self._publish
+
+    def _publish(self, snap: Any) -> None:
+        if self.dashboard is not None:
+            self.dashboard.publish(snap)
+        if self.summary is not None:
+            self.summary.update(snap)
+
+    def log(self, event: dict) -> None:
+        """Print an event worth a line as it happens."""
+        if event["kind"] in self.LOGGED:
+            line = json.dumps({k: v for k, v in event.items() if k != "wall"})
+            if self.summary is not None:
+                self.summary.note(line)
+            else:
+                print(f"ehss live: {line}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.summary is not None:
+            self.summary.close()
+        if self.dashboard is not None:
+            self.dashboard.stop()
+
+
+@contextlib.contextmanager
+def stop_on_sigterm() -> Iterator[threading.Event]:
+    """An event set by SIGTERM (in the main thread), so that a run ends cleanly."""
+    stop = threading.Event()
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGTERM)
+    if main:
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        yield stop
+    finally:
+        if main:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    from ehss.live.recording import check_new_recording
+
+    if args.record is not None:
+        check_new_recording(args.record)
+    if args.compensate is None:
+        for flag, value in (("--rms", args.rms), ("--target", args.target)):
+            if value is not None:
+                raise ParameterError(f"{flag} applies to --compensate only")
     if args.target is not None and args.udp is None:
         raise ParameterError("--target applies to --compensate with --udp only (the "
                              "simulated rig takes its compensator without datagrams)")
@@ -303,7 +421,7 @@ def _check_run_options(args: argparse.Namespace) -> None:
         _check_positive("--stop-after", args.stop_after)
 
 
-def _check_at_rate(est: EstimatorSettings, det: DetectionSettings, source: Any) -> None:
+def _check_at_rate(est: Any, det: Any, source: Any) -> None:
     """The settings that mean something only at the stream's rate, checked before the
     session reports itself ready when the source knows its rate (a rig or a replay): the
     memory longer than a sample and the band below Nyquist."""
@@ -316,18 +434,9 @@ def _check_at_rate(est: EstimatorSettings, det: DetectionSettings, source: Any) 
 
 
 def run(args: argparse.Namespace) -> int:
-    from ehss.live.channel import EstimatorSettings
-    from ehss.live.detect import DetectionSettings
     from ehss.live.session import LiveSession
-    from ehss.live.summary import TerminalSummary
 
-    if args.record is not None and Path(args.record).exists():
-        raise DataError(f"{args.record!r} exists: a recording is never overwritten")
-    if args.compensate is None:
-        for flag, value in (("--rms", args.rms), ("--target", args.target)):
-            if value is not None:
-                raise ParameterError(f"{flag} applies to --compensate only")
-    _check_run_options(args)
+    _check_options(args)
     if args.compensate is not None:
         from ehss.cli._live_compensate import run_compensated
 
@@ -335,104 +444,55 @@ def run(args: argparse.Namespace) -> int:
         duration = RIG_DURATION_S if args.duration is None else args.duration
         _check_positive("--duration", duration)
         return run_compensated(args, duration)
-    est = EstimatorSettings(na=args.na, nb=args.nb, nc=args.nc, delay=args.delay,
-                            method=args.method, memory_s=args.memory,
-                            forgetting=args.forgetting, p0=args.p0, u_scale=args.u_scale,
-                            y_scale=args.y_scale)
-    det = DetectionSettings(compare=args.compare, false_alarm_hours=args.false_alarm_hours,
-                            frf_db=args.frf_db, gain_db=args.gain_db,
-                            pole_shift=args.pole_shift, clear_s=args.clear,
-                            learn_s=LEARN_S if args.learn is None else args.learn,
-                            recent_s=args.recent,
-                            band_hz=None if args.band is None else tuple(args.band))
+    est, det = estimation_settings(args)
     source = _source(args)
-    dashboard = None
-    summary = None
+    display = None
     try:
         _check_at_rate(est, det, source)
-        baselines = _baselines(args.baseline, source.layout.channels)
-        if args.dashboard is not None:
-            from ehss.live.dashboard import Dashboard
-
-            dashboard = Dashboard(host=args.bind, port=args.dashboard)
-            dashboard.start()
-            print(f"ehss live: dashboard at {dashboard.url}", file=sys.stderr, flush=True)
-        if not args.quiet:
-            summary = TerminalSummary(sys.stderr)
-        publish = None
-        if dashboard is not None or summary is not None:
-            def publish(snap: dict) -> None:
-                if dashboard is not None:
-                    dashboard.publish(snap)
-                if summary is not None:
-                    summary.update(snap)
-
-        def log(event: dict) -> None:
-            if event["kind"] in ("alarm", "clear", "message"):
-                line = json.dumps({k: v for k, v in event.items() if k != "wall"})
-                if summary is not None:
-                    summary.note(line)
-                else:
-                    print(f"ehss live: {line}", file=sys.stderr, flush=True)
-
+        models = baselines(args.baseline, source.layout.channels)
+        display = Display(args)
         session = LiveSession(
-            source, est=est, det=det, baselines=baselines, record=args.record,
-            update_s=args.update, publish=publish, h1=dashboard is not None,
-            batch_s=args.batch,
-            settings={"argv": sys.argv[1:]}, log=log,
+            source, est=est, det=det, baselines=models, record=args.record,
+            update_s=args.update, publish=display.publish,
+            h1=display.dashboard is not None, batch_s=args.batch,
+            settings={"argv": sys.argv[1:]}, log=display.log,
         )
         where = (f"listening on {source.address[0]}:{source.address[1]}"
                  if hasattr(source, "address") else "running")
         print(f"ehss live: ready, {where}", file=sys.stderr, flush=True)
-        stop = threading.Event()
-        previous = signal.getsignal(signal.SIGTERM)
-        if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, lambda *_: stop.set())
-        try:
-            report = session.run(duration_s=args.stop_after, stop=stop,
-                                 idle_stop_s=args.idle_stop)
-        except KeyboardInterrupt:
-            report = None
-        finally:
-            if threading.current_thread() is threading.main_thread():
-                signal.signal(signal.SIGTERM, previous)
+        with stop_on_sigterm() as stop:
+            try:
+                report = session.run(duration_s=args.stop_after, stop=stop,
+                                     idle_stop_s=args.idle_stop)
+            except KeyboardInterrupt:
+                report = None
     finally:
         source.close()
-        if summary is not None:
-            summary.close()
-        if dashboard is not None:
-            dashboard.stop()
+        if display is not None:
+            display.close()
     if report is None:
         print("ehss live: interrupted; the recording is closed", file=sys.stderr)
         return 130
-    out = {
-        "samples": report.samples, "stream_s": report.stream_s, "wall_s": report.wall_s,
-        "cpu_s": report.cpu_s, "active_wall_s": report.active_wall_s,
-        "active_cpu_s": report.active_cpu_s,
-        "cpu_share": report.active_cpu_s / report.active_wall_s
-        if report.active_wall_s > 0 else math.nan,
-        "counters": report.counters, "lag_ms": report.lag_ms,
-        "setup_ms": session.setup_ms,
-        "settings": {"estimator": session.est.to_dict(), "detection": session.det.to_dict(),
-                     "forgetting": session.est.lam(session.fs) if session.fs else None},
-        "alarms": report.alarms,
-        "final_theta": {k: (None if v is None else v.tolist())
-                        for k, v in report.final_theta.items()},
-        "versions": versions(),
-    }
-    untested = [p.name for p in session.channels if not p.detector.started]
-    out["detection_started"] = {p.name: p.detector.started for p in session.channels}
+    finish(args, report)
+    return 0
+
+
+def finish(args: argparse.Namespace, report: Any, extra: dict | None = None) -> None:
+    """The last lines of a session (samples, alarms, counters, lag; a warning for the
+    channels where detection never started), and the --report file."""
+    started = report.detection_started
+    untested = [name for name, ok in started.items() if not ok]
     n_alarms = len([a for a in report.alarms if a["kind"] == "alarm"])
     print(f"ehss live: {report.samples} samples per channel ({report.stream_s:.1f} s), "
           f"{'no detection' if untested and not n_alarms else f'{n_alarms} alarms'}, "
-          f"counters {report.counters}, lag p99 {report.lag_ms['p99']:.2f} ms",
+          f"counters {report.counters}, lag p99 {report.lag_ms.p99:.2f} ms",
           file=sys.stderr)
     if untested:
-        why = (f"the stream ended within --learn {det.learn_s:g} s"
-               if report.stream_s < det.learn_s else "see the messages above")
+        why = (f"the stream ended within --learn {learn_s(args):g} s"
+               if report.stream_s < learn_s(args) else "see the messages above")
         print(f"ehss live: warning: detection never started on channel"
               f"{'s' if len(untested) > 1 else ''} {', '.join(untested)} ({why}): no alarm "
               "could be raised there", file=sys.stderr)
     if args.report:
-        ehss.write_json(args.report, out)
-    return 0
+        ehss.write_json(args.report, {**report.to_dict(), "versions": versions(),
+                                      **(extra or {})})

@@ -1,21 +1,27 @@
 """``ehss live --compensate``: adapt each channel's inverse-model compensator while the
-simulated rig runs, and report what it did."""
+simulated rig (or a remote target) runs, inside the live session, and report what it did.
+
+The adaptive loop steps the target block by block; each block also goes to the live
+session (identification and change detection of drive → feedback, the terminal summary,
+the dashboard with its compensation panel, the recording with the desired reference
+beside the drive and each compensator event), and the simulated rig runs a second time
+beside it without a compensator, for the comparison."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import signal
 import sys
-import threading
+import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 import ehss
 from ehss._checks import check_real
-from ehss._provenance import versions
 from ehss.errors import ParameterError
+from ehss.live.source import Block
 
 __all__ = ["run_compensated"]
 
@@ -24,7 +30,7 @@ __all__ = ["run_compensated"]
 PREVIEW_SAMPLES = 128
 
 
-def _rig_target(args: argparse.Namespace, duration_s: float):
+def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, Any]:
     from ehss.cli._params import warn_if_unstable
     from ehss.live.rig import RIG_SIGNAL, SteppingRig, parse_event, rig_reference
 
@@ -46,7 +52,7 @@ def _rig_target(args: argparse.Namespace, duration_s: float):
     return target, params, band
 
 
-def _udp_target(args: argparse.Namespace):
+def _udp_target(args: argparse.Namespace) -> tuple[Any, tuple[float, float]]:
     """A remote target: its stream on --udp (t, ref<k>, fb<k>, des<k>), its compensator
     port --target."""
     from ehss.live.compensate import DatagramSender, UdpTarget
@@ -77,21 +83,101 @@ def _udp_target(args: argparse.Namespace):
     return target, tuple(args.band)
 
 
+class _HandedSource:
+    """A source the compensation hands its blocks to (:meth:`hand`); the session polls
+    them. Fields: ``t``, then per channel ``ref<k>`` (the drive the loop received, the
+    compensator's output and the model's input), ``fb<k>`` and ``des<k>`` (the desired
+    reference, the drive without compensation)."""
+
+    def __init__(self, channels: tuple[str, ...], fs: float,
+                 counters: dict[str, int] | None = None) -> None:
+        from ehss.live.layout import RecordLayout
+        from ehss.live.source import new_counters
+
+        self.layout = RecordLayout(fields=("t", *(f"{kind}{c}" for c in channels
+                                                  for kind in ("ref", "fb", "des"))))
+        self.fs: float | None = float(fs)
+        self.counters = new_counters() if counters is None else counters
+        self._own_counters = counters is None
+        self._blocks: list[Block] = []
+        self.finished = False
+
+    def hand(self, first_index: int, desired: np.ndarray, drive: np.ndarray,
+             feedback: np.ndarray) -> None:
+        n = drive.shape[1]
+        assert self.fs is not None
+        cols = [(first_index + np.arange(n)) / self.fs]
+        for k in range(drive.shape[0]):
+            cols += [drive[k], feedback[k], desired[k]]
+        self._blocks.append(Block(first_index, np.column_stack(cols), time.time()))
+        if self._own_counters:
+            self.counters["packets"] += 1
+            self.counters["samples"] += n
+
+    def poll(self, timeout_s: float) -> list[Block]:
+        blocks, self._blocks = self._blocks, []
+        return blocks
+
+    def close(self) -> None:
+        self.finished = True
+
+
+class _SessionTarget:
+    """The target as the adaptive loop drives it: each block it steps also goes to the
+    live session (and to the monitor of the compensation panel), and, for the simulated
+    rig, the same rig without a compensator steps beside it for the comparison."""
+
+    def __init__(self, target: Any, source: _HandedSource, session: Any, monitor: Any,
+                 twin: Any = None) -> None:
+        self.target, self.source, self.session = target, source, session
+        self.monitor, self.twin = monitor, twin
+        self.fs: float = float(target.fs)
+        self.channels: tuple[str, ...] = tuple(target.channels)
+        self.preview: int = int(target.preview)
+        self.index: int = int(target.index)
+        self.loop: Any = None
+        self.plain: list[np.ndarray] = []
+        if hasattr(target, "desired"):
+            self.desired = target.desired
+        else:
+            self.reference_rms = target.reference_rms
+
+    @property
+    def finished(self) -> bool:
+        return bool(self.target.finished)
+
+    def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        return bool(self.target.load(channel, compensator, apply_index, crossfade))
+
+    def step(self, n: int) -> Any:
+        block = self.target.step(n)
+        self.index = int(self.target.index)
+        m = block.drive.shape[1]
+        if not m:
+            return block
+        without = None
+        if self.twin is not None:
+            without = self.twin.step(m).feedback
+            self.plain.append(without)
+        self.source.hand(block.first_index, block.desired, block.drive, block.feedback)
+        if self.loop is not None:
+            self.monitor.follow(self.loop)   # the loads and judgements up to this block
+        self.monitor.feed(block.desired, block.feedback, without)
+        self.session.step(wait_s=0.0)
+        return block
+
+
 def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
-    """The ``--compensate`` run of ``ehss live`` (``--rig`` or ``--udp``); exit status."""
+    """The ``--compensate`` run of ``ehss live`` (``--rig`` or ``--udp``): the live
+    session runs inside it (terminal summary, dashboard with its compensation panel,
+    recording); exit status."""
 
     if args.rig is None and args.udp is None:
         raise ParameterError("--compensate runs with --rig (the simulated rig's filters "
                              "take the compensators) or --udp with --target (a remote "
                              "target takes them as ehss.target datagrams)")
-    for flag, value in (("--record", args.record), ("--dashboard", args.dashboard),
-                        ("--baseline", args.baseline or None)):
-        if value is not None:
-            raise ParameterError(f"{flag} does not apply with --compensate: its log, "
-                                 "loads and figures go to --report")
     if args.udp is not None:
         target, band = _udp_target(args)
-        params = None
         try:
             return _run(args, target, None, band)
         finally:
@@ -101,44 +187,85 @@ def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
     return _run(args, target, params, band)
 
 
-def _run(args: argparse.Namespace, target, params, band) -> int:
+def _loop_event(session: Any) -> Callable[[dict], None]:
+    """The adaptive loop's events into the session's log and recording (its alarms and
+    clears named as the compensator's, apart from the change detection's)."""
+    def log(event: dict) -> None:
+        kind = event["kind"]
+        if kind in ("alarm", "clear"):
+            kind = f"compensator_{kind}"
+        session.add_event({**event, "kind": kind}, event.get("t_s"))
+    return log
+
+
+def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, float]
+         ) -> int:
+    from ehss.cli._live import Display, estimation_settings, finish, stop_on_sigterm
     from ehss.live.compensate import AdaptiveLoop, CompensationSettings
+    from ehss.live.monitor import CompensationMonitor
     from ehss.live.rig import SteppingRig
+    from ehss.live.session import LiveSession
 
     settings = CompensationSettings(mode=args.compensate, band_hz=band)
-
-    def log(event: dict) -> None:
-        if event["kind"] in ("alarm", "clear", "compensator_refused", "compensator"):
-            keep = ("kind", "channel", "t_s", "reason", "text", "accepted",
-                    "max_amplitude_error_db", "max_phase_error_deg")
-            print("ehss live: " + json.dumps({k: event[k] for k in keep if k in event}),
-                  file=sys.stderr, flush=True)
-
-    loop = AdaptiveLoop(target, settings, loop=args.rig if params is not None else None,
-                        params=params, log=None if args.quiet else log)
-    print(f"ehss live: compensating ({args.compensate}), band {band[0]:g}-{band[1]:g} Hz",
-          file=sys.stderr, flush=True)
-    stop = threading.Event()
-    previous = signal.getsignal(signal.SIGTERM)
-    main = threading.current_thread() is threading.main_thread()
-    if main:
-        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    est, det = estimation_settings(args)
+    counters = getattr(getattr(target, "source", None), "counters", None)
+    source = _HandedSource(tuple(target.channels), target.fs, counters)
+    twin = None if params is None else SteppingRig(
+        args.rig, target.desired, fs=target.fs, params=params, events=target.events,
+        seed=args.seed)
+    display = Display(args)
     try:
-        rec = loop.run(speed=args.speed, stop=stop, duration_s=args.stop_after)
-    except KeyboardInterrupt:
-        return 130
+        monitor = CompensationMonitor(target.channels, target.fs, band, args.compensate)
+        session = LiveSession(
+            source, est=est, det=det, baselines=_baselines(args, source), record=args.record,
+            update_s=args.update, publish=display.publish,
+            h1=display.dashboard is not None, batch_s=0.0, log=display.log,
+            settings={"argv": sys.argv[1:], "compensation": settings.to_dict()},
+            compensation=monitor.snapshot)
+        stepped = _SessionTarget(target, source, session, monitor, twin)
+        loop = AdaptiveLoop(stepped, settings, loop=args.rig if params is not None else None,
+                            params=params, log=_loop_event(session))
+        stepped.loop = loop
+        print(f"ehss live: compensating ({args.compensate}), band {band[0]:g}-{band[1]:g} Hz",
+              file=sys.stderr, flush=True)
+        session.start()
+        with stop_on_sigterm() as stop:
+            try:
+                rec = loop.run(speed=args.speed, stop=stop, duration_s=args.stop_after)
+            except KeyboardInterrupt:
+                rec = None
+            finally:
+                report = session.close()
     finally:
-        if main:
-            signal.signal(signal.SIGTERM, previous)
+        display.close()
+    if rec is None:
+        print("ehss live: interrupted; the recording is closed", file=sys.stderr)
+        return 130
+    channels = _compare(rec, stepped.plain)
+    finish(args, report, {"compensation": rec.settings, "channels": channels,
+                          "loads": rec.loads, "decisions": rec.decisions,
+                          "events": rec.events,
+                          "settings": {**report.settings, "argv": sys.argv[1:]}})
+    return 0
+
+
+def _baselines(args: argparse.Namespace, source: _HandedSource) -> dict:
+    from ehss.cli._live import baselines
+
+    return baselines(args.baseline, source.layout.channels)
+
+
+def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
+    """Tracking RMS over the second half with and without compensation per channel,
+    loads and refusals; printed, and returned for the report."""
     n = rec.desired.shape[1]
-    if params is not None:
-        # the same rig without compensation, for the comparison
-        plain = SteppingRig(args.rig, target.desired[:, :n], fs=target.fs, params=params,
-                            events=target.events, seed=args.seed).step(n)
-        err = plain.desired[:, n // 2:] - plain.feedback[:, n // 2:]
+    if plain:
+        # the same rig without compensation, stepped beside it
+        fb = np.concatenate(plain, axis=1)
+        err = rec.desired[:, n // 2:] - fb[:, n // 2:]
     else:
         # a remote target: its first second, before any compensator
-        m = min(n, int(target.fs))
+        m = min(n, int(rec.fs))
         err = rec.desired[:, :m] - rec.feedback[:, :m]
     without = np.sqrt(np.mean(err * err, axis=1))
     with_ = rec.tracking_rms(n / 2 / rec.fs, n / rec.fs)
@@ -154,9 +281,4 @@ def _run(args: argparse.Namespace, target, params, band) -> int:
               f"{without[k] / with_[k] if with_[k] > 0 else math.inf:.1f}x), "
               f"{channels[name]['loads']} compensators loaded, "
               f"{channels[name]['refusals']} refused", file=sys.stderr)
-    if args.report:
-        ehss.write_json(args.report, {
-            "compensation": rec.settings, "channels": channels, "loads": rec.loads,
-            "decisions": rec.decisions, "events": rec.events,
-            "settings": {"argv": sys.argv[1:]}, "versions": versions()})
-    return 0
+    return channels

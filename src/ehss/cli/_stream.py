@@ -7,8 +7,7 @@ import argparse
 import math
 import sys
 
-from ehss.cli import command_help
-from ehss.cli._live import WIRE_FORMAT, add_rig_arguments, rig_or_replay
+from ehss.cli._live import add_command, add_rig_arguments, rig_or_replay
 from ehss.cli._outputs import InputFile
 from ehss.errors import ParameterError
 
@@ -16,16 +15,12 @@ __all__ = ["register", "run"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "stream",
-        help=command_help("stream"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Play the simulated rig (computed up front, then paced to the wall "
-        "clock) or a recorded file\nto a UDP address, as a real-time target would.\n\n"
-        + WIRE_FORMAT,
-        epilog="example: ehss stream --rig position --channels 8 --fs 5000 --duration 10 "
-        "--to 127.0.0.1:5005 --samples-per-packet 5",
-    )
+    p = add_command(
+        sub, "stream",
+        "Play the simulated rig (computed up front, then paced to the wall clock) or a "
+        "recorded file\nto a UDP address, as a real-time target would.",
+        "ehss stream --rig position --channels 8 --fs 5000 --duration 10 --to "
+        "127.0.0.1:5005 --samples-per-packet 5")
     p.add_argument("--to", required=True, metavar="HOST:PORT", help="destination")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--rig", choices=("position", "acceleration", "force"),

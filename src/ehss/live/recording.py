@@ -38,7 +38,22 @@ from ehss.live.detect import FIGURES
 from ehss.live.layout import RecordLayout
 from ehss.live.source import COUNTERS
 
-__all__ = ["LiveRecorder", "read_recording"]
+__all__ = ["LiveRecorder", "check_new_recording", "read_recording"]
+
+
+def check_new_recording(path: str | Path) -> Path:
+    """The one rule of recordings: ``path`` can be written (:func:`ehss._files.check_writable`)
+    and does not exist, for a recording is never overwritten.
+
+    Raises
+    ------
+    DataError
+        If ``path`` exists, or cannot be written.
+    """
+    path = check_writable(path)
+    if path.exists() or path.is_symlink():
+        raise DataError(f"{str(path)!r} exists: a recording is never overwritten")
+    return path
 
 
 class LiveRecorder:
@@ -60,9 +75,7 @@ class LiveRecorder:
 
     def __init__(self, path: str | Path, layout: RecordLayout, fs: float, n_params: int,
                  settings: dict, *, flush_s: float = 1.0) -> None:
-        path = check_writable(path)
-        if path.exists():
-            raise DataError(f"{str(path)!r} exists: a recording is never overwritten")
+        path = check_new_recording(path)
         self.path = path
         self.layout = layout
         self._flush_s = flush_s
@@ -103,7 +116,7 @@ class LiveRecorder:
         self._writer = threading.Thread(target=self._write_loop, name="ehss-recorder",
                                         daemon=True)
         self._pend_s: list[np.ndarray] = []
-        self._pend_i: list[np.ndarray] = []
+        self._pend_i: list[tuple[int, int]] = []
         self._pend_t: list[float] = []
         self._pend_theta: list[np.ndarray] = []
         self._pend_fig: list[np.ndarray] = []
@@ -175,7 +188,7 @@ class LiveRecorder:
                 return
 
     @staticmethod
-    def _append(ds, rows: np.ndarray) -> None:
+    def _append(ds: h5py.Dataset, rows: np.ndarray) -> None:
         n = ds.shape[0]
         ds.resize(n + rows.shape[0], axis=0)
         ds[n:] = rows

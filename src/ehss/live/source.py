@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -97,7 +98,7 @@ class PacedSource:
 
     def __init__(
         self, layout: RecordLayout, samples: np.ndarray, fs: float, *, speed: float = 1.0,
-        block_samples: int | None = None, clock=time.monotonic,
+        block_samples: int | None = None, clock: Callable[[], float] = time.monotonic,
     ) -> None:
         samples = np.ascontiguousarray(samples, dtype=np.float64)
         if samples.ndim != 2 or samples.shape[1] != layout.n_fields:
@@ -130,7 +131,8 @@ class PacedSource:
         if math.isinf(self._speed):
             # as fast as possible: about 0.1 s of record per poll keeps blocks large
             return min(self._x.shape[0], self._next + max(self._block, int(0.1 * self.fs)))
-        due = int((now - self._t0) * self._speed * self.fs)
+        t0 = now if self._t0 is None else self._t0
+        due = int((now - t0) * self._speed * self.fs)
         return min(self._x.shape[0], due)
 
     def poll(self, timeout_s: float) -> list[Block]:

@@ -251,7 +251,8 @@ class UdpSource:
     def _far(self, first: int) -> bool:
         """Whether a datagram's index is too far from the count, either way, to be a
         gap or a reordering (:data:`FAR_SAMPLES`)."""
-        return not -FAR_SAMPLES <= first - self._expected <= FAR_SAMPLES
+        return self._expected is not None and \
+            not -FAR_SAMPLES <= first - self._expected <= FAR_SAMPLES
 
     def _place(self, first: int, samples: np.ndarray, arrival: float,
                out: list[Block]) -> None:
@@ -283,6 +284,7 @@ class UdpSource:
     def _give_up(self, out: list[Block]) -> None:
         """Declare the gap before the oldest held packet lost, and go on from there."""
         nxt = min(self._pending)
+        assert self._expected is not None          # set by the first datagram
         self.counters["gaps"] += 1
         self.counters["lost_samples"] += nxt - self._expected
         self._expected = nxt
