@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 import ehss
+from ehss._warm import warm_up
 from ehss.errors import ParameterError
 from ehss.live.channel import ChannelProcessor, EstimatorSettings
 from ehss.live.detect import BaselineResidual, DetectionSettings
@@ -516,9 +517,8 @@ class LiveSession:
 
 def _warm_up(est: EstimatorSettings) -> None:
     """Load the estimator's compiled kernels now, before any data comes."""
-    warm = ehss.RelsEstimator(na=est.na, nb=est.nb, nc=est.nc, delay=est.delay,
-                              method=est.method)
-    warm.update_many(np.zeros(64), np.zeros(64))
+    warm_up(["streaming"], na=est.na, nb=est.nb, nc=est.nc, delay=est.delay,
+            methods=[est.method])
     BaselineResidual(np.ones(1), np.zeros(1), np.ones(1), 1)(np.zeros(8), np.zeros(8))
 
 
