@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from scipy import optimize, stats
@@ -105,13 +106,6 @@ DRIFT = 0.5
 CLEAR_LEVEL = 0.5
 #: Fewest independent blocks of learning the test is calibrated from.
 MIN_EFFECTIVE_BLOCKS = 5
-#: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
-_MAX_RHO = 0.9
-#: Siegmund's correction of the threshold for the overshoot of Gaussian increments.
-_OVERSHOOT = 1.166
-#: Largest magnitude of a baseline's coefficient: beyond it, a float64 response of the
-#: model, or the square of its prediction error, overflows.
-MAX_COEFFICIENT = 1e12
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -178,6 +172,11 @@ class DetectionSettings:
     def to_dict(self) -> dict:
         return asdict(self)
 
+
+#: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
+_MAX_RHO = 0.9
+#: Siegmund's correction of the threshold for the overshoot of Gaussian increments.
+_OVERSHOOT = 1.166
 
 def block_statistic(eps: np.ndarray) -> float:
     """x = ln(median ε²) of one block's prediction errors; NaN for an empty block or a
@@ -330,10 +329,9 @@ class Detector:
         names = [name for name, o in zip(GATES, over, strict=True) if o]
         return names + (["test"] if values[-1] >= 1.0 else [])
 
-    def _increment(self, x: float) -> tuple[float, float] | None:
+    def _increment(self, x: float, cal: Calibration) -> tuple[float, float] | None:
         """The standardised increments (upward, downward) of block x, None when the
         block gives none."""
-        cal = self.calibration
         if not math.isfinite(x):
             return None
         if self._lag == 0:
@@ -349,7 +347,7 @@ class Detector:
         the test starts)."""
         if self.calibration is None:
             return math.nan
-        inc = self._increment(x)
+        inc = self._increment(x, self.calibration)
         h = self.calibration.threshold
         if inc is not None:
             # S_k = max(0, S_{k−1} + z_k − κ), both sides; held at h at most, so that it
@@ -428,7 +426,12 @@ class BaselineResidual:
         return out
 
 
-def check_baseline(model, name: str = "the baseline") -> None:
+#: Largest magnitude of a baseline's coefficient: beyond it, a float64 response of the
+#: model, or the square of its prediction error, overflows.
+MAX_COEFFICIENT = 1e12
+
+
+def check_baseline(model: Any, name: str = "the baseline") -> None:
     """Refuse a baseline model that cannot be a running loop's reference: coefficients
     not finite or beyond ±:data:`MAX_COEFFICIENT`, or poles on or outside the unit
     circle (the loop it describes would not be running).
