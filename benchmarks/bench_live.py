@@ -13,19 +13,20 @@ Runs: the receiver alone (``--quiet``), and with the dashboard server (``--dashb
 no browser attached: snapshots with one sliding H1 per snapshot are still built).
 
 ``--adaptive``: adaptive compensation instead (:class:`ehss.live.compensate.AdaptiveLoop`
-in preview mode, 8 channels at 5 kHz, 0.5–20 Hz references, blocks of 50 ms, the
-simulated rig as the target). The rig's own simulation is not the host's work, so the
-time measured is the loop's alone for each block (the estimators fed, and the
-judgements, designs and loads when they fall due), against the block's 50 ms of stream
-time. Lag: that work queued behind the blocks as they would arrive in real time (a
-block arrives when its last sample is made; its work starts then or when the previous
-block's is done), from the block's arrival to the end of its work; a block whose work
-started more than the receive buffer's length after its arrival would be lost. Runs
-with the second estimator (the tracker) and without it, in the same process.
+in preview mode, 8 channels at 5 kHz, 0.5–20 Hz references, blocks of 5 ms by default,
+the simulated rig as the target), paced to real time: a block arrives when its last
+sample is due (the rig's own simulation, the target's work, is not counted against the
+host), and the loop waits for it, so that a judgement on a worker has the time between
+blocks. Work: the stream's thread's wall time on each block (the estimators fed,
+decisions taken up and loads sent, and judgements when they run on that thread), from
+the block's arrival or the end of the previous block's work. Lag: from the block's
+arrival to the end of its work. Runs with judgements on the stream's thread, on a
+worker thread and in a worker process, each with the second estimator (the tracker)
+and without it, in the same process.
 
 Usage::
 
-    python benchmarks/bench_live.py [--duration 10] [--repeat 3] [--adaptive]
+    python benchmarks/bench_live.py [--duration 10] [--repeat 3] [--adaptive [--block 0.005]]
 """
 
 from __future__ import annotations
@@ -190,6 +191,54 @@ def main_adaptive(args) -> None:
                       f"{r['tracking_um']:.1f} |", flush=True)
 
 
+def _feed_time(kind: str, order: tuple, method: str, u: np.ndarray, y: np.ndarray,
+               block: int, fs: float) -> float:
+    """Wall time to feed every channel's samples block by block and read every θ̂."""
+    import ehss
+    from ehss.identification.bank import RelsBank
+
+    na, nb, nc, d = order
+    common = dict(na=na, nb=nb, nc=nc, delay=d, method=method, p0=1e6,
+                  forgetting=1.0 - 1.0 / (0.3 * fs), dt=1.0 / fs)
+    n_ch = u.shape[1]
+    if kind == "bank":
+        bank = RelsBank(n_channels=n_ch, **common)
+        t0 = time.perf_counter()
+        for a in range(0, u.shape[0] - block + 1, block):
+            bank.update_many(u[a:a + block], y[a:a + block])
+            _ = bank.theta
+        return time.perf_counter() - t0
+    ests = [ehss.RelsEstimator(**common) for _ in range(n_ch)]
+    t0 = time.perf_counter()
+    for a in range(0, u.shape[0] - block + 1, block):
+        for c, e in enumerate(ests):
+            e.update_many(u[a:a + block, c], y[a:a + block, c])
+        _ = [e.theta for e in ests]
+    return time.perf_counter() - t0
+
+
+def main_bank(args) -> None:
+    """Eight channels' estimators fed one by one (RelsEstimator each) against one
+    RelsBank, at 5 kHz, for the structures ehss live and its compensation use."""
+    fs, n_ch = 5000.0, 8
+    n = int(args.duration * fs)
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((n, n_ch))
+    y = np.zeros_like(u)
+    y[1:] = 0.5 * u[:-1] + 0.01 * rng.standard_normal((n - 1, n_ch))
+    print(f"8 channels × 5 kHz, {args.duration:g} s of samples; best of {args.repeat}\n")
+    print("| structure | block (samples) | one estimator per channel (µs/block) "
+          "| RelsBank (µs/block) | bank / separate |")
+    print("|---|---:|---:|---:|---:|")
+    for order, method in (((4, 3, 4, 1), "rml"), ((6, 5, 6, 1), "rels")):
+        for block in (10, 25, 250):
+            t = {kind: min(_feed_time(kind, order, method, u, y, block, fs)
+                           for _ in range(args.repeat)) for kind in ("separate", "bank")}
+            per = {k: 1e6 * v / (n // block) for k, v in t.items()}
+            print(f"| {method.upper()} {order} | {block} | {per['separate']:.0f} | "
+                  f"{per['bank']:.0f} | {t['bank'] / t['separate']:.2f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=10.0)
@@ -198,8 +247,14 @@ def main() -> None:
                     help="--adaptive: block length, s (default 5 ms)")
     ap.add_argument("--adaptive", action="store_true",
                     help="adaptive compensation in process instead of the UDP receiver")
+    ap.add_argument("--bank", action="store_true",
+                    help="feeding 8 channels: RelsEstimator each against one RelsBank")
     args = ap.parse_args()
     sys.path.insert(0, SRC)
+    if args.bank:
+        main_bank(args)
+        _machine(args)
+        return
     if args.adaptive:
         main_adaptive(args)
         _machine(args)
@@ -229,8 +284,9 @@ def _machine(args) -> None:
     print(f"\n- Machine: {os.cpu_count()} cores, {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}; load average during the runs "
           f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1/5/15 min).")
+    mode = " --adaptive" if args.adaptive else " --bank" if getattr(args, "bank", False) else ""
     print(f"- Command: `python benchmarks/bench_live.py --duration {args.duration:g} "
-          f"--repeat {args.repeat}{' --adaptive' if args.adaptive else ''}`")
+          f"--repeat {args.repeat}{mode}`")
 
 
 if __name__ == "__main__":

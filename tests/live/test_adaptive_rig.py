@@ -37,7 +37,7 @@ _WINDOWS_S = [(t, t + 2.0) for t in np.arange(22.0, 40.0, 2.0)]
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("seeds", "factor", "first_bound"),
-                         [((1, 2), 1.4, 2.5), ((3, 4), 0.7, 1.5)],
+                         [((1, 2), 1.4, 2.0), ((3, 4), 0.7, 1.5)],
                          ids=["+40%", "-30%, other references"])
 def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
     desired = _desired(40.0, seeds)
@@ -56,9 +56,10 @@ def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
     assert np.all(before <= uncompensated / 20.0)
     after = [adapted.tracking_rms(*w) for w in _WINDOWS_S]
     # channel 1 over [22, 24) s: the aim is 1.5x its level before. Reached after -30 %
-    # (0.8x); after +40 % 2.0x, so 2.5x bounds what is reached there: the heavier loop's
-    # own level is 1.4x, and the model that follows the change within its 0.3 s memory
-    # scatters too much at the heavier mass (README, "Adaptive compensation")
+    # (0.8x); after +40 % 1.6x on these references (1.7-2.1x on others), so 2x bounds
+    # what is reached there: the heavier loop's own level is 1.1-1.4x, and the model
+    # that follows the change within its 0.3 s memory scatters at the heavier mass
+    # (README, "Adaptive compensation")
     assert after[0][0] <= first_bound * before[0]
     # from 4 s after the change on, every 2-s stretch within 2x: the heavier loop's own
     # level, adapted from the start, is 1.4x the lighter one's, and a 2-s stretch of an
