@@ -124,3 +124,34 @@ def test_causal_compensation_cuts_the_phase_lag():
     for k in range(1):
         check_drive(rec.drive[k], desired[k], FS, loop="position",
                     params=ehss.preset("default"))
+
+
+@pytest.mark.slow
+def test_a_worker_process_judges_as_a_worker_thread():
+    # the decision is taken up at a fixed sample (the next channel's turn) wherever it is
+    # made, so a run judged in a worker process is the one judged on a worker thread,
+    # bit for bit; judged on the stream's thread it is taken up at once
+    desired = _desired(6.0)
+    runs = {}
+    for where in ("thread", "process", "stream"):
+        rig = SteppingRig("position", desired, fs=FS, preview=128, seed=0)
+        settings = CompensationSettings(band_hz=BAND, judge_in=where)
+        runs[where] = AdaptiveLoop(rig, settings, loop="position",
+                                   params=ehss.preset("default")).run()
+    assert runs["thread"].loads
+    np.testing.assert_array_equal(runs["process"].drive, runs["thread"].drive)
+    assert runs["process"].loads == runs["thread"].loads
+    assert runs["process"].decisions == runs["thread"].decisions
+    # the stream's thread loads each compensator one turn earlier
+    turn = int(round(0.25 / 2 * FS))
+    first = {w: next(ld for ld in runs[w].loads if ld["channel"] == "1")
+             for w in ("thread", "stream")}
+    assert first["thread"]["t_s"] == first["stream"]["t_s"]
+    assert first["thread"]["apply_index"] - first["stream"]["apply_index"] >= turn
+
+
+def test_judging_anywhere_else_is_refused():
+    from ehss.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="judge_in"):
+        CompensationSettings(band_hz=BAND, judge_in="gpu")

@@ -9,6 +9,10 @@ a compensator that passes is sent to the target (:meth:`Target.load`), which run
 shadow until its start-up has died out and cross-fades it in; one that fails is not
 sent, the last good one keeps running, and the refusal is logged (an alarm when a
 channel that had a good compensator starts refusing, a clear when it accepts again).
+A judgement runs on a worker (:attr:`CompensationSettings.judge_in`) on a copy of the
+channel's windows and θ̂ (:class:`Snapshot`, :class:`Judging`), and its decision is
+taken up at the next channel's turn, so that the stream's samples never wait for a
+design.
 
 The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
 ``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
@@ -44,7 +48,8 @@ from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
 
 __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
-           "Target", "DatagramSender", "UdpTarget"]
+           "Target", "DatagramSender", "UdpTarget", "JUDGE_IN", "Snapshot", "Verdict",
+           "Judging"]
 
 
 #: where :class:`AdaptiveLoop` judges (:attr:`CompensationSettings.judge_in`)
@@ -174,7 +179,7 @@ class CompensationSettings:
                 "start_s": self.start_s, "adapt_until_s": self.adapt_until_s,
                 "n_taps": self.n_taps, "estimator": [self.na, self.nb, self.nc, self.delay,
                                                      self.method],
-                "min_interval_s": self.guard.min_interval_s,
+                "judge_in": self.judge_in, "min_interval_s": self.guard.min_interval_s,
                 "crossfade_s": self.guard.crossfade_s, "max_gain": self.guard.max_gain}
 
 
