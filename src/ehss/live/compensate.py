@@ -110,6 +110,11 @@ class CompensationSettings:
         tr P, stays below 0.03). Each judgement takes the model of the two that fits
         the latest ``guard.fit_s`` of feedback better in free run
         (:func:`ehss.compensation.adaptive.free_run_fit`).
+    tracker_memory_s : float or None
+        The tracker's memory (None: ``memory_s``). A longer memory of the first
+        estimator with the tracker's kept short lowers the scatter of the models judged
+        in steady running, but the first estimator then lags a change longer, and the
+        choice between the two does not pick the tracker reliably meanwhile.
     h1_window_s : float
         Length of the sliding H1 estimate that must confirm a model (and of the recent
         reference the drive checks run on). A change of the rig shows in full in it
@@ -154,6 +159,7 @@ class CompensationSettings:
     memory_s: float = 0.3
     p0: float = 1e6
     tracker_trace_bound: float | None = 1e12
+    tracker_memory_s: float | None = None
     average_s: float = 0.3
     h1_window_s: float = 1.5
     update_s: float = 0.25
@@ -249,7 +255,8 @@ class ChannelAdapter:
         self.estimator = self._new_estimator(None)
         # the tracker: the same estimator with its forgetting not held by the trace bound
         self.tracker = None if s.tracker_trace_bound is None \
-            else self._new_estimator(None, trace_bound=s.tracker_trace_bound)
+            else self._new_estimator(None, trace_bound=s.tracker_trace_bound,
+                                     memory_s=s.tracker_memory_s)
 
         self.window = _Ring(3, max(64, int(round(s.h1_window_s * self.fs))))
         self.compensator = AdaptiveCompensator(
@@ -265,12 +272,13 @@ class ChannelAdapter:
         self.chosen = "estimator"
         self.judging = Judging(self.fs, s, self.compensator)
 
-    def _new_estimator(self, theta0: np.ndarray | None, *,
-                       trace_bound: float | None = None) -> ehss.RelsEstimator:
+    def _new_estimator(self, theta0: np.ndarray | None, *, trace_bound: float | None = None,
+                       memory_s: float | None = None) -> ehss.RelsEstimator:
         s = self.settings
+        memory = s.memory_s if memory_s is None else memory_s
         return ehss.RelsEstimator(
             na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, method=s.method, theta0=theta0, p0=s.p0,
-            trace_bound=trace_bound, forgetting=1.0 - 1.0 / (s.memory_s * self.fs),
+            trace_bound=trace_bound, forgetting=1.0 - 1.0 / (memory * self.fs),
             dt=1.0 / self.fs,
             u_scale=self._scale, y_scale=self._scale)
 
