@@ -511,6 +511,13 @@ class AdaptiveLoop:
                 if not every:
                     self._apply(k, t_s, verdict.decision)
 
+    def close(self) -> None:
+        """Stop the worker (a worker process starts with the loop; :meth:`run` stops it
+        at its end, and starts it anew if run again)."""
+        if self._worker is not None:
+            self._worker.shutdown()
+            self._worker = None
+
     def _start_worker(self) -> Executor | None:
         where = self.settings.judge_in
         if where == "thread":
@@ -596,8 +603,7 @@ class AdaptiveLoop:
         finally:
             if self._worker is not None:
                 self._collect(every=True)
-                self._worker.shutdown()
-                self._worker = None
+            self.close()
         cat = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
                for name in ("desired", "drive", "feedback")}
         return CompensationRecord(
