@@ -93,20 +93,6 @@ __all__ = ["FIGURES", "GATES", "DRIFT", "CLEAR_LEVEL", "MIN_EFFECTIVE_BLOCKS", "
            "cusum_threshold", "Detector", "BaselineResidual", "check_baseline",
            "dominant_pole", "figures"]
 
-#: Names of the figures, in the order they are recorded.
-FIGURES = ("frf_db", "gain_db", "pole_shift", "test")
-#: The figures that may gate an alarm with a threshold of their own.
-GATES = ("frf_db", "gain_db", "pole_shift")
-#: κ, the CUSUM's drift in σ: quickest for a rise of 2κ = 1 σ.
-DRIFT = 0.5
-#: An alarm clears when the test stays below this fraction of its threshold for
-#: ``clear_s``: a change that persists holds the CUSUM near h, and the loop back to
-#: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
-#: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
-CLEAR_LEVEL = 0.5
-#: Fewest independent blocks of learning the test is calibrated from.
-MIN_EFFECTIVE_BLOCKS = 5
-
 
 @dataclass(frozen=True, kw_only=True)
 class DetectionSettings:
@@ -173,6 +159,19 @@ class DetectionSettings:
         return asdict(self)
 
 
+#: Names of the figures, in the order they are recorded.
+FIGURES = ("frf_db", "gain_db", "pole_shift", "test")
+#: The figures that may gate an alarm with a threshold of their own.
+GATES = ("frf_db", "gain_db", "pole_shift")
+#: κ, the CUSUM's drift in σ: quickest for a rise of 2κ = 1 σ.
+DRIFT = 0.5
+#: An alarm clears when the test stays below this fraction of its threshold for
+#: ``clear_s``: a change that persists holds the CUSUM near h, and the loop back to
+#: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
+#: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
+CLEAR_LEVEL = 0.5
+#: Fewest independent blocks of learning the test is calibrated from.
+MIN_EFFECTIVE_BLOCKS = 5
 #: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
 _MAX_RHO = 0.9
 #: Siegmund's correction of the threshold for the overshoot of Gaussian increments.
