@@ -13,19 +13,20 @@ Runs: the receiver alone (``--quiet``), and with the dashboard server (``--dashb
 no browser attached: snapshots with one sliding H1 per snapshot are still built).
 
 ``--adaptive``: adaptive compensation instead (:class:`ehss.live.compensate.AdaptiveLoop`
-in preview mode, 8 channels at 5 kHz, 0.5–20 Hz references, blocks of 50 ms, the
-simulated rig as the target). The rig's own simulation is not the host's work, so the
-time measured is the loop's alone for each block (the estimators fed, and the
-judgements, designs and loads when they fall due), against the block's 50 ms of stream
-time. Lag: that work queued behind the blocks as they would arrive in real time (a
-block arrives when its last sample is made; its work starts then or when the previous
-block's is done), from the block's arrival to the end of its work; a block whose work
-started more than the receive buffer's length after its arrival would be lost. Runs
-with the second estimator (the tracker) and without it, in the same process.
+in preview mode, 8 channels at 5 kHz, 0.5–20 Hz references, blocks of 5 ms by default,
+the simulated rig as the target), paced to real time: a block arrives when its last
+sample is due (the rig's own simulation, the target's work, is not counted against the
+host), and the loop waits for it, so that a judgement on a worker has the time between
+blocks. Work: the stream's thread's wall time on each block (the estimators fed,
+decisions taken up and loads sent, and judgements when they run on that thread), from
+the block's arrival or the end of the previous block's work. Lag: from the block's
+arrival to the end of its work. Runs with judgements on the stream's thread, on a
+worker thread and in a worker process, each with the second estimator (the tracker)
+and without it, in the same process.
 
 Usage::
 
-    python benchmarks/bench_live.py [--duration 10] [--repeat 3] [--adaptive]
+    python benchmarks/bench_live.py [--duration 10] [--repeat 3] [--adaptive [--block 0.005]]
 """
 
 from __future__ import annotations
@@ -97,13 +98,19 @@ def run_once(duration: float, extra: list[str], expected: np.ndarray) -> dict:
 
 
 class _TimedTarget:
-    """A target whose blocks are timed: the loop's work on a block is the wall time from
-    the block handed over to the next call (or the end of the run)."""
+    """A target that hands its blocks over in real time, and times the loop's work.
+
+    Block k arrives when its last sample is due (stream time from the first block's
+    arrival, plus the rig's own simulation time so far: the target's work, not the
+    host's); ``step`` waits until then. The loop's work on a block runs from its arrival
+    (or the end of the previous block's work, if later) to the next call."""
 
     def __init__(self, rig) -> None:
         self.rig = rig
-        self.work_s: list[float] = []
-        self._handed = None
+        self.arrive_s: list[float] = []
+        self.done_s: list[float] = []
+        self._start: float | None = None
+        self._rig_s = 0.0
 
     def __getattr__(self, name):
         return getattr(self.rig, name)
@@ -112,32 +119,33 @@ class _TimedTarget:
         return self.rig.load(channel, compensator, apply_index, crossfade)
 
     def step(self, n):
-        if self._handed is not None:
-            self.work_s.append(time.perf_counter() - self._handed)
+        now = time.perf_counter()
+        if len(self.done_s) < len(self.arrive_s):
+            self.done_s.append(now)
         block = self.rig.step(n)
-        self._handed = time.perf_counter()
+        self._rig_s += time.perf_counter() - now
+        if self._start is None:
+            self._start = now
+        arrive = self._start + self._rig_s + self.rig.index / self.rig.fs
+        wait = arrive - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        self.arrive_s.append(arrive)
         return block
 
     def close(self) -> None:
-        if self._handed is not None:
-            self.work_s.append(time.perf_counter() - self._handed)
-            self._handed = None
+        if len(self.done_s) < len(self.arrive_s):
+            self.done_s.append(time.perf_counter())
 
-
-def _queue_lag(work_s: np.ndarray, block_s: float) -> np.ndarray:
-    """Lag of each block's end of work behind its arrival, blocks arriving every
-    ``block_s`` and worked on one after the other."""
-    lag = np.empty(work_s.size)
-    done = 0.0
-    for k, w in enumerate(work_s):
-        arrive = (k + 1) * block_s
-        done = max(done, arrive) + w
-        lag[k] = done - arrive
-    return lag
+    def times(self) -> tuple[np.ndarray, np.ndarray]:
+        """(work, lag) of each block, s."""
+        arrive, done = np.array(self.arrive_s), np.array(self.done_s)
+        begin = np.maximum(arrive, np.r_[-np.inf, done[:-1]])
+        return done - begin, done - arrive
 
 
 def run_adaptive(duration: float, tracker: bool, *, fs: float = 5000.0,
-                 n_channels: int = 8, block_s: float = 0.05) -> dict:
+                 n_channels: int = 8, block_s: float = 0.005, where: str = "process") -> dict:
     import ehss
     from ehss.live.compensate import AdaptiveLoop, CompensationSettings
     from ehss.live.rig import SteppingRig
@@ -148,13 +156,12 @@ def run_adaptive(duration: float, tracker: bool, *, fs: float = 5000.0,
                                          fs=fs, seed=seed, fade_s=0.2).values
         for seed in range(1, n_channels + 1)])
     rig = _TimedTarget(SteppingRig("position", desired, fs=fs, preview=128, seed=0))
-    settings = CompensationSettings(band_hz=band,
+    settings = CompensationSettings(band_hz=band, judge_in=where,
                                     tracker_trace_bound=1e12 if tracker else None)
     loop = AdaptiveLoop(rig, settings, loop="position", params=ehss.preset("default"))
     rec = loop.run(block_s=block_s)
     rig.close()
-    work = np.array(rig.work_s)
-    lag = _queue_lag(work, block_s)
+    work, lag = rig.times()
     n_block = int(round(block_s * fs))
     return {"blocks": work.size, "samples": int(rec.feedback.shape[1]),
             "expected": desired.shape[1], "work_p50_ms": 1e3 * np.percentile(work, 50),
@@ -167,30 +174,87 @@ def run_adaptive(duration: float, tracker: bool, *, fs: float = 5000.0,
 
 
 def main_adaptive(args) -> None:
-    print(f"Adaptive compensation, 8 channels × 5 kHz, {args.duration:g} s, blocks of "
-          f"50 ms (250 samples per channel), {args.repeat} runs each\n")
-    print("| estimators | samples per channel (of) | blocks | work p50 (ms) | work p99 (ms) "
-          "| work max (ms) | work / real time | lag p99 (ms) | lag max (ms) | loads "
-          "| tracking RMS 2nd half (µm) |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print(f"Adaptive compensation, 8 channels × 5 kHz, {args.duration:g} s paced to real "
+          f"time, blocks of {1e3 * args.block:g} ms, {args.repeat} runs each\n")
+    print("| judged on | estimators | samples per channel (of) | blocks | work p50 (ms) "
+          "| work p99 (ms) | work max (ms) | work / real time | lag p99 (ms) | lag max (ms) "
+          "| loads | tracking RMS 2nd half (µm) |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for _ in range(args.repeat):
-        for name, tracker in (("one (no tracker)", False), ("two (with tracker)", True)):
-            r = run_adaptive(args.duration, tracker)
-            print(f"| {name} | {r['samples']} ({r['expected']}) | {r['blocks']} | "
-                  f"{r['work_p50_ms']:.2f} | {r['work_p99_ms']:.1f} | "
-                  f"{r['work_max_ms']:.1f} | {r['real_time_ratio']:.3f} | "
-                  f"{r['lag_p99_ms']:.1f} | {r['lag_max_ms']:.1f} | {r['loads']} | "
-                  f"{r['tracking_um']:.1f} |")
+        for where in ("stream", "thread", "process"):
+            for name, tracker in (("one", False), ("two", True)):
+                r = run_adaptive(args.duration, tracker, block_s=args.block, where=where)
+                print(f"| {where} | {name} | {r['samples']} ({r['expected']}) | "
+                      f"{r['blocks']} | {r['work_p50_ms']:.2f} | {r['work_p99_ms']:.1f} | "
+                      f"{r['work_max_ms']:.1f} | {r['real_time_ratio']:.3f} | "
+                      f"{r['lag_p99_ms']:.1f} | {r['lag_max_ms']:.1f} | {r['loads']} | "
+                      f"{r['tracking_um']:.1f} |", flush=True)
+
+
+def _feed_time(kind: str, order: tuple, method: str, u: np.ndarray, y: np.ndarray,
+               block: int, fs: float) -> float:
+    """Wall time to feed every channel's samples block by block and read every θ̂."""
+    import ehss
+    from ehss.identification.bank import RelsBank
+
+    na, nb, nc, d = order
+    common = dict(na=na, nb=nb, nc=nc, delay=d, method=method, p0=1e6,
+                  forgetting=1.0 - 1.0 / (0.3 * fs), dt=1.0 / fs)
+    n_ch = u.shape[1]
+    if kind == "bank":
+        bank = RelsBank(n_channels=n_ch, **common)
+        t0 = time.perf_counter()
+        for a in range(0, u.shape[0] - block + 1, block):
+            bank.update_many(u[a:a + block], y[a:a + block])
+            _ = bank.theta
+        return time.perf_counter() - t0
+    ests = [ehss.RelsEstimator(**common) for _ in range(n_ch)]
+    t0 = time.perf_counter()
+    for a in range(0, u.shape[0] - block + 1, block):
+        for c, e in enumerate(ests):
+            e.update_many(u[a:a + block, c], y[a:a + block, c])
+        _ = [e.theta for e in ests]
+    return time.perf_counter() - t0
+
+
+def main_bank(args) -> None:
+    """Eight channels' estimators fed one by one (RelsEstimator each) against one
+    RelsBank, at 5 kHz, for the structures ehss live and its compensation use."""
+    fs, n_ch = 5000.0, 8
+    n = int(args.duration * fs)
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((n, n_ch))
+    y = np.zeros_like(u)
+    y[1:] = 0.5 * u[:-1] + 0.01 * rng.standard_normal((n - 1, n_ch))
+    print(f"8 channels × 5 kHz, {args.duration:g} s of samples; best of {args.repeat}\n")
+    print("| structure | block (samples) | one estimator per channel (µs/block) "
+          "| RelsBank (µs/block) | bank / separate |")
+    print("|---|---:|---:|---:|---:|")
+    for order, method in (((4, 3, 4, 1), "rml"), ((6, 5, 6, 1), "rels")):
+        for block in (10, 25, 250):
+            t = {kind: min(_feed_time(kind, order, method, u, y, block, fs)
+                           for _ in range(args.repeat)) for kind in ("separate", "bank")}
+            per = {k: 1e6 * v / (n // block) for k, v in t.items()}
+            print(f"| {method.upper()} {order} | {block} | {per['separate']:.0f} | "
+                  f"{per['bank']:.0f} | {t['bank'] / t['separate']:.2f} |", flush=True)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--block", type=float, default=0.005,
+                    help="--adaptive: block length, s (default 5 ms)")
     ap.add_argument("--adaptive", action="store_true",
                     help="adaptive compensation in process instead of the UDP receiver")
+    ap.add_argument("--bank", action="store_true",
+                    help="feeding 8 channels: RelsEstimator each against one RelsBank")
     args = ap.parse_args()
     sys.path.insert(0, SRC)
+    if args.bank:
+        main_bank(args)
+        _machine(args)
+        return
     if args.adaptive:
         main_adaptive(args)
         _machine(args)
@@ -220,8 +284,9 @@ def _machine(args) -> None:
     print(f"\n- Machine: {os.cpu_count()} cores, {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}; load average during the runs "
           f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1/5/15 min).")
+    mode = " --adaptive" if args.adaptive else " --bank" if getattr(args, "bank", False) else ""
     print(f"- Command: `python benchmarks/bench_live.py --duration {args.duration:g} "
-          f"--repeat {args.repeat}{' --adaptive' if args.adaptive else ''}`")
+          f"--repeat {args.repeat}{mode}`")
 
 
 if __name__ == "__main__":

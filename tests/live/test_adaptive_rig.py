@@ -37,7 +37,7 @@ _WINDOWS_S = [(t, t + 2.0) for t in np.arange(22.0, 40.0, 2.0)]
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("seeds", "factor", "first_bound"),
-                         [((1, 2), 1.4, 2.5), ((3, 4), 0.7, 1.5)],
+                         [((1, 2), 1.4, 2.0), ((3, 4), 0.7, 1.5)],
                          ids=["+40%", "-30%, other references"])
 def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
     desired = _desired(40.0, seeds)
@@ -56,9 +56,10 @@ def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
     assert np.all(before <= uncompensated / 20.0)
     after = [adapted.tracking_rms(*w) for w in _WINDOWS_S]
     # channel 1 over [22, 24) s: the aim is 1.5x its level before. Reached after -30 %
-    # (0.8x); after +40 % 2.0x, so 2.5x bounds what is reached there: the heavier loop's
-    # own level is 1.4x, and the model that follows the change within its 0.3 s memory
-    # scatters too much at the heavier mass (README, "Adaptive compensation")
+    # (0.7-0.9x); after +40 % 1.6x on these references (1.7-2.9x on others), so 2x bounds
+    # what is reached here: the heavier loop's own level is 1.2-1.7x, and the model
+    # that follows the change within its 0.3 s memory scatters at the heavier mass
+    # (README, "Adaptive compensation")
     assert after[0][0] <= first_bound * before[0]
     # from 4 s after the change on, every 2-s stretch within 2x: the heavier loop's own
     # level, adapted from the start, is 1.4x the lighter one's, and a 2-s stretch of an
@@ -123,3 +124,34 @@ def test_causal_compensation_cuts_the_phase_lag():
     for k in range(1):
         check_drive(rec.drive[k], desired[k], FS, loop="position",
                     params=ehss.preset("default"))
+
+
+@pytest.mark.slow
+def test_a_worker_process_judges_as_a_worker_thread():
+    # the decision is taken up at a fixed sample (the next channel's turn) wherever it is
+    # made, so a run judged in a worker process is the one judged on a worker thread,
+    # bit for bit; judged on the stream's thread it is taken up at once
+    desired = _desired(6.0)
+    runs = {}
+    for where in ("thread", "process", "stream"):
+        rig = SteppingRig("position", desired, fs=FS, preview=128, seed=0)
+        settings = CompensationSettings(band_hz=BAND, judge_in=where)
+        runs[where] = AdaptiveLoop(rig, settings, loop="position",
+                                   params=ehss.preset("default")).run()
+    assert runs["thread"].loads
+    np.testing.assert_array_equal(runs["process"].drive, runs["thread"].drive)
+    assert runs["process"].loads == runs["thread"].loads
+    assert runs["process"].decisions == runs["thread"].decisions
+    # the stream's thread loads each compensator one turn earlier
+    turn = int(round(0.25 / 2 * FS))
+    first = {w: next(ld for ld in runs[w].loads if ld["channel"] == "1")
+             for w in ("thread", "stream")}
+    assert first["thread"]["t_s"] == first["stream"]["t_s"]
+    assert first["thread"]["apply_index"] - first["stream"]["apply_index"] >= turn
+
+
+def test_judging_anywhere_else_is_refused():
+    from ehss.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="judge_in"):
+        CompensationSettings(band_hz=BAND, judge_in="gpu")

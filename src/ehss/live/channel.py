@@ -222,7 +222,7 @@ class ChannelProcessor:
             self._start(est.u_scale, est.y_scale)
 
     # ------------------------------------------------------------------ feeding
-    def _start(self, u_scale: float, y_scale: float) -> None:
+    def _start(self, u_scale: float, y_scale: float) -> ehss.RelsEstimator:
         e = self.est
         theta0 = None if self.baseline is None else self.baseline.theta
         self.estimator = ehss.RelsEstimator(
@@ -230,6 +230,7 @@ class ChannelProcessor:
             theta0=theta0, dt=1.0 / self.fs, u_scale=u_scale, y_scale=y_scale,
             method=e.method,
         )
+        return self.estimator
 
     def feed(self, u: np.ndarray, y: np.ndarray) -> None:
         """Process consecutive samples of the reference ``u`` and feedback ``y``."""
@@ -248,23 +249,29 @@ class ChannelProcessor:
             self._pending.append((u[m:].copy(), y[m:].copy()))
         self._push_ring(u, y)
         self.n_samples += n
-        if self.estimator is None:
+        estimator = self.estimator
+        if estimator is None:
             if self.n_samples < min(self._n_scale, n_learn):
                 return
-            have = min(self.n_samples, n_learn)
-            uu, yy = self._learn[0][:have], self._learn[1][:have]
-            su = float(np.sqrt(np.mean(uu**2))) or 1.0
-            sy = float(np.sqrt(np.mean(yy**2))) or 1.0
-            self._start(su, sy)
-            # catch up on the samples held before this block (all in the learning
-            # buffer: the estimator starts no later than the buffer's end)
-            if k0:
-                self.estimator.update_many(uu[:k0], yy[:k0])
-        err = self.estimator.update_many(u, y)
+            estimator = self._start_on_learning(k0)
+        err = estimator.update_many(u, y)
         self.pred_sq += float(np.dot(err, err))
         d = u - y
         self.track_sq += float(np.dot(d, d))
         self._acc_n += n
+
+    def _start_on_learning(self, k0: int) -> ehss.RelsEstimator:
+        """Start the estimator with the scales of the learning buffer so far, and run it
+        over the ``k0`` samples held before the current block (all in the buffer: the
+        estimator starts no later than its end)."""
+        have = min(self.n_samples, self._learn[0].size)
+        uu, yy = self._learn[0][:have], self._learn[1][:have]
+        su = float(np.sqrt(np.mean(uu**2))) or 1.0
+        sy = float(np.sqrt(np.mean(yy**2))) or 1.0
+        estimator = self._start(su, sy)
+        if k0:
+            estimator.update_many(uu[:k0], yy[:k0])
+        return estimator
 
     def _push_ring(self, u: np.ndarray, y: np.ndarray) -> None:
         r = self._ring
@@ -306,7 +313,7 @@ class ChannelProcessor:
             self.band_hz = (lo, hi)
         lo, hi = self.band_hz
         self.grid_hz = np.linspace(max(lo, 0.0), min(hi, 0.5 * self.fs), N_GRID)
-        if self.baseline is None and self._theta_count:
+        if self.baseline is None and self._theta_sum is not None and self._theta_count:
             # the mean of the estimates over the learning time's second half
             e = self.est
             th = self._theta_sum / self._theta_count
@@ -325,18 +332,17 @@ class ChannelProcessor:
                                      "are not meaningful")
             self._h_ref = self.baseline.frequency_response(self.grid_hz)
             self._s_ref = dominant_pole(self.baseline.a, 1.0 / self.fs, self.band_hz)
-            self._start_test()
+            self._start_test(self.baseline)
         # z^-k on the grid, k = 0..na for A and d..d+nb for B: H = (V_b b) / (V_a a)
         e = self.est
         zi = np.exp(-2j * np.pi * self.grid_hz / self.fs)
         self._va = zi[:, None] ** np.arange(e.na + 1)
         self._vb = zi[:, None] ** (e.delay + np.arange(e.nb + 1))
 
-    def _start_test(self) -> None:
+    def _start_test(self, m: ehss.ArmaxModel) -> None:
         """Filter the learning time with the baseline, calibrate the test on its blocks'
         statistics (the last three quarters), then catch up on the samples that came
         since (:mod:`ehss.live.detect`)."""
-        m = self.baseline
         self.residual = BaselineResidual(m.a, m.b, m.c, m.delay)
         eps = self.residual(*self._learn)
         pending, self._pending = self._pending, []
@@ -442,7 +448,7 @@ class ChannelProcessor:
         self.detector.restart()
 
     def _reference(self, t_s: float, h: np.ndarray, s: complex
-                   ) -> tuple[np.ndarray, np.ndarray, complex, complex] | None:
+                   ) -> tuple[np.ndarray, complex, complex] | None:
         """``(h_ref, s, s_ref)`` to compare ``h`` with (the baseline's, or the model's of
         ``recent_s`` ago); None while there is none."""
         if self.det.compare == "recent":

@@ -9,6 +9,10 @@ a compensator that passes is sent to the target (:meth:`Target.load`), which run
 shadow until its start-up has died out and cross-fades it in; one that fails is not
 sent, the last good one keeps running, and the refusal is logged (an alarm when a
 channel that had a good compensator starts refusing, a clear when it accepts again).
+A judgement runs on a worker (:attr:`CompensationSettings.judge_in`) on a copy of the
+channel's windows and θ̂ (:class:`Snapshot`, :class:`Judging`), and its decision is
+taken up at the next channel's turn, so that the stream's samples never wait for a
+design.
 
 The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
 ``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
@@ -25,12 +29,14 @@ import math
 import re
 import time
 from collections.abc import Callable
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 import ehss
+from ehss._checks import check_real
 from ehss.compensation.adaptive import (
     MODES,
     AdaptiveCompensator,
@@ -42,7 +48,12 @@ from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
 
 __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
-           "Target", "DatagramSender", "UdpTarget"]
+           "Target", "DatagramSender", "UdpTarget", "JUDGE_IN", "Snapshot", "Verdict",
+           "Judging"]
+
+
+#: where :class:`AdaptiveLoop` judges (:attr:`CompensationSettings.judge_in`)
+JUDGE_IN = ("process", "thread", "stream")
 
 
 class Target(Protocol):
@@ -99,6 +110,11 @@ class CompensationSettings:
         tr P, stays below 0.03). Each judgement takes the model of the two that fits
         the latest ``guard.fit_s`` of feedback better in free run
         (:func:`ehss.compensation.adaptive.free_run_fit`).
+    tracker_memory_s : float or None
+        The tracker's memory (None: ``memory_s``). A longer memory of the first
+        estimator with the tracker's kept short lowers the scatter of the models judged
+        in steady running, but the first estimator then lags a change longer, and the
+        choice between the two does not pick the tracker reliably meanwhile.
     h1_window_s : float
         Length of the sliding H1 estimate that must confirm a model (and of the recent
         reference the drive checks run on). A change of the rig shows in full in it
@@ -118,18 +134,32 @@ class CompensationSettings:
     n_taps, max_sections : int
         The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
     guard : UpdateGuard
+    judge_in : {"process", "thread", "stream"}
+        Where judgements run: a worker process, a worker thread or the stream's own
+        thread. A judgement (the model's checks, the H1 estimate, the inverse's design:
+        milliseconds to tens of them) on the stream's thread holds up the samples; on a
+        worker it does not: the stream's thread takes a copy of the windows and of θ̂
+        at the channel's turn and the decision at the next channel's turn
+        (``update_s`` / channels later), waiting for it only if the worker has not
+        finished by then. That fixed point, in samples, makes a run the same wherever
+        it is judged and whatever the machine's speed. A thread shares the
+        interpreter's lock with the stream (the judgement's Python parts hold it for up
+        to the switch interval, 5 ms); a process does not, and starts once per run
+        (about a second; ``multiprocessing``'s spawn: a script that runs the loop needs
+        ``if __name__ == "__main__":``).
     """
 
     mode: str = "preview"
     band_hz: tuple[float, float] | None = None
+    method: str = "rels"
     na: int = 6
     nb: int = 5
     nc: int = 6
     delay: int = 1
-    method: str = "rels"
     memory_s: float = 0.3
     p0: float = 1e6
     tracker_trace_bound: float | None = 1e12
+    tracker_memory_s: float | None = None
     average_s: float = 0.3
     h1_window_s: float = 1.5
     update_s: float = 0.25
@@ -139,14 +169,15 @@ class CompensationSettings:
     n_taps: int = 256
     max_sections: int = 16
     guard: UpdateGuard = field(default_factory=UpdateGuard)
+    judge_in: str = "thread"
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParameterError(f"mode={self.mode!r} must be one of {MODES}")
+        if self.judge_in not in JUDGE_IN:
+            raise ParameterError(f"judge_in={self.judge_in!r} must be one of {JUDGE_IN}")
         for name in ("memory_s", "h1_window_s", "update_s"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ParameterError(f"{name}={v!r} must be a number > 0 (s)")
+            check_real(getattr(self, name), name, lo=0.0, lo_open=True, unit="s")
 
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
@@ -154,7 +185,7 @@ class CompensationSettings:
                 "start_s": self.start_s, "adapt_until_s": self.adapt_until_s,
                 "n_taps": self.n_taps, "estimator": [self.na, self.nb, self.nc, self.delay,
                                                      self.method],
-                "min_interval_s": self.guard.min_interval_s,
+                "judge_in": self.judge_in, "min_interval_s": self.guard.min_interval_s,
                 "crossfade_s": self.guard.crossfade_s, "max_gain": self.guard.max_gain}
 
 
@@ -182,6 +213,17 @@ class _Ring:
         if self.fill < self.buf.shape[1]:
             return self.buf[:, :self.fill].copy()
         return np.roll(self.buf, -self.pos, axis=1)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """A channel's windows (drive, feedback, desired reference, oldest first) and its
+    averaged θ̂ (estimator's, then tracker's; shape (1 or 2, n_params)) at one time."""
+
+    drive: np.ndarray
+    feedback: np.ndarray
+    desired: np.ndarray
+    thetas: np.ndarray
 
 
 class ChannelAdapter:
@@ -213,7 +255,8 @@ class ChannelAdapter:
         self.estimator = self._new_estimator(None)
         # the tracker: the same estimator with its forgetting not held by the trace bound
         self.tracker = None if s.tracker_trace_bound is None \
-            else self._new_estimator(None, trace_bound=s.tracker_trace_bound)
+            else self._new_estimator(None, trace_bound=s.tracker_trace_bound,
+                                     memory_s=s.tracker_memory_s)
 
         self.window = _Ring(3, max(64, int(round(s.h1_window_s * self.fs))))
         self.compensator = AdaptiveCompensator(
@@ -227,13 +270,15 @@ class ChannelAdapter:
         self._n_average = int(round(s.average_s * self.fs))
         self._thetas: collections.deque = collections.deque()
         self.chosen = "estimator"
+        self.judging = Judging(self.fs, s, self.compensator)
 
-    def _new_estimator(self, theta0: np.ndarray | None, *,
-                       trace_bound: float | None = None) -> ehss.RelsEstimator:
+    def _new_estimator(self, theta0: np.ndarray | None, *, trace_bound: float | None = None,
+                       memory_s: float | None = None) -> ehss.RelsEstimator:
         s = self.settings
+        memory = s.memory_s if memory_s is None else memory_s
         return ehss.RelsEstimator(
             na=s.na, nb=s.nb, nc=s.nc, delay=s.delay, method=s.method, theta0=theta0, p0=s.p0,
-            trace_bound=trace_bound, forgetting=1.0 - 1.0 / (s.memory_s * self.fs),
+            trace_bound=trace_bound, forgetting=1.0 - 1.0 / (memory * self.fs),
             dt=1.0 / self.fs,
             u_scale=self._scale, y_scale=self._scale)
 
@@ -251,45 +296,100 @@ class ChannelAdapter:
         while self._thetas and self._thetas[0][0] < self._n - self._n_average:
             self._thetas.popleft()
 
-    def models(self) -> list[ehss.ArmaxModel]:
-        """The estimator's model, and the tracker's if there is one: θ̂ averaged over
-        the last ``average_s`` (one estimate per block fed), which halves its scatter at
-        the cost of that much more lag."""
-        s = self.settings
-        mean = np.mean([t for _, t in self._thetas], axis=0)
-        return [ehss.ArmaxModel(a=np.r_[1.0, th[:s.na]], b=th[s.na:s.na + s.nb + 1],
-                                c=np.r_[1.0, th[s.na + s.nb + 1:]], delay=s.delay,
-                                dt=1.0 / self.fs) for th in mean]
+    def snapshot(self) -> Snapshot:
+        """What a judgement needs, copied: the windows and θ̂ averaged over the last
+        ``average_s`` (one estimate per block fed), which halves its scatter at the cost
+        of that much more lag. Later samples do not change it."""
+        u, y, r = self.window.latest()
+        return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0))
 
-    def model(self, u: np.ndarray | None = None, y: np.ndarray | None = None
-              ) -> ehss.ArmaxModel:
+    def models(self, snapshot: Snapshot | None = None) -> list[ehss.ArmaxModel]:
+        """The estimator's model, and the tracker's if there is one, of ``snapshot``
+        (default: now)."""
+        return self.judging.models((self.snapshot() if snapshot is None else snapshot).thetas)
+
+    def model(self, u: np.ndarray | None = None, y: np.ndarray | None = None, *,
+              snapshot: Snapshot | None = None) -> ehss.ArmaxModel:
         """The model judged: of :meth:`models`, the one whose free-run simulation on
         the drive ``u`` fits the latest ``guard.fit_s`` of the feedback ``y`` better
         (the estimator's when no window is given)."""
-        models = self.models()
-        if u is None or y is None or len(models) == 1:
-            return models[0]
-        n_fit = max(1, min(int(round(self.settings.guard.fit_s * self.fs)), u.size // 2))
-        fits = [free_run_fit(m, u, y, n_fit) for m in models]
-        best = int(np.argmax(fits))
-        self.chosen = ("estimator", "tracker")[best]
-        return models[best]
+        snap = self.snapshot() if snapshot is None else snapshot
+        model, self.chosen = self.judging.model(snap.thetas, u, y)
+        return model
 
-    def judge(self, t_s: float) -> Decision:
-        """The decision on the current model at stream time ``t_s``."""
-        u, y, r = self.window.latest()
+    def judge(self, t_s: float, snapshot: Snapshot | None = None) -> Decision:
+        """The decision on the model of ``snapshot`` (default: now) at stream time
+        ``t_s``, recorded in the compensator's log."""
+        verdict = self.judging(t_s, self.snapshot() if snapshot is None else snapshot)
+        self.take(verdict)
+        return verdict.decision
+
+    def take(self, verdict: Verdict) -> None:
+        """Record a judgement made elsewhere (:class:`Judging`) as :meth:`judge` does."""
+        self.compensator.record(verdict.decision, verdict.model)
+        if verdict.model is not None:
+            self.chosen = verdict.chosen
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """A judgement: the decision, the model judged (None if there was none) and whose
+    model it is (``"estimator"`` or ``"tracker"``)."""
+
+    decision: Decision
+    model: ehss.ArmaxModel | None
+    chosen: str
+
+
+class Judging:
+    """How a channel's snapshot is judged; changes nothing, so that it can run on a
+    worker thread or in a worker process (a copy) while the stream is fed.
+
+    Parameters
+    ----------
+    fs : float
+    settings : CompensationSettings
+    compensator : AdaptiveCompensator
+        Whose :meth:`~AdaptiveCompensator.assess` decides (its state is not touched).
+    """
+
+    def __init__(self, fs: float, settings: CompensationSettings,
+                 compensator: AdaptiveCompensator) -> None:
+        self.fs = float(fs)
+        self.settings = settings
+        self.compensator = compensator
+
+    def models(self, thetas: np.ndarray) -> list[ehss.ArmaxModel]:
+        """The models of averaged θ̂ (rows: estimator, tracker)."""
+        s = self.settings
+        return [ehss.ArmaxModel(a=np.r_[1.0, th[:s.na]], b=th[s.na:s.na + s.nb + 1],
+                                c=np.r_[1.0, th[s.na + s.nb + 1:]], delay=s.delay,
+                                dt=1.0 / self.fs) for th in thetas]
+
+    def model(self, thetas: np.ndarray, u: np.ndarray | None, y: np.ndarray | None
+              ) -> tuple[ehss.ArmaxModel, str]:
+        """Of :meth:`models`, the one that fits the latest ``guard.fit_s`` of ``y`` better
+        in free run on ``u``, and whose it is."""
+        models = self.models(thetas)
+        if u is None or y is None or len(models) == 1:
+            return models[0], "estimator"
+        n_fit = max(1, min(int(round(self.settings.guard.fit_s * self.fs)), u.size // 2))
+        best = int(np.argmax([free_run_fit(m, u, y, n_fit) for m in models]))
+        return models[best], ("estimator", "tracker")[best]
+
+    def __call__(self, t_s: float, snap: Snapshot) -> Verdict:
+        u, y = snap.drive, snap.feedback
         try:
-            model = self.model(u, y)
+            model, chosen = self.model(snap.thetas, u, y)
             # segments of a third of the window (a power of two): 4 averages with half
             # overlap, and as long as the loop's memory asks (short ones leak and lose
             # their coherence)
             nper = int(2 ** round(math.log2(max(16, u.size / 3))))
             h1 = ehss.h1_estimate(u, y, fs=self.fs, nperseg=min(nper, u.size))
         except EhssError as exc:
-            decision = Decision(t_s, False, f"no model or H1 estimate: {exc}")
-            self.compensator.log.append(decision)
-            return decision
-        return self.compensator.propose(t_s, model, h1, r, window=(u, y))
+            return Verdict(Decision(t_s, False, f"no model or H1 estimate: {exc}"), None, "")
+        return Verdict(self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y)),
+                       model, chosen)
 
 
 @dataclass(frozen=True)
@@ -349,20 +449,7 @@ class AdaptiveLoop:
         self.target = target
         self.settings = settings
         self.fs = float(target.fs)
-        band = settings.band_hz
-        desired = getattr(target, "desired", None)
-        if desired is not None:
-            desired = np.atleast_2d(desired)
-            scales = np.sqrt(np.mean(desired**2, axis=1))
-        else:
-            # a remote target: its reference is not here ahead of time
-            scales = np.asarray(target.reference_rms, dtype=float)
-            if band is None:
-                raise ParameterError("a remote target needs the band of its reference "
-                                     "(band_hz / --band)")
-        if band is None:
-            band = reference_band(desired[0], self.fs)
-            band = (max(band[0], 2.0 * self.fs / desired.shape[1]), band[1])
+        scales, band = _scales_and_band(target, settings.band_hz, self.fs)
         self.band_hz = (float(band[0]), float(band[1]))
         self.adapters = [
             ChannelAdapter(name, self.fs, self.band_hz, float(scales[k]) or 1.0, settings,
@@ -373,6 +460,11 @@ class AdaptiveLoop:
         self.loads: list[dict] = []
         self._warm_up(loop, params)
         self._last_reason = [""] * len(self.adapters)
+        # judgements on the worker: channel -> (sample to take it up at, t_s, future)
+        self._pending: dict[int, tuple[int, float, Future]] = {}
+        self._collect_after = 1
+        # started here, like the warm-up, so that a target's stream does not wait for it
+        self._worker: Executor | None = self._start_worker()
 
     def _warm_up(self, loop: str | None, params: Any) -> None:
         """One judgement on a throwaway channel, so that the estimator's compiled
@@ -382,7 +474,8 @@ class AdaptiveLoop:
         warm = ChannelAdapter("warm-up", self.fs, self.band_hz, 1.0, self.settings,
                               loop=loop, params=params, preview=self.target.preview)
         warm.feed(u, 0.5 * u, u)
-        warm.judge(0.0)
+        self._warm_snapshot = warm.snapshot()
+        warm.judge(0.0, self._warm_snapshot)
 
     def _event(self, record: dict) -> None:
         self.events.append(record)
@@ -390,54 +483,102 @@ class AdaptiveLoop:
             self._log(record)
 
     def _update(self, t_s: float, channels: list[int]) -> None:
-        from ehss.target.filter import Compensator
-
-        s = self.settings
+        """Judge the channels whose turn it is: on the worker, to be taken up
+        ``self._collect_after`` samples later, or here and now."""
         for k in channels:
             ad = self.adapters[k]
             # one compensator at a time: the last one sent must be in before the next
-            if not ad.compensator.due(t_s) or self.target.index < ad.busy_until:
+            if k in self._pending or not ad.compensator.due(t_s) \
+                    or self.target.index < ad.busy_until:
                 continue
-            d = ad.judge(t_s)
-            name = ad.name
-            if not d.accepted:
-                # the same refusal with other figures is logged once
-                key = re.sub(r"[-+0-9.]+", "#", d.reason)
-                if key != self._last_reason[k]:
-                    self._event({"kind": "compensator_refused", "channel": name,
-                                 "t_s": t_s, "reason": d.reason})
-                ad.refusals += 1
-                if ad.compensator.current is not None and not ad.alarm \
-                        and ad.refusals >= s.alarm_after:
-                    ad.alarm = True
-                    self._event({"kind": "alarm", "channel": name, "t_s": t_s,
-                                 "text": f"compensator kept: {d.reason}"})
-                self._last_reason[k] = key
+            snap = ad.snapshot()
+            if self._worker is None:
+                self._apply(k, t_s, ad.judge(t_s, snap))
                 continue
-            self._last_reason[k] = ""
-            ad.refusals = 0
-            if ad.alarm:
-                ad.alarm = False
-                self._event({"kind": "clear", "channel": name, "t_s": t_s})
-            design = d.design
-            try:
-                # the target's own checks (sizes, finite, every section stable)
-                comp = Compensator(sos=design.sos, taps=design.taps, preview=design.preview,
-                                   fs_hz=design.fs_hz)
-            except EhssError as exc:
-                self._event({"kind": "compensator_refused", "channel": name, "t_s": t_s,
-                             "reason": f"the target cannot run it: {exc}"})
-                continue
-            apply_index = self.target.index + design.settle_samples
-            crossfade = max(1, int(round(s.guard.crossfade_s * self.fs)))
-            ok = self.target.load(k, comp, apply_index, crossfade)
-            ad.busy_until = apply_index + crossfade
-            load = {"kind": "compensator", "channel": name, "t_s": t_s,
-                    "apply_index": int(apply_index), "crossfade": crossfade,
-                    "accepted": bool(ok), "model": ad.chosen, **d.figures,
-                    **design.errors()}
-            self.loads.append(load)
-            self._event(load)
+            future = self._worker.submit(ad.judging, t_s, snap) \
+                if isinstance(self._worker, ThreadPoolExecutor) \
+                else self._worker.submit(_worker_judge, k, t_s, snap)
+            self._pending[k] = (self.target.index + self._collect_after, t_s, future)
+
+    def _collect(self, *, every: bool = False) -> None:
+        """Take up the judgements whose time has come and apply them (``every``: all,
+        recorded but not applied: the stream is over)."""
+        for k, (due, t_s, future) in sorted(self._pending.items(), key=lambda kv: kv[1][0]):
+            if every or self.target.index >= due:
+                del self._pending[k]
+                verdict = future.result()
+                self.adapters[k].take(verdict)
+                if not every:
+                    self._apply(k, t_s, verdict.decision)
+
+    def close(self) -> None:
+        """Stop the worker (a worker process starts with the loop; :meth:`run` stops it
+        at its end, and starts it anew if run again)."""
+        if self._worker is not None:
+            self._worker.shutdown()
+            self._worker = None
+
+    def _start_worker(self) -> Executor | None:
+        where = self.settings.judge_in
+        if where == "thread":
+            return ThreadPoolExecutor(max_workers=1, thread_name_prefix="ehss-judge")
+        if where == "stream":
+            return None
+        import multiprocessing
+
+        pool = ProcessPoolExecutor(
+            max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+            initializer=_worker_start,
+            initargs=([ad.judging for ad in self.adapters], self._warm_snapshot))
+        pool.submit(_worker_ready).result()      # started and warm before the stream
+        return pool
+
+    def _refused(self, k: int, t_s: float, d: Decision) -> None:
+        ad = self.adapters[k]
+        # the same refusal with other figures is logged once
+        key = re.sub(r"[-+0-9.]+", "#", d.reason)
+        if key != self._last_reason[k]:
+            self._event({"kind": "compensator_refused", "channel": ad.name,
+                         "t_s": t_s, "reason": d.reason})
+        ad.refusals += 1
+        if ad.compensator.current is not None and not ad.alarm \
+                and ad.refusals >= self.settings.alarm_after:
+            ad.alarm = True
+            self._event({"kind": "alarm", "channel": ad.name, "t_s": t_s,
+                         "text": f"compensator kept: {d.reason}"})
+        self._last_reason[k] = key
+
+    def _apply(self, k: int, t_s: float, d: Decision) -> None:
+        """Log a refusal, or send an accepted design to the target."""
+        from ehss.target.filter import Compensator
+
+        ad = self.adapters[k]
+        if not d.accepted or d.design is None:
+            self._refused(k, t_s, d)
+            return
+        self._last_reason[k] = ""
+        ad.refusals = 0
+        if ad.alarm:
+            ad.alarm = False
+            self._event({"kind": "clear", "channel": ad.name, "t_s": t_s})
+        design = d.design
+        try:
+            # the target's own checks (sizes, finite, every section stable)
+            comp = Compensator(sos=design.sos, taps=design.taps, preview=design.preview,
+                               fs_hz=design.fs_hz)
+        except EhssError as exc:
+            self._event({"kind": "compensator_refused", "channel": ad.name, "t_s": t_s,
+                         "reason": f"the target cannot run it: {exc}"})
+            return
+        apply_index = self.target.index + design.settle_samples
+        crossfade = max(1, int(round(self.settings.guard.crossfade_s * self.fs)))
+        ok = self.target.load(k, comp, apply_index, crossfade)
+        ad.busy_until = apply_index + crossfade
+        load = {"kind": "compensator", "channel": ad.name, "t_s": t_s,
+                "apply_index": int(apply_index), "crossfade": crossfade,
+                "accepted": bool(ok), "model": ad.chosen, **d.figures, **design.errors()}
+        self.loads.append(load)
+        self._event(load)
 
     def run(self, *, block_s: float = 0.05, duration_s: float | None = None,
             speed: float = math.inf, stop: Any = None) -> CompensationRecord:
@@ -445,16 +586,38 @@ class AdaptiveLoop:
         ``stop`` (a :class:`threading.Event`) is set; ``speed`` × real time (inf: as
         fast as it computes)."""
         s = self.settings
-        wall0 = time.monotonic()
         n_block = max(1, int(round(block_s * self.fs)))
         limit = math.inf if duration_s is None else int(round(duration_s * self.fs))
         # the channels take their turns spread over the update period, so that their
-        # judgements (a design each, tens of ms) do not all fall in one block and hold
-        # the stream up by their sum
+        # judgements (a design each, milliseconds) do not all fall in one block
         n_ch = max(1, len(self.adapters))
+        spacing_s = s.update_s / n_ch
         first = max(s.start_s, s.update_s)
-        next_update = [first + k * s.update_s / n_ch for k in range(n_ch)]
+        next_update = [first + k * spacing_s for k in range(n_ch)]
+        self._collect_after = max(1, int(round(spacing_s * self.fs)))
+        if self._worker is None:
+            self._worker = self._start_worker()
         parts: list[Any] = []
+        try:
+            self._stream(parts, n_block, limit, speed, stop, next_update)
+        finally:
+            if self._worker is not None:
+                self._collect(every=True)
+            self.close()
+        cat = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
+               for name in ("desired", "drive", "feedback")}
+        return CompensationRecord(
+            fs=self.fs, channels=tuple(self.target.channels), **cat,
+            decisions={ad.name: [d.to_dict() for d in ad.compensator.log]
+                       for ad in self.adapters},
+            loads=list(self.loads), events=list(self.events),
+            settings={**s.to_dict(), "band_hz": list(self.band_hz)})
+
+    def _stream(self, parts: list, n_block: int, limit: float, speed: float, stop: Any,
+                next_update: list[float]) -> None:
+        """Step the target block by block, feeding the channels and judging in turn."""
+        s = self.settings
+        wall0 = time.monotonic()
         while not self.target.finished and self.target.index < limit:
             if stop is not None and stop.is_set():
                 break
@@ -467,20 +630,54 @@ class AdaptiveLoop:
             parts.append(block)
             for k, ad in enumerate(self.adapters):
                 ad.feed(block.drive[k], block.feedback[k], block.desired[k])
+            self._collect()
             t_s = self.target.index / self.fs
-            turn = [k for k in range(n_ch) if t_s + 1e-12 >= next_update[k]]
+            turn = [k for k in range(len(next_update)) if t_s + 1e-12 >= next_update[k]]
             if turn and t_s <= s.adapt_until_s:
                 self._update(t_s, turn)
             for k in turn:
                 next_update[k] += s.update_s
-        cat = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
-               for name in ("desired", "drive", "feedback")}
-        return CompensationRecord(
-            fs=self.fs, channels=tuple(self.target.channels), **cat,
-            decisions={ad.name: [d.to_dict() for d in ad.compensator.log]
-                       for ad in self.adapters},
-            loads=list(self.loads), events=list(self.events),
-            settings={**s.to_dict(), "band_hz": list(self.band_hz)})
+
+
+def _scales_and_band(target: Target, band: tuple[float, float] | None, fs: float
+                     ) -> tuple[np.ndarray, tuple[float, float]]:
+    """Each channel's reference RMS, and the band (default: the first channel's
+    reference band, from the target's whole desired reference)."""
+    desired = getattr(target, "desired", None)
+    if desired is None:
+        # a remote target: its reference is not here ahead of time
+        rms = getattr(target, "reference_rms", None)
+        if rms is None:
+            raise ParameterError("the target gives neither its desired reference nor each "
+                                 "channel's reference_rms")
+        scales = np.asarray(rms, dtype=float)
+        if band is None:
+            raise ParameterError("a remote target needs the band of its reference "
+                                 "(band_hz / --band)")
+        return scales, band
+    desired = np.atleast_2d(desired)
+    scales = np.sqrt(np.mean(desired**2, axis=1))
+    if band is None:
+        lo, hi = reference_band(desired[0], fs)
+        band = (max(lo, 2.0 * fs / desired.shape[1]), hi)
+    return scales, band
+
+
+# the worker process's copies of the channels' judging
+_WORKER_JUDGING: list[Judging] = []
+
+
+def _worker_start(judging: list[Judging], warm: Snapshot) -> None:
+    _WORKER_JUDGING[:] = judging
+    judging[0](0.0, warm)            # the compiled kernels loaded before the stream
+
+
+def _worker_ready() -> bool:
+    return True
+
+
+def _worker_judge(k: int, t_s: float, snap: Snapshot) -> Verdict:
+    return _WORKER_JUDGING[k](t_s, snap)
 
 
 # ----------------------------------------------------------------------------- over UDP
@@ -565,7 +762,7 @@ class UdpTarget:
         self._ri, self._fi = layout.ref_index, layout.fb_index
         self._di = [layout.fields.index(f"des{c}") for c in self.channels]
         self._idle = float(idle_stop_s)
-        self._last = None
+        self._last: float | None = None
         self._done = False
         self.index = 0
 

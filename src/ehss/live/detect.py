@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from scipy import optimize, stats
@@ -91,27 +92,6 @@ __all__ = ["FIGURES", "GATES", "DRIFT", "CLEAR_LEVEL", "MIN_EFFECTIVE_BLOCKS", "
            "DetectionSettings", "Calibration", "block_statistic", "calibrate",
            "cusum_threshold", "Detector", "BaselineResidual", "check_baseline",
            "dominant_pole", "figures"]
-
-#: Names of the figures, in the order they are recorded.
-FIGURES = ("frf_db", "gain_db", "pole_shift", "test")
-#: The figures that may gate an alarm with a threshold of their own.
-GATES = ("frf_db", "gain_db", "pole_shift")
-#: κ, the CUSUM's drift in σ: quickest for a rise of 2κ = 1 σ.
-DRIFT = 0.5
-#: An alarm clears when the test stays below this fraction of its threshold for
-#: ``clear_s``: a change that persists holds the CUSUM near h, and the loop back to
-#: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
-#: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
-CLEAR_LEVEL = 0.5
-#: Fewest independent blocks of learning the test is calibrated from.
-MIN_EFFECTIVE_BLOCKS = 5
-#: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
-_MAX_RHO = 0.9
-#: Siegmund's correction of the threshold for the overshoot of Gaussian increments.
-_OVERSHOOT = 1.166
-#: Largest magnitude of a baseline's coefficient: beyond it, a float64 response of the
-#: model, or the square of its prediction error, overflows.
-MAX_COEFFICIENT = 1e12
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -178,6 +158,24 @@ class DetectionSettings:
     def to_dict(self) -> dict:
         return asdict(self)
 
+
+#: Names of the figures, in the order they are recorded.
+FIGURES = ("frf_db", "gain_db", "pole_shift", "test")
+#: The figures that may gate an alarm with a threshold of their own.
+GATES = ("frf_db", "gain_db", "pole_shift")
+#: κ, the CUSUM's drift in σ: quickest for a rise of 2κ = 1 σ.
+DRIFT = 0.5
+#: An alarm clears when the test stays below this fraction of its threshold for
+#: ``clear_s``: a change that persists holds the CUSUM near h, and the loop back to
+#: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
+#: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
+CLEAR_LEVEL = 0.5
+#: Fewest independent blocks of learning the test is calibrated from.
+MIN_EFFECTIVE_BLOCKS = 5
+#: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
+_MAX_RHO = 0.9
+#: Siegmund's correction of the threshold for the overshoot of Gaussian increments.
+_OVERSHOOT = 1.166
 
 def block_statistic(eps: np.ndarray) -> float:
     """x = ln(median ε²) of one block's prediction errors; NaN for an empty block or a
@@ -330,10 +328,9 @@ class Detector:
         names = [name for name, o in zip(GATES, over, strict=True) if o]
         return names + (["test"] if values[-1] >= 1.0 else [])
 
-    def _increment(self, x: float) -> tuple[float, float] | None:
+    def _increment(self, x: float, cal: Calibration) -> tuple[float, float] | None:
         """The standardised increments (upward, downward) of block x, None when the
         block gives none."""
-        cal = self.calibration
         if not math.isfinite(x):
             return None
         if self._lag == 0:
@@ -349,7 +346,7 @@ class Detector:
         the test starts)."""
         if self.calibration is None:
             return math.nan
-        inc = self._increment(x)
+        inc = self._increment(x, self.calibration)
         h = self.calibration.threshold
         if inc is not None:
             # S_k = max(0, S_{k−1} + z_k − κ), both sides; held at h at most, so that it
@@ -428,7 +425,12 @@ class BaselineResidual:
         return out
 
 
-def check_baseline(model, name: str = "the baseline") -> None:
+#: Largest magnitude of a baseline's coefficient: beyond it, a float64 response of the
+#: model, or the square of its prediction error, overflows.
+MAX_COEFFICIENT = 1e12
+
+
+def check_baseline(model: Any, name: str = "the baseline") -> None:
     """Refuse a baseline model that cannot be a running loop's reference: coefficients
     not finite or beyond ±:data:`MAX_COEFFICIENT`, or poles on or outside the unit
     circle (the loop it describes would not be running).

@@ -22,6 +22,7 @@ import dataclasses
 import math
 import re
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -320,9 +321,10 @@ class SteppingRig:
         self.params = [base] * self.n_channels
         self.events = tuple(sorted(events, key=lambda e: e.time_s))
         self.faults = tuple(faults)
-        for item in (*self.events, *self.faults):
-            if item.channel is not None and item.channel not in self.channels:
-                raise ParameterError(f"channel {item.channel!r}: the rig has channels "
+        named = [e.channel for e in self.events] + [f.channel for f in self.faults]
+        for channel in named:
+            if channel is not None and channel not in self.channels:
+                raise ParameterError(f"channel {channel!r}: the rig has channels "
                                      f"{', '.join(self.channels)}")
         self.preview = int(preview)
         self.filters = [CompensatorFilter(Compensator.delay(self.preview, fs_hz=self.fs))
@@ -343,7 +345,7 @@ class SteppingRig:
     def finished(self) -> bool:
         return self.index >= self.n_samples
 
-    def load(self, channel: int, compensator, apply_index: int, crossfade: int) -> bool:
+    def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
         """Hand a compensator to channel ``channel``'s filter, to apply from the drive
         sample ``apply_index`` (see :meth:`ehss.target.filter.CompensatorFilter.load`)."""
         return self.filters[channel].load(compensator, apply_index + self.preview, crossfade)
