@@ -54,15 +54,17 @@ def roots_inside(p: np.ndarray, radius: float) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def _inverse(x: np.ndarray, den: np.ndarray) -> np.ndarray:
-    """x filtered by 1/D, D = 1 + den[0] q^-1 + … (at rest before x[0])."""
+def _inverse_rows(x: np.ndarray, den: np.ndarray) -> np.ndarray:
+    """Each row of x filtered by 1/D, D = 1 + den[0] q^-1 + … (at rest before x[:, 0]);
+    the rows' recursions interleaved in one loop over k."""
     n = den.size
-    out = np.empty(x.size)
-    for k in range(x.size):
-        s = x[k]
-        for i in range(1, min(n, k) + 1):
-            s -= den[i - 1] * out[k - i]
-        out[k] = s
+    out = np.empty_like(x)
+    for k in range(x.shape[1]):
+        for r in range(x.shape[0]):
+            s = x[r, k]
+            for i in range(1, min(n, k) + 1):
+                s -= den[i - 1] * out[r, k - i]
+            out[r, k] = s
     return out
 
 
@@ -87,25 +89,83 @@ def armax_errors(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, na: int, nb:
 
 
 @njit(cache=True, nogil=True)
+def armax_signals(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.ndarray,
+                  na: int, nb: int, nc: int) -> np.ndarray:
+    """Rows y/C, u/C, ε/C and ε: what the ARMAX Jacobian's columns are delayed copies of,
+    and the residual."""
+    x = np.empty((3, ys.size))
+    x[0], x[1], x[2] = ys, us, eps
+    out = np.empty((4, ys.size))
+    out[:3] = _inverse_rows(x, theta[na + nb + 1 : na + nb + 1 + nc])
+    out[3] = eps
+    return out
+
+
+@njit(cache=True, nogil=True)
+def armax_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
+    """(row, lag, sign) of each column of [J | ε] in :func:`armax_signals`' rows:
+    ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C, then ε(k)."""
+    n = na + nb + 1 + nc
+    row = np.empty(n + 1, dtype=np.int64)
+    lag = np.empty(n + 1, dtype=np.int64)
+    sign = np.empty(n + 1)
+    for i in range(na):
+        row[i], lag[i], sign[i] = 0, i + 1, 1.0
+    for j in range(nb + 1):
+        row[na + j], lag[na + j], sign[na + j] = 1, delay + j, -1.0
+    for i in range(nc):
+        row[na + nb + 1 + i], lag[na + nb + 1 + i], sign[na + nb + 1 + i] = 2, i + 1, -1.0
+    row[n], lag[n], sign[n] = 3, 0, 1.0
+    return row, lag, sign
+
+
+@njit(cache=True, nogil=True)
+def columns(signals: np.ndarray, row: np.ndarray, lag: np.ndarray, sign: np.ndarray,
+            k0: int) -> np.ndarray:
+    """A[k − k0, c] = sign[c] · signals[row[c], k − lag[c]] for k = k0 … N − 1."""
+    m = signals.shape[1] - k0
+    A = np.empty((m, row.size))
+    for c in range(row.size):
+        src = signals[row[c], k0 - lag[c] : k0 - lag[c] + m]
+        for r in range(m):
+            A[r, c] = sign[c] * src[r]
+    return A
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def _dot(x: np.ndarray, y: np.ndarray) -> float:
+    """Σ x_k y_k (reassociated: LLVM sums in vector lanes)."""
+    s = 0.0
+    for k in range(x.size):
+        s += x[k] * y[k]
+    return s
+
+
+@njit(cache=True, nogil=True)
+def gram(signals: np.ndarray, row: np.ndarray, lag: np.ndarray, sign: np.ndarray,
+         k0: int) -> np.ndarray:
+    """AᵀA of :func:`columns`' A without forming A: each entry one dot product of two
+    delayed rows of ``signals``."""
+    n = row.size
+    m = signals.shape[1] - k0
+    G = np.empty((n, n))
+    for a in range(n):
+        xa = signals[row[a], k0 - lag[a] : k0 - lag[a] + m]
+        for b in range(a, n):
+            xb = signals[row[b], k0 - lag[b] : k0 - lag[b] + m]
+            G[a, b] = sign[a] * sign[b] * _dot(xa, xb)
+            G[b, a] = G[a, b]
+    return G
+
+
+@njit(cache=True, nogil=True)
 def armax_jacobian(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.ndarray,
                    na: int, nb: int, nc: int, delay: int, k0: int) -> np.ndarray:
-    """∂ε(k)/∂θ for k ≥ k0 (k0 ≥ max(na, nb + d, nc)), rows k − k0.
-
-    ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C.
-    """
-    nab = na + nb + 1
-    c = theta[nab:]
-    wy, wu, we = _inverse(ys, c), _inverse(us, c), _inverse(eps, c)
-    J = np.empty((ys.size - k0, nab + nc))
-    for r in range(ys.size - k0):
-        k = r + k0
-        for i in range(1, na + 1):
-            J[r, i - 1] = wy[k - i]
-        for j in range(nb + 1):
-            J[r, na + j] = -wu[k - delay - j]
-        for i in range(1, nc + 1):
-            J[r, nab + i - 1] = -we[k - i]
-    return J
+    """∂ε(k)/∂θ for k ≥ k0 (k0 ≥ max(na, nb + d, nc)), rows k − k0."""
+    row, lag, sign = armax_layout(na, nb, nc, delay)
+    n = row.size - 1
+    return columns(armax_signals(theta, us, ys, eps, na, nb, nc), row[:n], lag[:n],
+                   sign[:n], k0)
 
 
 @njit(cache=True, nogil=True)
@@ -126,16 +186,39 @@ def oe_simulate(theta: np.ndarray, us: np.ndarray, nf: int, nb: int,
 
 
 @njit(cache=True, nogil=True)
+def oe_signals(theta: np.ndarray, us: np.ndarray, yhat: np.ndarray, eps: np.ndarray,
+               nf: int) -> np.ndarray:
+    """Rows ŷ/F, u/F and ε = y − ŷ: what the OE Jacobian's columns are delayed copies
+    of, and the residual."""
+    x = np.empty((2, us.size))
+    x[0], x[1] = yhat, us
+    out = np.empty((3, us.size))
+    out[:2] = _inverse_rows(x, theta[:nf])
+    out[2] = eps
+    return out
+
+
+@njit(cache=True, nogil=True)
+def oe_layout(nf: int, nb: int, delay: int) -> tuple:
+    """(row, lag, sign) of each column of [J | ε] in :func:`oe_signals`' rows:
+    ∂ε/∂f_i = ŷ(k−i)/F, ∂ε/∂b_j = −u(k−d−j)/F, then ε(k) = y(k) − ŷ(k)."""
+    n = nf + nb + 1
+    row = np.empty(n + 1, dtype=np.int64)
+    lag = np.empty(n + 1, dtype=np.int64)
+    sign = np.empty(n + 1)
+    for i in range(nf):
+        row[i], lag[i], sign[i] = 0, i + 1, 1.0
+    for j in range(nb + 1):
+        row[nf + j], lag[nf + j], sign[nf + j] = 1, delay + j, -1.0
+    row[n], lag[n], sign[n] = 2, 0, 1.0
+    return row, lag, sign
+
+
+@njit(cache=True, nogil=True)
 def oe_jacobian(theta: np.ndarray, us: np.ndarray, yhat: np.ndarray, nf: int, nb: int,
                 delay: int, k0: int) -> np.ndarray:
     """∂ε(k)/∂θ of ε = y − ŷ for k ≥ k0: ∂ε/∂f_i = ŷ(k−i)/F, ∂ε/∂b_j = −u(k−d−j)/F."""
-    f = theta[:nf]
-    wy, wu = _inverse(yhat, f), _inverse(us, f)
-    J = np.empty((us.size - k0, nf + nb + 1))
-    for r in range(us.size - k0):
-        k = r + k0
-        for i in range(1, nf + 1):
-            J[r, i - 1] = wy[k - i]
-        for j in range(nb + 1):
-            J[r, nf + j] = -wu[k - delay - j]
-    return J
+    row, lag, sign = oe_layout(nf, nb, delay)
+    n = row.size - 1
+    # the residual row (here a stand-in) is not among J's columns
+    return columns(oe_signals(theta, us, yhat, yhat, nf), row[:n], lag[:n], sign[:n], k0)

@@ -102,55 +102,123 @@ def _covariance(J: np.ndarray, eps: np.ndarray, n_free: int) -> tuple[float, np.
     return nv, nv * np.linalg.pinv(J.T @ J)
 
 
+_COND_GRAM = 1e5  # largest condition number of J (columns scaled) solved through JᵀJ
+
+
+def _cholesky_factor(G: np.ndarray) -> np.ndarray | None:
+    """R with RᵀR = G, or None when G = JᵀJ is too ill-conditioned for R to stand in
+    for the R of a QR of J.
+
+    Through JᵀJ the relative error of R grows as ε κ² (κ the condition number of J with
+    its columns scaled to unit norm, ε = 2.2e-16), through a QR of J as ε κ. Up to
+    κ = 1e5 (ε κ² ≤ 2e-6) the steps agree with MINPACK's own to about six digits, which
+    leaves its iterates as they are: on the report's position record (κ up to 3e4 over
+    the 32 candidates of ``ehss order``) every run takes the same number of evaluations
+    and ends at the same cost to 1e-11. Oversampled records of high order reach
+    κ = 1e8–1e9 and are factored by QR.
+    """
+    d = np.sqrt(np.diag(G))
+    if not np.all(d > 0.0):
+        return None
+    try:
+        Rs = np.linalg.cholesky(G / np.outer(d, d)).T
+    except np.linalg.LinAlgError:
+        return None
+    s = np.linalg.svd(Rs, compute_uv=False)
+    if not s[-1] > s[0] / _COND_GRAM:
+        return None
+    return Rs * d
+
+
 class _Predictor:
     """Residuals ε(k ≥ k0) and Jacobian of one model structure on one scaled record.
 
-    ``least_squares`` asks for the Jacobian at the point whose residuals it has just
-    had: the last θ and its full error sequence are kept, so that the Jacobian does not
-    filter the record once more for them. A θ whose predictor polynomial (C for ARMAX,
-    F for OE) has a root at or beyond ``radius`` gets the constant residual ``_BARRIER``
-    (the step is rejected, the damping raised).
+    The columns of the Jacobian J and the residual ε are delayed copies of a few
+    filtered signals (:mod:`._pem_kernels`); they are formed for the covariance only.
+    Levenberg–Marquardt is given the same problem reduced to n + 1 rows instead: with
+    [J ε] = Q [R q; 0 ρ] (R upper triangular, n × n), ‖ε + J p‖² = ‖q + R p‖² + ρ² for
+    every step p, so the residual [q; ρ] and the Jacobian [R; 0] give MINPACK the same
+    costs, steps, column norms and convergence tests as ε and J, while its QR works on
+    (n + 1) × n instead of N × n. R is the Cholesky factor of JᵀJ, q = R⁻ᵀ Jᵀε, and
+    ρ² = εᵀε − qᵀq (εᵀε summed directly, so that the cost is that of ε itself); JᵀJ and
+    Jᵀε are dot products of the delayed signals, in the compiled :func:`gram`, and J
+    is not formed. Should JᵀJ not be numerically positive definite, R and q come from a
+    QR of [J ε] instead.
+
+    A θ whose predictor polynomial (C for ARMAX, F for OE) has a root at or beyond
+    ``radius`` gets a residual of the norm of N − k0 entries ``_BARRIER`` (the step is
+    rejected, the damping raised). The last θ and its filtered signals are kept:
+    ``least_squares`` asks for the Jacobian at the point whose residuals it has just had.
     """
 
     def __init__(self, us, ys, na, nb, nc, delay, k0, radius, *, oe=False):
         self.us, self.ys = us, ys
         self.na, self.nb, self.nc, self.delay, self.k0 = na, nb, nc, delay, k0
         self.radius, self.oe = radius, oe
-        self._theta = None
-        self._signal = None
+        self.layout = _pk.oe_layout(na, nb, delay) if oe else _pk.armax_layout(na, nb, nc,
+                                                                               delay)
+        self._theta: np.ndarray | None = None
+        self._signals = np.empty((0, 0))
+        self._reduced: tuple[np.ndarray, np.ndarray] | None = None
 
     def _guard(self, theta: np.ndarray) -> np.ndarray:
         return theta[: self.na] if self.oe else theta[self.na + self.nb + 1 :]
 
-    def _signal_at(self, theta: np.ndarray) -> np.ndarray:
-        """ε (ARMAX) or ŷ (OE) over the whole record at θ, from the cache if there."""
+    def _signals_at(self, theta: np.ndarray) -> np.ndarray:
+        """The filtered signals at θ (rows of :func:`armax_signals`/:func:`oe_signals`,
+        the residual last), from the cache if there."""
         if self._theta is None or not np.array_equal(theta, self._theta):
             th = np.ascontiguousarray(theta, dtype=np.float64)
             if self.oe:
-                sig = _pk.oe_simulate(th, self.us, self.na, self.nb, self.delay)
+                yhat = _pk.oe_simulate(th, self.us, self.na, self.nb, self.delay)
+                sig = _pk.oe_signals(th, self.us, yhat, self.ys - yhat, self.na)
             else:
-                sig = _pk.armax_errors(th, self.us, self.ys, self.na, self.nb, self.nc,
+                eps = _pk.armax_errors(th, self.us, self.ys, self.na, self.nb, self.nc,
                                        self.delay)
-            self._theta, self._signal = th.copy(), sig
-        return self._signal
+                sig = _pk.armax_signals(th, self.us, self.ys, eps, self.na, self.nb, self.nc)
+            self._theta, self._signals, self._reduced = th.copy(), sig, None
+        return self._signals
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
         if not _inside(self._guard(theta), self.radius):
             return np.full(self.ys.size - self.k0, _BARRIER)
-        sig = self._signal_at(theta)
-        return (self.ys - sig)[self.k0 :] if self.oe else sig[self.k0 :]
+        return self._signals_at(theta)[-1, self.k0 :]
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
-        sig = self._signal_at(theta)
-        th = self._theta
-        if self.oe:
-            return _pk.oe_jacobian(th, self.us, sig, self.na, self.nb, self.delay, self.k0)
-        return _pk.armax_jacobian(th, self.us, self.ys, sig, self.na, self.nb, self.nc,
-                                  self.delay, self.k0)
+        row, lag, sign = self.layout
+        n = row.size - 1
+        return _pk.columns(self._signals_at(theta), row[:n], lag[:n], sign[:n], self.k0)
+
+    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """([q; ρ], [R; 0]) at θ."""
+        sig = self._signals_at(theta)
+        if self._reduced is None:
+            G = _pk.gram(sig, *self.layout, self.k0)
+            n = G.shape[0] - 1
+            R = _cholesky_factor(G[:n, :n])
+            if R is None:
+                Rq = np.linalg.qr(np.column_stack([self.jacobian(theta),
+                                                   self.residual(theta)]), mode="r")
+                R, q = Rq[:n, :n], Rq[:n, n]
+            else:
+                q = np.linalg.solve(R.T, G[:n, n])
+            rho = np.sqrt(max(G[n, n] - float(q @ q), 0.0))
+            self._reduced = (np.append(q, rho), np.vstack([R, np.zeros((1, n))]))
+        return self._reduced
+
+    def _reduced_residual(self, theta: np.ndarray) -> np.ndarray:
+        if not _inside(self._guard(theta), self.radius):
+            out = np.zeros(theta.size + 1)
+            out[-1] = _BARRIER * np.sqrt(self.ys.size - self.k0)
+            return out
+        return self._reduce(theta)[0]
+
+    def _reduced_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        return self._reduce(theta)[1]
 
     def fit(self, x0: np.ndarray, max_nfev: int, tol: float):
-        """Levenberg–Marquardt from ``x0``: (θ, cost, nfev)."""
-        return _solve(self.residual, self.jacobian, x0, max_nfev, tol)
+        """Levenberg–Marquardt from ``x0`` on the reduced problem: (θ, cost, nfev)."""
+        return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
 
 
 # ------------------------------------------------------------------------------ ARMAX
