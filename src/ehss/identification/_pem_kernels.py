@@ -54,18 +54,20 @@ def roots_inside(p: np.ndarray, radius: float) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def _inverse_rows(x: np.ndarray, den: np.ndarray) -> np.ndarray:
-    """Each row of x filtered by 1/D, D = 1 + den[0] q^-1 + … (at rest before x[:, 0]);
-    the rows' recursions interleaved in one loop over k."""
+def _inverse(x: np.ndarray, den: np.ndarray, out: np.ndarray) -> None:
+    """out = x filtered by 1/D, D = 1 + den[0] q^-1 + … (at rest before x[0])."""
     n = den.size
-    out = np.empty_like(x)
-    for k in range(x.shape[1]):
-        for r in range(x.shape[0]):
-            s = x[r, k]
-            for i in range(1, min(n, k) + 1):
-                s -= den[i - 1] * out[r, k - i]
-            out[r, k] = s
-    return out
+    for k in range(min(n, x.size)):
+        s = x[k]
+        for i in range(1, k + 1):
+            s -= den[i - 1] * out[k - i]
+        out[k] = s
+    for k in range(n, x.size):
+        s = x[k]
+        past = out[k - n : k]  # past[n − i] = out[k − i]
+        for i in range(1, n + 1):
+            s -= den[i - 1] * past[n - i]
+        out[k] = s
 
 
 @njit(cache=True, nogil=True)
@@ -93,10 +95,11 @@ def armax_signals(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.nda
                   na: int, nb: int, nc: int) -> np.ndarray:
     """Rows y/C, u/C, ε/C and ε: what the ARMAX Jacobian's columns are delayed copies of,
     and the residual."""
-    x = np.empty((3, ys.size))
-    x[0], x[1], x[2] = ys, us, eps
+    c = theta[na + nb + 1 : na + nb + 1 + nc]
     out = np.empty((4, ys.size))
-    out[:3] = _inverse_rows(x, theta[na + nb + 1 : na + nb + 1 + nc])
+    _inverse(ys, c, out[0])
+    _inverse(us, c, out[1])
+    _inverse(eps, c, out[2])
     out[3] = eps
     return out
 
@@ -190,10 +193,9 @@ def oe_signals(theta: np.ndarray, us: np.ndarray, yhat: np.ndarray, eps: np.ndar
                nf: int) -> np.ndarray:
     """Rows ŷ/F, u/F and ε = y − ŷ: what the OE Jacobian's columns are delayed copies
     of, and the residual."""
-    x = np.empty((2, us.size))
-    x[0], x[1] = yhat, us
     out = np.empty((3, us.size))
-    out[:2] = _inverse_rows(x, theta[:nf])
+    _inverse(yhat, theta[:nf], out[0])
+    _inverse(us, theta[:nf], out[1])
     out[2] = eps
     return out
 

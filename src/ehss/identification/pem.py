@@ -51,6 +51,7 @@ Safeguards:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -89,7 +90,8 @@ def _inside(p: np.ndarray, radius: float) -> bool:
     return bool(_pk.roots_inside(np.ascontiguousarray(p, dtype=np.float64), float(radius)))
 
 
-def _solve(fun, jac, x0: np.ndarray, max_nfev: int, tol: float):
+def _solve(fun: Callable[[np.ndarray], np.ndarray], jac: Callable[[np.ndarray], np.ndarray],
+           x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
     """One Levenberg–Marquardt run; returns (x, cost, nfev)."""
     sol = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=tol, ftol=tol,
                         gtol=tol, max_nfev=max_nfev)
@@ -151,12 +153,13 @@ class _Predictor:
     ``least_squares`` asks for the Jacobian at the point whose residuals it has just had.
     """
 
-    def __init__(self, us, ys, na, nb, nc, delay, k0, radius, *, oe=False):
+    def __init__(self, us: np.ndarray, ys: np.ndarray, na: int, nb: int, nc: int,
+                 delay: int, k0: int, radius: float, *, oe: bool = False) -> None:
         self.us, self.ys = us, ys
         self.na, self.nb, self.nc, self.delay, self.k0 = na, nb, nc, delay, k0
         self.radius, self.oe = radius, oe
-        self.layout = _pk.oe_layout(na, nb, delay) if oe else _pk.armax_layout(na, nb, nc,
-                                                                               delay)
+        layout = _pk.oe_layout(na, nb, delay) if oe else _pk.armax_layout(na, nb, nc, delay)
+        self.layout: tuple[np.ndarray, np.ndarray, np.ndarray] = layout
         self._theta: np.ndarray | None = None
         self._signals = np.empty((0, 0))
         self._reduced: tuple[np.ndarray, np.ndarray] | None = None
@@ -193,12 +196,13 @@ class _Predictor:
         """([q; ρ], [R; 0]) at θ."""
         sig = self._signals_at(theta)
         if self._reduced is None:
-            G = _pk.gram(sig, *self.layout, self.k0)
+            row, lag, sign = self.layout
+            G = _pk.gram(sig, row, lag, sign, self.k0)
             n = G.shape[0] - 1
             R = _cholesky_factor(G[:n, :n])
             if R is None:
-                Rq = np.linalg.qr(np.column_stack([self.jacobian(theta),
-                                                   self.residual(theta)]), mode="r")
+                A = np.column_stack([self.jacobian(theta), self.residual(theta)])
+                Rq: np.ndarray = np.linalg.qr(A, mode="r")  # type: ignore[assignment]
                 R, q = Rq[:n, :n], Rq[:n, n]
             else:
                 q = np.linalg.solve(R.T, G[:n, n])
@@ -216,7 +220,7 @@ class _Predictor:
     def _reduced_jacobian(self, theta: np.ndarray) -> np.ndarray:
         return self._reduce(theta)[1]
 
-    def fit(self, x0: np.ndarray, max_nfev: int, tol: float):
+    def fit(self, x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
         """Levenberg–Marquardt from ``x0`` on the reduced problem: (θ, cost, nfev)."""
         return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
 
@@ -303,16 +307,20 @@ def armax_pem(
     return model
 
 
-def _smaller_c_theta(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol) -> np.ndarray:
+def _smaller_c_theta(u: np.ndarray, y: np.ndarray, na: int, nb: int, nc: int, delay: int,
+                     dt: float, radius: float, max_nfev: int, tol: float) -> np.ndarray:
     """θ of the fit with nc − 1 (started so itself, down to nc = 1), a zero appended."""
-    theta0 = None
+    theta0: np.ndarray | None = None
     for k in range(1, nc):
         m = _armax_fit(u, y, na, nb, k, delay, dt, radius, max_nfev, tol, theta0)
         theta0 = np.append(m.theta, 0.0)
+    assert theta0 is not None  # nc ≥ 2: the loop ran
     return theta0
 
 
-def _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0) -> ArmaxModel:
+def _armax_fit(u: np.ndarray, y: np.ndarray, na: int, nb: int, nc: int, delay: int,
+               dt: float, radius: float, max_nfev: int, tol: float,
+               theta0: Any) -> ArmaxModel:
     """:func:`armax_pem` on checked arguments, without its warning."""
     su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
@@ -338,7 +346,9 @@ def _armax_fit(u, y, na, nb, nc, delay, dt, radius, max_nfev, tol, theta0) -> Ar
                    delay, dt, meta, k0, warn=False)
 
 
-def _armax_starts(us, ys, na, nb, nc, delay, radius, max_nfev, tol):
+def _armax_starts(us: np.ndarray, ys: np.ndarray, na: int, nb: int, nc: int, delay: int,
+                  radius: float, max_nfev: int,
+                  tol: float) -> tuple[dict[str, np.ndarray], int]:
     """The cheap starts on scaled data, by name, and the first sample of the loss.
 
     Extended least squares (C kept inside 0.95 radius), ARX with C = 1 and, when
@@ -375,7 +385,7 @@ def _given_start(theta0: Any, dvec: np.ndarray, na: int, nb: int, nc: int,
 
 
 def _best_start(problem: _Predictor, starts: dict[str, np.ndarray], max_nfev: int,
-                tol: float):
+                tol: float) -> tuple[str, np.ndarray, dict[str, float], int]:
     """Fit from every start; the stable-A fit of lowest loss wins (earlier on a tie).
 
     A stable A beats any unstable one: a lower loss bought with a pole outside the unit
@@ -403,7 +413,9 @@ def _best_start(problem: _Predictor, starts: dict[str, np.ndarray], max_nfev: in
 
 
 # ------------------------------------------------------------------------------ OE
-def _steiglitz_mcbride(us, ys, nf, nb, delay, theta, radius, iterations=8):
+def _steiglitz_mcbride(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: int,
+                       theta: np.ndarray, radius: float,
+                       iterations: int = 8) -> np.ndarray:
     """Refilter u, y by 1/F and refit ARX (Steiglitz & McBride 1965): an OE start."""
     for _ in range(iterations):
         f = np.concatenate([[1.0], theta[:nf]])
@@ -417,7 +429,8 @@ def _steiglitz_mcbride(us, ys, nf, nb, delay, theta, radius, iterations=8):
     return theta
 
 
-def _oe_fit(us, ys, nf, nb, delay, radius, max_nfev, tol):
+def _oe_fit(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: int, radius: float,
+            max_nfev: int, tol: float) -> tuple[np.ndarray, str, dict[str, float], int, int]:
     """OE PEM on scaled data from the ARX and Steiglitz–McBride starts; best wins."""
     phi, t, k0 = regression_matrix(us, ys, None, nf, nb, 0, delay)
     arx = np.linalg.lstsq(phi, t, rcond=None)[0]
@@ -516,7 +529,9 @@ def oe_pem(
 
 
 # ------------------------------------------------------------------------------ shared
-def _finish(theta, cov, nv, na, nb, nc, delay, dt, meta, k0, warn=True) -> ArmaxModel:
+def _finish(theta: np.ndarray, cov: np.ndarray, nv: float, na: int, nb: int, nc: int,
+            delay: int, dt: float, meta: dict[str, Any], k0: int,
+            warn: bool = True) -> ArmaxModel:
     if not np.all(np.isfinite(theta)):
         raise IdentificationError("the estimate does not fit float64 in physical units")
     radius = _radius(theta[:na])
