@@ -69,23 +69,23 @@ def test_reduced_problem_has_the_costs_of_the_full_one(rng, oversampled, oe):
 
 
 def test_both_ways_of_forming_r_are_used(rng):
-    kappas = []
+    from ehss.identification.pem import _COND_GRAM
+
+    through_gram = []
     for oversampled in (False, True):
         p, theta = _problem(rng, oversampled, oe=False)
         row, lag, sign = p.layout
-        n = row.size - 1
         G = pk.gram(p._signals_at(theta), row, lag, sign, p.k0)
-        kappas.append(pem_cholesky_is_used(G[:n, :n]))
-    assert kappas == [True, False]
-
-
-def pem_cholesky_is_used(G):
-    from ehss.identification.pem import _cholesky_factor
-
-    R = _cholesky_factor(G)
-    if R is not None:  # then it is G's Cholesky factor
-        np.testing.assert_allclose(R.T @ R, G, rtol=1e-12, atol=1e-12 * np.max(np.abs(G)))
-    return R is not None
+        r, Jr = pk.reduce_gram(G, _COND_GRAM)
+        if r.size:  # then R is JᵀJ's Cholesky factor and Rᵀq = Jᵀε
+            n = G.shape[0] - 1
+            R = Jr[:n]
+            np.testing.assert_allclose(R.T @ R, G[:n, :n], rtol=0,
+                                       atol=1e-13 * np.max(np.abs(G)))
+            np.testing.assert_allclose(R.T @ r[:n], G[:n, n], rtol=0,
+                                       atol=1e-13 * np.max(np.abs(G)))
+        through_gram.append(r.size > 0)
+    assert through_gram == [True, False]
 
 
 @pytest.mark.parametrize("oe", [False, True])

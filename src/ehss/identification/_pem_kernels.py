@@ -147,18 +147,34 @@ def _dot(x: np.ndarray, y: np.ndarray) -> float:
 @njit(cache=True, nogil=True)
 def gram(signals: np.ndarray, row: np.ndarray, lag: np.ndarray, sign: np.ndarray,
          k0: int) -> np.ndarray:
-    """AᵀA of :func:`columns`' A without forming A: each entry one dot product of two
-    delayed rows of ``signals``."""
+    """AᵀA of :func:`columns`' A without forming A.
+
+    An entry is a dot product of two delayed rows x, y of ``signals``; when the columns
+    before both (a − 1, b − 1) are the same rows one lag less, the entry is theirs with
+    the window moved by a sample: Σ_{k=k0}^{N−1} x(k−l−1) y(k−m−1) = Σ_{k=k0}^{N−1}
+    x(k−l) y(k−m) + x(k0−l−1) y(k0−m−1) − x(N−l−1) y(N−m−1). Only the entries on the
+    first column of a block of lags are summed in full.
+    """
     n = row.size
     m = signals.shape[1] - k0
     G = np.empty((n, n))
-    for a in range(n):
-        xa = signals[row[a], k0 - lag[a] : k0 - lag[a] + m]
+    for a in range(n):  # x(k0 − l) … x(N − l): one more than the window where l ≥ 1
+        xa = signals[row[a], k0 - lag[a] : k0 - lag[a] + m + 1]
         for b in range(a, n):
-            xb = signals[row[b], k0 - lag[b] : k0 - lag[b] + m]
-            G[a, b] = sign[a] * sign[b] * _dot(xa, xb)
+            xb = signals[row[b], k0 - lag[b] : k0 - lag[b] + m + 1]
+            if a > 0 and _next_lag(row, lag, a) and _next_lag(row, lag, b):
+                s = sign[a - 1] * sign[b - 1] * G[a - 1, b - 1]
+                G[a, b] = sign[a] * sign[b] * (s + xa[0] * xb[0] - xa[m] * xb[m])
+            else:
+                G[a, b] = sign[a] * sign[b] * _dot(xa[:m], xb[:m])
             G[b, a] = G[a, b]
     return G
+
+
+@njit(cache=True, nogil=True)
+def _next_lag(row: np.ndarray, lag: np.ndarray, c: int) -> bool:
+    """Column c is column c − 1's row one lag later."""
+    return c > 0 and row[c] == row[c - 1] and lag[c] == lag[c - 1] + 1
 
 
 @njit(cache=True, nogil=True)
@@ -224,3 +240,36 @@ def oe_jacobian(theta: np.ndarray, us: np.ndarray, yhat: np.ndarray, nf: int, nb
     n = row.size - 1
     # the residual row (here a stand-in) is not among J's columns
     return columns(oe_signals(theta, us, yhat, yhat, nf), row[:n], lag[:n], sign[:n], k0)
+
+
+@njit(cache=True, nogil=True)
+def reduce_gram(G: np.ndarray, max_cond: float) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares problem of [J ε] reduced to n + 1 rows, from G = [J ε]ᵀ[J ε].
+
+    Returns the residual [q; ρ] and Jacobian [R; 0] with RᵀR = JᵀJ (R upper triangular),
+    Rᵀq = Jᵀε and ρ² = εᵀε − qᵀq, so that ‖q + R p‖² + ρ² = ‖ε + J p‖² for every p; or
+    two empty arrays when J, its columns scaled to unit norm, has a condition number
+    above ``max_cond`` (R is then to come from a QR of [J ε]).
+    """
+    n = G.shape[0] - 1
+    empty = (np.empty(0), np.empty((0, 0)))
+    d = np.sqrt(np.diag(G)[:n])
+    if not np.all(d > 0.0):
+        return empty
+    Gs = G[:n, :n] / np.outer(d, d)
+    w = np.linalg.eigvalsh(Gs)  # κ(J_s)² = κ(J_sᵀ J_s)
+    if not w[0] > w[n - 1] / (max_cond * max_cond):
+        return empty
+    R = np.linalg.cholesky(Gs).T * d  # J = J_s D: R = R_s D
+    q = np.empty(n)
+    for i in range(n):  # Rᵀ q = Jᵀε, Rᵀ lower triangular
+        s = G[i, n]
+        for j in range(i):
+            s -= R[j, i] * q[j]
+        q[i] = s / R[i, i]
+    r = np.empty(n + 1)
+    r[:n] = q
+    r[n] = np.sqrt(max(G[n, n] - np.dot(q, q), 0.0))
+    Jr = np.zeros((n + 1, n))
+    Jr[:n] = R
+    return r, Jr

@@ -104,32 +104,14 @@ def _covariance(J: np.ndarray, eps: np.ndarray, n_free: int) -> tuple[float, np.
     return nv, nv * np.linalg.pinv(J.T @ J)
 
 
-_COND_GRAM = 1e5  # largest condition number of J (columns scaled) solved through JᵀJ
-
-
-def _cholesky_factor(G: np.ndarray) -> np.ndarray | None:
-    """R with RᵀR = G, or None when G = JᵀJ is too ill-conditioned for R to stand in
-    for the R of a QR of J.
-
-    Through JᵀJ the relative error of R grows as ε κ² (κ the condition number of J with
-    its columns scaled to unit norm, ε = 2.2e-16), through a QR of J as ε κ. Up to
-    κ = 1e5 (ε κ² ≤ 2e-6) the steps agree with MINPACK's own to about six digits, which
-    leaves its iterates as they are: on the report's position record (κ up to 3e4 over
-    the 32 candidates of ``ehss order``) every run takes the same number of evaluations
-    and ends at the same cost to 1e-11. Oversampled records of high order reach
-    κ = 1e8–1e9 and are factored by QR.
-    """
-    d = np.sqrt(np.diag(G))
-    if not np.all(d > 0.0):
-        return None
-    try:
-        Rs = np.linalg.cholesky(G / np.outer(d, d)).T
-    except np.linalg.LinAlgError:
-        return None
-    s = np.linalg.svd(Rs, compute_uv=False)
-    if not s[-1] > s[0] / _COND_GRAM:
-        return None
-    return Rs * d
+#: largest condition number of J (columns scaled to unit norm) whose reduced problem
+#: is formed from JᵀJ: through JᵀJ the relative error of R grows as ε κ² (ε = 2.2e-16),
+#: through a QR of J as ε κ. Up to κ = 1e5 (ε κ² ≤ 2e-6) the steps agree with MINPACK's
+#: own to about six digits, which leaves its iterates as they are: on the report's
+#: position record (κ up to 3e4 over the 32 candidates of ``ehss order``) every run
+#: takes the same number of evaluations and ends at the same cost to 1e-11. Oversampled
+#: records of high order reach κ = 1e8–1e9 and are factored by QR.
+_COND_GRAM = 1e5
 
 
 class _Predictor:
@@ -144,8 +126,8 @@ class _Predictor:
     (n + 1) × n instead of N × n. R is the Cholesky factor of JᵀJ, q = R⁻ᵀ Jᵀε, and
     ρ² = εᵀε − qᵀq (εᵀε summed directly, so that the cost is that of ε itself); JᵀJ and
     Jᵀε are dot products of the delayed signals, in the compiled :func:`gram`, and J
-    is not formed. Should JᵀJ not be numerically positive definite, R and q come from a
-    QR of [J ε] instead.
+    is not formed. When J is too ill-conditioned for that (``_COND_GRAM``), R, q and ρ
+    come from a QR of [J ε] instead.
 
     A θ whose predictor polynomial (C for ARMAX, F for OE) has a root at or beyond
     ``radius`` gets a residual of the norm of N − k0 entries ``_BARRIER`` (the step is
@@ -193,21 +175,20 @@ class _Predictor:
         return _pk.columns(self._signals_at(theta), row[:n], lag[:n], sign[:n], self.k0)
 
     def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """([q; ρ], [R; 0]) at θ."""
+        """([q; ρ], [R; 0]) at θ (:func:`._pem_kernels.reduce_gram`, or a QR of [J ε]
+        when J is too ill-conditioned for JᵀJ)."""
         sig = self._signals_at(theta)
         if self._reduced is None:
             row, lag, sign = self.layout
             G = _pk.gram(sig, row, lag, sign, self.k0)
-            n = G.shape[0] - 1
-            R = _cholesky_factor(G[:n, :n])
-            if R is None:
+            r, Jr = _pk.reduce_gram(G, _COND_GRAM)
+            if r.size == 0:
+                n = G.shape[0] - 1
                 A = np.column_stack([self.jacobian(theta), self.residual(theta)])
                 Rq: np.ndarray = np.linalg.qr(A, mode="r")  # type: ignore[assignment]
-                R, q = Rq[:n, :n], Rq[:n, n]
-            else:
-                q = np.linalg.solve(R.T, G[:n, n])
-            rho = np.sqrt(max(G[n, n] - float(q @ q), 0.0))
-            self._reduced = (np.append(q, rho), np.vstack([R, np.zeros((1, n))]))
+                r = np.append(Rq[:n, n], abs(Rq[n, n]))
+                Jr = np.vstack([Rq[:n, :n], np.zeros((1, n))])
+            self._reduced = (r, Jr)
         return self._reduced
 
     def _reduced_residual(self, theta: np.ndarray) -> np.ndarray:
