@@ -105,9 +105,9 @@ def armax_signals(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.nda
 
 
 @njit(cache=True, nogil=True)
-def armax_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
-    """(row, lag, sign) of each column of [J | ε] in :func:`armax_signals`' rows:
-    ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C, then ε(k)."""
+def _layout(na: int, nb: int, nc: int, delay: int, residual_row: int) -> tuple:
+    """(row, lag, sign) of the columns of [J | ε] for θ = [a, b, c]: the lags 1..na of
+    row 0, −(lags d..d+nb of row 1), −(lags 1..nc of row 2), then ``residual_row``."""
     n = na + nb + 1 + nc
     row = np.empty(n + 1, dtype=np.int64)
     lag = np.empty(n + 1, dtype=np.int64)
@@ -118,8 +118,15 @@ def armax_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
         row[na + j], lag[na + j], sign[na + j] = 1, delay + j, -1.0
     for i in range(nc):
         row[na + nb + 1 + i], lag[na + nb + 1 + i], sign[na + nb + 1 + i] = 2, i + 1, -1.0
-    row[n], lag[n], sign[n] = 3, 0, 1.0
+    row[n], lag[n], sign[n] = residual_row, 0, 1.0
     return row, lag, sign
+
+
+@njit(cache=True, nogil=True)
+def armax_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
+    """(row, lag, sign) of each column of [J | ε] in :func:`armax_signals`' rows:
+    ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C, then ε(k)."""
+    return _layout(na, nb, nc, delay, 3)
 
 
 @njit(cache=True, nogil=True)
@@ -220,16 +227,7 @@ def oe_signals(theta: np.ndarray, us: np.ndarray, yhat: np.ndarray, eps: np.ndar
 def oe_layout(nf: int, nb: int, delay: int) -> tuple:
     """(row, lag, sign) of each column of [J | ε] in :func:`oe_signals`' rows:
     ∂ε/∂f_i = ŷ(k−i)/F, ∂ε/∂b_j = −u(k−d−j)/F, then ε(k) = y(k) − ŷ(k)."""
-    n = nf + nb + 1
-    row = np.empty(n + 1, dtype=np.int64)
-    lag = np.empty(n + 1, dtype=np.int64)
-    sign = np.empty(n + 1)
-    for i in range(nf):
-        row[i], lag[i], sign[i] = 0, i + 1, 1.0
-    for j in range(nb + 1):
-        row[nf + j], lag[nf + j], sign[nf + j] = 1, delay + j, -1.0
-    row[n], lag[n], sign[n] = 2, 0, 1.0
-    return row, lag, sign
+    return _layout(nf, nb, 0, delay, 2)
 
 
 @njit(cache=True, nogil=True)
