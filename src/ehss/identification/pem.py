@@ -26,7 +26,9 @@ The prediction errors and the Jacobians are compiled
 (:mod:`ehss.identification._pem_kernels`, GIL released): since filtering commutes with a
 delay, each Jacobian filters y, u and ε (ARMAX) or ŷ and u (OE) once and takes its
 columns as delayed copies; the errors of the last trial point are reused for its
-Jacobian.
+Jacobian. Levenberg–Marquardt is handed the same least-squares problem reduced to
+n + 1 rows (R and Qᵀε of J's QR, formed from JᵀJ and Jᵀε where J is well enough
+conditioned): the same steps and tests at a fraction of the cost (``_Predictor``).
 
 An OE model is returned as an :class:`~ehss.identification.ArmaxModel` with a = c = F:
 A y = B u + A e is exactly y = B/F u + e, so one model type serves both.
