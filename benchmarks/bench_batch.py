@@ -25,7 +25,9 @@ import platform
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +40,7 @@ from ehss.validation import nrmse_fit as fit_percent  # noqa: E402
 from ehss.validation import simulation_fit  # noqa: E402
 
 
-def free_run_fit(model, u, y):
+def free_run_fit(model: Any, u: np.ndarray, y: np.ndarray) -> float:
     """Free-run fit from the least-squares initial state (MATLAB ``compare``'s default)."""
     return simulation_fit(model, u, y, initial="estimate")
 
@@ -49,7 +51,7 @@ RECORDS = {
 }
 
 
-def halves(name: str):
+def halves(name: str) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray], float]:
     table = read_columns(ROOT / "tests" / "data" / name, ["u", "y"], time_column="t")
     dt = 1.0 / sample_rate(table, None)
     u, y = table["u"], table["y"]
@@ -60,7 +62,7 @@ def halves(name: str):
 
 
 
-def timed(fn, repeat: int):
+def timed(fn: Callable[..., Any], repeat: int) -> tuple[Any, float]:
     fn()  # warm-up
     best, out = np.inf, None
     for _ in range(repeat):
@@ -70,19 +72,19 @@ def timed(fn, repeat: int):
     return out, best
 
 
-def tf_model(G, dt: float) -> ArmaxModel:
+def tf_model(G: Any, dt: float) -> ArmaxModel:
     """A python-control discrete SISO transfer function as an ArmaxModel (B/A part)."""
     num = np.atleast_1d(np.squeeze(G.num[0][0])).astype(float)
     den = np.atleast_1d(np.squeeze(G.den[0][0])).astype(float)
     return ArmaxModel.from_paper_form(num, den, dt=dt)
 
 
-def run_record(label: str, spec, repeat: int) -> list[tuple]:
+def run_record(label: str, spec: Any, repeat: int) -> list[tuple]:
     name, na_g, nb_g, nc_g = spec
     (u, y), (uv, yv), dt = halves(name)
     rows = []
 
-    def workflow():
+    def workflow() -> Any:
         sel = select_order(u, y, na=list(na_g), nb=list(nb_g), nc=list(nc_g), dt=dt,
                            score=lambda m: free_run_fit(m, uv, yv))
         b = sel.best
@@ -99,9 +101,9 @@ def run_record(label: str, spec, repeat: int) -> list[tuple]:
                                                     delay=d, dt=dt), repeat)
         rows.append((label, f"ehss {method}", orders, free_run_fit(m, uv, yv), t))
 
-    from sippy_unipi import system_identification
+    from sippy_unipi import system_identification  # type: ignore[import-not-found]
 
-    def sippy(method, **kw):
+    def sippy(method: str, **kw: Any) -> Any:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return system_identification(y, u, method, tsample=dt, **kw)
@@ -119,11 +121,11 @@ def run_record(label: str, spec, repeat: int) -> list[tuple]:
             rows.append((label, f"SIPPY {tag}", orders, float("nan"), float("nan")))
             print(f"SIPPY {tag} failed on {label}: {exc}", file=sys.stderr)
 
-    from sysidentpy.basis_function import Polynomial
-    from sysidentpy.model_structure_selection import FROLS
-    from sysidentpy.parameter_estimation import LeastSquares
+    from sysidentpy.basis_function import Polynomial  # type: ignore[import-not-found]
+    from sysidentpy.model_structure_selection import FROLS  # type: ignore[import-not-found]
+    from sysidentpy.parameter_estimation import LeastSquares  # type: ignore[import-not-found]
 
-    def frols():
+    def frols() -> Any:
         model = FROLS(ylag=na, xlag=list(range(d, d + nb + 1)), order_selection=True,
                       info_criteria="aic", estimator=LeastSquares(),
                       basis_function=Polynomial(degree=1))
@@ -149,7 +151,7 @@ def main() -> None:
     from importlib.metadata import version
 
     import sippy_unipi  # noqa: F401 - fail early if the bench extra is missing
-    import sysidentpy
+    import sysidentpy  # type: ignore[import-not-found]
 
     print(f"# {platform.python_version()}, numpy {np.__version__}, "
           f"sippy-unipi {version('sippy-unipi')}, sysidentpy {sysidentpy.__version__}, "

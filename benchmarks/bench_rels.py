@@ -28,7 +28,9 @@ import sys
 import tarfile
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numba
 import numpy as np
@@ -51,7 +53,8 @@ VARIANTS = (("rels", 1.0), ("rels", 0.99), ("rml", 1.0))
 COMPILE_ROUNDS = 3
 
 
-def record_of(n_samples: int, n_channels: int = 1, seed: int = 2017):
+def record_of(n_samples: int, n_channels: int = 1,
+              seed: int = 2017) -> tuple[np.ndarray, np.ndarray]:
     """u, y of a 4th-order ARMAX loop, RMS-normalised (as rels() runs them); (N,) or
     (N, C) with independent channels."""
     rng = np.random.default_rng(seed)
@@ -69,7 +72,7 @@ def git_show(commit: str, path: str) -> str:
                           capture_output=True, text=True, check=True).stdout
 
 
-def load_old(commit: str, tmp: Path):
+def load_old(commit: str, tmp: Path) -> Any:
     """The RELS kernel module of ``commit``, imported as a package of its own."""
     package = f"rels_{commit}"
     folder = tmp / package
@@ -84,15 +87,19 @@ def load_old(commit: str, tmp: Path):
     return importlib.import_module(f"{package}._kernels")
 
 
-def p0(na, nb, nc, alpha=1e6):
+#: a kernel run over (u, y): seconds
+Run = Callable[[np.ndarray, np.ndarray], float]
+
+
+def p0(na: int, nb: int, nc: int, alpha: float = 1e6) -> Any:
     return np.diag(np.full(na + nb + 1 + nc, alpha))
 
 
-def runner_this(entry, na, nb, nc, lam, method):
+def runner_this(entry: Any, na: int, nb: int, nc: int, lam: float, method: str) -> Run:
     """A run of this tree's loop ``entry`` over (u, y) from θ̂ = 0, P(0) = 1e6 I."""
     n = na + nb + 1 + nc
 
-    def run(u, y):
+    def run(u: np.ndarray, y: np.ndarray) -> float:
         s = RelsSettings(na=na, nb=nb, nc=nc, forgetting=lam, method=method).kernel()
         block, _ = new_state(s, np.zeros(n))
         rec = K.record(u, y)
@@ -103,10 +110,10 @@ def runner_this(entry, na, nb, nc, lam, method):
     return run
 
 
-def runner_3b7(mod, na, nb, nc, lam, method):
+def runner_3b7(mod: Any, na: int, nb: int, nc: int, lam: float, method: str) -> Run:
     n = na + nb + 1 + nc
 
-    def run(u, y):
+    def run(u: np.ndarray, y: np.ndarray) -> float:
         s = mod.RelsSettings(na, nb, nc, 1, lam, 1e6, 1e6, n * 1e6, 0.99,
                              method == "rml" and nc > 0, True)
         block = mod.new_block(s)
@@ -119,10 +126,10 @@ def runner_3b7(mod, na, nb, nc, lam, method):
     return run
 
 
-def runner_b935(mod, na, nb, nc, lam, method):
+def runner_b935(mod: Any, na: int, nb: int, nc: int, lam: float, method: str) -> Run:
     n = na + nb + 1 + nc
 
-    def run(u, y):
+    def run(u: np.ndarray, y: np.ndarray) -> float:
         st = mod.new_state_buffer(na, nb, nc, 1)
         for index, value in ((mod.H_NA, na), (mod.H_NB, nb), (mod.H_NC, nc),
                              (mod.H_DELAY, 1), (mod.H_LAM, lam), (mod.H_ALPHA, 1e6),
@@ -140,7 +147,7 @@ def runner_b935(mod, na, nb, nc, lam, method):
     return run
 
 
-def best_rate(run, u, y, repeats: int) -> float:
+def best_rate(run: Run, u: np.ndarray, y: np.ndarray, repeats: int) -> float:
     run(u[:50], y[:50])  # compile or load from the cache
     return u.size / min(run(u, y) for _ in range(repeats))
 
@@ -189,7 +196,7 @@ def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
     s = RelsSettings(na=na, nb=nb, nc=nc).kernel()  # P(0) = 1e6 I, tr P <= n·1e6
     bank = B.bank_kernel(na, nb, nc, 1)
 
-    def run_bank(uu, yy):
+    def run_bank(uu: np.ndarray, yy: np.ndarray) -> float:
         blocks = B.new_blocks(s, n_ch)
         for c in range(n_ch):
             start_state(blocks[c], s, np.zeros(n))
@@ -208,8 +215,9 @@ def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
     columns = {c: (np.ascontiguousarray(u[:, c]), np.ascontiguousarray(y[:, c]))
                for c in range(n_ch)}
 
-    def eight_runs(run):
-        def total(uu, yy):  # uu, yy unused: the channels' own columns
+    def eight_runs(run: Run) -> Run:
+        def total(uu: np.ndarray, yy: np.ndarray) -> float:  # uu, yy unused: the
+            # channels' own columns
             return sum(run(*columns[c]) for c in range(n_ch))
         return total
 
@@ -307,7 +315,7 @@ def extract(commit: str, into: Path) -> Path:
 
 
 def compile_times(tmp: Path) -> None:
-    def python(code, src, cache):
+    def python(code: str, src: Path, cache: Path) -> Any:
         env = {**os.environ, "PYTHONPATH": str(src), "NUMBA_CACHE_DIR": str(cache)}
         out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                              text=True, check=True)

@@ -19,9 +19,9 @@ once for all of them.
 Why not one channel per SIMD lane (P[i, j, c] with the channel innermost in the
 state): numba runs LLVM without its SLP vectoriser, and LLVM fully unrolls a loop of
 a few (compile-time constant) iterations, such as one over 8 channels, into scalar
-code before its loop vectoriser could see it. Measured on the P pass alone at n = 12,
-8 channels: 102 ns a channel with the channel innermost against 32 ns for the
-single-channel row pass (BENCHMARKS.md); plain loops cannot express lanes in numba.
+code before its loop vectoriser could see it; the lanes layout measured slower than
+the single-channel row pass (BENCHMARKS.md, "Why the bank does not put channels in
+SIMD lanes"): plain loops cannot express lanes in numba.
 
 The kernel is compiled per orders (the orders as constants, like
 :func:`._kernels.specialised`) and cached on disk.
@@ -29,8 +29,10 @@ The kernel is compiled per orders (the orders as constants, like
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
-from numba import njit, types
+from numba import types
 
 from ehss.identification._kernels import (
     LINE,
@@ -45,12 +47,13 @@ from ehss.identification._kernels import (
     aligned_copy,
     block_size,
     new_block,
+    njit,
 )
 
 __all__: list[str] = []  # private module: the public API is in bank.py
 
 
-def new_blocks(settings, n_channels: int) -> np.ndarray:
+def new_blocks(settings: RelsSettings, n_channels: int) -> np.ndarray:
     """A zeroed (n_channels, stride) array of blocks holding ``settings``, each row
     starting on a 64-byte line (stride: the block size rounded up to a line)."""
     s = settings
@@ -67,7 +70,7 @@ Y_SCALE = RelsSettings._fields.index("y_scale")
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _all_finite(blocks, rec, k):
+def _all_finite(blocks: np.ndarray, rec: np.ndarray, k: int) -> bool:
     """True if every channel's u(k)/u_scale and y(k)/y_scale is finite."""
     for c in range(blocks.shape[0]):
         u = rec[0, k, c] * (1.0 / blocks[c, U_SCALE])
@@ -78,7 +81,8 @@ def _all_finite(blocks, rec, k):
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _run_bank(blocks, rec, settle, na, nb, nc, delay):
+def _run_bank(blocks: np.ndarray, rec: np.ndarray, settle: bool, na: int, nb: int, nc: int,
+              delay: int) -> int:
     """Run every channel's estimator over a (4, N, C) record, sample by sample.
 
     Parameters
@@ -125,7 +129,7 @@ def _run_bank(blocks, rec, settle, na, nb, nc, delay):
 BANK_SIGNATURE = (types.float64[:, ::1], types.float64[:, :, ::1], types.boolean)
 
 
-def bank_kernel(na: int, nb: int, nc: int, delay: int):
+def bank_kernel(na: int, nb: int, nc: int, delay: int) -> Any:
     """The compiled bank loop for these orders (an entry point taking
     :data:`BANK_SIGNATURE`'s arguments): compiled on first use, then loaded from
     numba's cache on disk."""
@@ -136,13 +140,13 @@ def bank_kernel(na: int, nb: int, nc: int, delay: int):
     return entry
 
 
-_BANKS: dict = {}
+_BANKS: dict[tuple[int, int, int, int], Any] = {}
 
 
-def _bank_dispatcher(na_: int, nb_: int, nc_: int, delay_: int):
+def _bank_dispatcher(na_: int, nb_: int, nc_: int, delay_: int) -> Any:
     """A dispatcher of :func:`_run_bank` with the orders fixed."""
 
-    def rels_bank_run(blocks, rec, settle):
+    def rels_bank_run(blocks: np.ndarray, rec: np.ndarray, settle: bool) -> int:
         return _run_bank(blocks, rec, settle, na_, nb_, nc_, delay_)
 
     return njit(cache=True, error_model="numpy", _nrt=False)(rels_bank_run)

@@ -94,16 +94,17 @@ The loop is written once, as the body of a closure (:func:`_entry`) over the ord
 :func:`rels_run`, the generic entry point, reads them from the block;
 :func:`specialised` compiles, once per orders and into numba's disk cache, an entry
 point that has them as constants (numba's cache keys a closure by the values it
-holds), so that LLVM sees every loop bound and offset as a number. (The loop as a
-function that each entry point inlined through numba cost ~0.8 s more cold compile.)
+holds), so that LLVM sees every loop bound and offset as a number. (The loop is the
+body of the entry point, not a function each entry point inlines: numba would type and
+compile the inlined copy again, at a cost in cold compile; BENCHMARKS.md.)
 Loop bounds are therefore taken from the orders, never from array shapes (a slice's
 length is clamped at run time, which would hide the constant), and P and the RML rows
 are flat arrays (numba's ``reshape`` goes through a C helper that hides the row
 length). Both run the same operations in the same order: the results are equal bit
 for bit. The RML rows are read and shifted through slices of ψ_f, not as
 ψ_f[j·n + i]: with a run-time n numba cannot prove such an index non-negative, keeps
-its negative-index wrap-around in the loop, and LLVM does not vectorise it (the
-generic RML loop spent ~100 ns a sample there). :func:`kernel_for` picks one: the
+its negative-index wrap-around in the loop, and LLVM does not vectorise it (what
+that cost: BENCHMARKS.md). :func:`kernel_for` picks one: the
 specialised loop once it has been compiled (in this process, or found in the disk
 cache), else the generic one; compiling a specialised loop is asked for by
 :func:`ehss.identification.rels.specialise_rels`. Each entry point is one
@@ -114,10 +115,15 @@ BENCHMARKS.md has the measurements.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit, types
+from numba import njit as _numba_njit
+from numba import types
+
+#: numba's njit (its typing stubs do not list the private ``_nrt`` option used here)
+njit: Callable[..., Any] = _numba_njit
 
 __all__: list[str] = []  # private module: the public API is in rels.py
 
@@ -221,14 +227,15 @@ def state_views(block: np.ndarray) -> RelsState:
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def settings_of(block):
+def settings_of(block: np.ndarray) -> RelsSettings:
     """The :class:`RelsSettings` stored at the start of ``block``."""
     return _settings_with(block, int(block[0]), int(block[1]), int(block[2]),
                           int(block[3]))
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _settings_with(block, na, nb, nc, delay):
+def _settings_with(block: np.ndarray, na: int, nb: int, nc: int,
+                   delay: int) -> RelsSettings:
     """The settings of ``block`` with these orders: those of the block (generic kernel)
     or compile-time constants equal to them (a kernel specialised to its orders)."""
     return RelsSettings(na, nb, nc, delay,
@@ -239,12 +246,12 @@ def _settings_with(block, na, nb, nc, delay):
 #: every state array starts on a 64-byte line (8 float64) of a line-aligned block
 #: (:func:`new_block`): a vector store to g that straddles two lines is not forwarded
 #: to the next row's load of g in the P pass, which then waits for the store to
-#: complete (the pass at n = 17 took 1.6× as long with g off the line; BENCHMARKS.md)
+#: complete (BENCHMARKS.md has the pass timed on and off the line)
 LINE = 8
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _starts(n, nu, nc):
+def _starts(n: int, nu: int, nc: int) -> tuple[int, ...]:
     """Where each state array starts in the block, in :class:`RelsState` order, then
     where the block ends: the one definition of the layout (``nu`` = delay + nb + 1).
     Each array starts on the first line at or after the end of the one before
@@ -262,7 +269,7 @@ def _starts(n, nu, nc):
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def views(block):
+def views(block: np.ndarray) -> tuple[np.ndarray, ...]:
     """The state arrays of ``block``, in :class:`RelsState` order (see :func:`_starts`),
     P and ψ_f flat (row-major: P[i n + j] is P_ij, psi_f[j n + i] is ψ_f(k−j)_i; the
     Python views, :func:`state_views`, have their two axes)."""
@@ -270,7 +277,8 @@ def views(block):
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _views_with(block, na, nb, nc, delay):
+def _views_with(block: np.ndarray, na: int, nb: int, nc: int,
+                delay: int) -> tuple[np.ndarray, ...]:
     """:func:`views` for these orders (run-time values or compile-time constants: with
     constants every shape below is one, and so is every loop bound taken from it).
 
@@ -292,7 +300,7 @@ def _views_with(block, na, nb, nc, delay):
 
 # ---------------------------------------------------------------- small helpers
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _dot(p, q, n):
+def _dot(p: np.ndarray, q: np.ndarray, n: int) -> float:
     """pᵀq, in four partial sums.
 
     A float sum is one chain of dependent additions that numba may not reorder
@@ -314,7 +322,8 @@ def _dot(p, q, n):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _push_input(u_line, psi, u, na, nb, delay):
+def _push_input(u_line: np.ndarray, psi: np.ndarray, u: float, na: int, nb: int,
+                delay: int) -> None:
     """u_line[j] = u(k−j); ψ̂'s u-part becomes u(k−d)..u(k−d−nb)."""
     for j in range(delay + nb, 0, -1):
         u_line[j] = u_line[j - 1]
@@ -324,7 +333,8 @@ def _push_input(u_line, psi, u, na, nb, delay):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _filter_regressor(psi_f, psi, theta, o, n, nc):
+def _filter_regressor(psi_f: np.ndarray, psi: np.ndarray, theta: np.ndarray, o: int,
+                      n: int, nc: int) -> None:
     """RML: ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc), into row 0.
 
     Ĉ = Ĉ(k−1), kept inside c_radius, so the filter 1/Ĉ is stable. Runs on every
@@ -341,7 +351,8 @@ def _filter_regressor(psi_f, psi, theta, o, n, nc):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _shift_regressors(psi, psi_f, n, na, nc, rml, y, xi):
+def _shift_regressors(psi: np.ndarray, psi_f: np.ndarray, n: int, na: int, nc: int,
+                      rml: bool, y: float, xi: float) -> None:
     """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: _push_input);
     RML: ψ_f(k) becomes ψ_f((k+1)−1) (rows move down by one)."""
     for i in range(na - 1, 0, -1):
@@ -361,7 +372,7 @@ def _shift_regressors(psi, psi_f, n, na, nc, rml, y, xi):
 
 # ---------------------------------------------------------------- the C check
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _c_within(theta, o, nc, radius, cw):
+def _c_within(theta: np.ndarray, o: int, nc: int, radius: float, cw: np.ndarray) -> bool:
     """True if all roots of z^nc + c1 z^(nc−1) + … + c_nc lie strictly inside ``radius``.
 
     The coefficients are theta[o:o+nc]. Cheap sufficient test first (Rouché:
@@ -400,7 +411,7 @@ def _c_within(theta, o, nc, radius, cw):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _poly_roots(c, re, im):
+def _poly_roots(c: np.ndarray, re: np.ndarray, im: np.ndarray) -> None:
     """Roots of z^nc + c1 z^(nc−1) + … + c_nc, as re + j im, by the Weierstrass
     (Durand–Kerner) iteration z_i ← z_i − C(z_i) / Π_{j≠i} (z_i − z_j).
 
@@ -438,7 +449,7 @@ def _poly_roots(c, re, im):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _project_c(c, radius, work):
+def _project_c(c: np.ndarray, radius: float, work: np.ndarray) -> None:
     """Move the roots of C(z) = z^nc + c1 z^(nc−1) + … inside ``radius``, in place.
 
     Roots outside the unit circle are reflected (z → 1/z̄, which keeps |C(e^{jω})| up to
@@ -488,7 +499,7 @@ def _project_c(c, radius, work):
 
 # ---------------------------------------------------------------- eqs (21)–(22)
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _gain(P, r, g, n):
+def _gain(P: np.ndarray, r: np.ndarray, g: np.ndarray, n: int) -> None:
     """g = P r for symmetric P, as g += P[j, :] r_j (row axpys, which vectorise)."""
     for i in range(n):
         g[i] = 0.0
@@ -499,7 +510,8 @@ def _gain(P, r, g, n):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
-def _update_P_and_gain(P, w, inv_lam, r, g, n):
+def _update_P_and_gain(P: np.ndarray, w: np.ndarray, inv_lam: float, r: np.ndarray,
+                       g: np.ndarray, n: int) -> tuple[float, float]:
     """(22) P(k−1) = P(k−2)/λ − w wᵀ and, in the same pass, g = P(k−1) r(k).
 
     Returns (tr P, min P_ii) for the guards of :func:`_bring_P_up_to_date`.
@@ -553,7 +565,8 @@ def _update_P_and_gain(P, w, inv_lam, r, g, n):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _restart(s, counters, P, psi_f, psi, theta, r, g):
+def _restart(s: RelsSettings, counters: np.ndarray, P: np.ndarray, psi_f: np.ndarray,
+             psi: np.ndarray, theta: np.ndarray, r: np.ndarray, g: np.ndarray) -> None:
     """P = P(0) = diag(α (a- and b-part), α_c (c-part)), counted as a reset, and
     g = P(0) r. RML: the filter 1/Ĉ restarts from rest (ψ_f history zeroed), so
     r = ψ_f(k) = ψ̂(k). Rare (a guard failed), hence not inlined."""
@@ -572,7 +585,10 @@ def _restart(s, counters, P, psi_f, psi, theta, r, g):
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed):
+def _bring_P_up_to_date(s: RelsSettings, counters: np.ndarray, P: np.ndarray,
+                        w: np.ndarray, r: np.ndarray, g: np.ndarray, psi_f: np.ndarray,
+                        psi: np.ndarray, theta: np.ndarray, pending: bool,
+                        fixed: bool) -> None:
     """Apply the pending (22), if any, with its guards, and form g = P(k−1) r(k).
 
     Guards after (22): with λ < 1, the diagonal floor δ = 8 n eps tr P: the rank-1
@@ -613,7 +629,9 @@ def _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fix
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _denominator(s, counters, P, r, g, psi_f, psi, theta):
+def _denominator(s: RelsSettings, counters: np.ndarray, P: np.ndarray, r: np.ndarray,
+                 g: np.ndarray, psi_f: np.ndarray, psi: np.ndarray,
+                 theta: np.ndarray) -> float:
     """den = λ + rᵀ P(k−1) r of eq (21), with the definiteness guard; g = P(k−1) r.
 
     rᵀPr ≥ 0 whenever P is positive semi-definite; rᵀPr < 0 proves that P lost
@@ -631,7 +649,9 @@ def _denominator(s, counters, P, r, g, psi_f, psi, theta):
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _update_theta(s, counters, theta, g, w, psi, c_work, y, e, den):
+def _update_theta(s: RelsSettings, counters: np.ndarray, theta: np.ndarray, g: np.ndarray,
+                  w: np.ndarray, psi: np.ndarray, c_work: np.ndarray, y: float, e: float,
+                  den: float) -> tuple[bool, float]:
     """(20)–(21) and (19), and the w of the sample's pending (22); returns (moved,
     ξ̂(k)), moved False if the step K e would overflow (then nothing changed).
 
@@ -669,7 +689,9 @@ def _update_theta(s, counters, theta, g, w, psi, c_work, y, e, den):
 
 # ---------------------------------------------------------------- one sample
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _sample(s, block, counters, st, pending, u, y, fixed):
+def _sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
+            st: tuple[np.ndarray, ...], pending: bool, u: float, y: float,
+            fixed: bool) -> tuple[float, float, bool]:
     """One RELS or RML sample with every safeguard; returns (e(k), ξ̂(k), pending).
 
     ``u``, ``y`` are scaled and finite (checked by the callers). e(k) = y(k) −
@@ -707,7 +729,7 @@ def _sample(s, block, counters, st, pending, u, y, fixed):
 
 
 # ---------------------------------------------------------------- the entry points
-def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool):
+def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
     """A dispatcher of the loop: the generic kernel (``fixed`` False: the orders are
     read from the block at run time, ``na_`` … ``delay_`` unused) or the one
     specialised to the orders ``na_`` … ``delay_`` (``fixed`` True; :func:`specialised`).
@@ -719,7 +741,8 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool):
     each entry point; that extra level of inlining cost ~0.8 s of cold compile.)
     """
 
-    def rels_run(block, rec, hist, hist_every, settle):
+    def rels_run(block: np.ndarray, rec: np.ndarray, hist: np.ndarray, hist_every: int,
+                 settle: bool) -> int:
         """Run the estimator in ``block`` over a record, or one streaming sample.
 
         Parameters
@@ -789,7 +812,7 @@ rels_run = _entry(0, 0, 0, 0, False)
 
 
 @njit(cache=True, error_model="numpy", inline="always", _nrt=False)
-def _settle(block, na, nb, nc, delay, fixed):
+def _settle(block: np.ndarray, na: int, nb: int, nc: int, delay: int, fixed: bool) -> None:
     """Apply the pending (22) of the estimator in ``block``, if any, so that it holds
     P(k) (what :func:`rels_run` does with ``settle``, for a bank's channel)."""
     if block[PENDING] == 0.0:
@@ -815,7 +838,8 @@ def record(u: np.ndarray, y: np.ndarray) -> np.ndarray:
     return rec
 
 
-def kernel_for(na: int, nb: int, nc: int, delay: int, *, compile_now: bool = False):
+def kernel_for(na: int, nb: int, nc: int, delay: int, *,
+               compile_now: bool = False) -> Any:
     """The compiled loop to run an estimator with these orders (an entry point taking
     :data:`RELS_RUN_SIGNATURE`'s arguments).
 
@@ -838,7 +862,7 @@ def kernel_for(na: int, nb: int, nc: int, delay: int, *, compile_now: bool = Fal
     return entry
 
 
-def _cached_on_disk(dispatcher, signature) -> bool:
+def _cached_on_disk(dispatcher: Any, signature: tuple[Any, ...]) -> bool:
     """True if numba's cache holds ``dispatcher`` compiled for ``signature`` (loading
     it is a matter of milliseconds; numba's loader, used where it is)."""
     try:
@@ -852,7 +876,7 @@ _ENTRIES: dict = {}
 _NOT_ON_DISK: set = set()
 
 
-def specialised(na: int, nb: int, nc: int, delay: int):
+def specialised(na: int, nb: int, nc: int, delay: int) -> Any:
     """:func:`rels_run` for these orders, as compile-time constants (a dispatcher).
 
     The loop is :func:`rels_run`'s again (the same source, :func:`_entry`), with the
@@ -874,6 +898,6 @@ def specialised(na: int, nb: int, nc: int, delay: int):
 _SPECIALISED: dict = {}
 
 
-def _specialise(na: int, nb: int, nc: int, delay: int):
+def _specialise(na: int, nb: int, nc: int, delay: int) -> Any:
     """A new dispatcher of the loop with the orders fixed (see :func:`specialised`)."""
     return _entry(na, nb, nc, delay, True)

@@ -54,16 +54,20 @@ def roots_inside(p: np.ndarray, radius: float) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def _inverse(x: np.ndarray, den: np.ndarray) -> np.ndarray:
-    """x filtered by 1/D, D = 1 + den[0] q^-1 + … (at rest before x[0])."""
+def _inverse(x: np.ndarray, den: np.ndarray, out: np.ndarray) -> None:
+    """out = x filtered by 1/D, D = 1 + den[0] q^-1 + … (at rest before x[0])."""
     n = den.size
-    out = np.empty(x.size)
-    for k in range(x.size):
+    for k in range(min(n, x.size)):
         s = x[k]
-        for i in range(1, min(n, k) + 1):
+        for i in range(1, k + 1):
             s -= den[i - 1] * out[k - i]
         out[k] = s
-    return out
+    for k in range(n, x.size):
+        s = x[k]
+        past = out[k - n : k]  # past[n − i] = out[k − i]
+        for i in range(1, n + 1):
+            s -= den[i - 1] * past[n - i]
+        out[k] = s
 
 
 @njit(cache=True, nogil=True)
@@ -87,25 +91,107 @@ def armax_errors(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, na: int, nb:
 
 
 @njit(cache=True, nogil=True)
+def armax_signals(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.ndarray,
+                  na: int, nb: int, nc: int) -> np.ndarray:
+    """Rows y/C, u/C, ε/C and ε: what the ARMAX Jacobian's columns are delayed copies of,
+    and the residual."""
+    c = theta[na + nb + 1 : na + nb + 1 + nc]
+    out = np.empty((4, ys.size))
+    _inverse(ys, c, out[0])
+    _inverse(us, c, out[1])
+    _inverse(eps, c, out[2])
+    out[3] = eps
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _layout(na: int, nb: int, nc: int, delay: int, residual_row: int) -> tuple:
+    """(row, lag, sign) of the columns of [J | ε] for θ = [a, b, c]: the lags 1..na of
+    row 0, −(lags d..d+nb of row 1), −(lags 1..nc of row 2), then ``residual_row``."""
+    n = na + nb + 1 + nc
+    row = np.empty(n + 1, dtype=np.int64)
+    lag = np.empty(n + 1, dtype=np.int64)
+    sign = np.empty(n + 1)
+    for i in range(na):
+        row[i], lag[i], sign[i] = 0, i + 1, 1.0
+    for j in range(nb + 1):
+        row[na + j], lag[na + j], sign[na + j] = 1, delay + j, -1.0
+    for i in range(nc):
+        row[na + nb + 1 + i], lag[na + nb + 1 + i], sign[na + nb + 1 + i] = 2, i + 1, -1.0
+    row[n], lag[n], sign[n] = residual_row, 0, 1.0
+    return row, lag, sign
+
+
+@njit(cache=True, nogil=True)
+def armax_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
+    """(row, lag, sign) of each column of [J | ε] in :func:`armax_signals`' rows:
+    ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C, then ε(k)."""
+    return _layout(na, nb, nc, delay, 3)
+
+
+@njit(cache=True, nogil=True)
+def columns(signals: np.ndarray, row: np.ndarray, lag: np.ndarray, sign: np.ndarray,
+            k0: int) -> np.ndarray:
+    """A[k − k0, c] = sign[c] · signals[row[c], k − lag[c]] for k = k0 … N − 1."""
+    m = signals.shape[1] - k0
+    A = np.empty((m, row.size))
+    for c in range(row.size):
+        src = signals[row[c], k0 - lag[c] : k0 - lag[c] + m]
+        for r in range(m):
+            A[r, c] = sign[c] * src[r]
+    return A
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def _dot(x: np.ndarray, y: np.ndarray) -> float:
+    """Σ x_k y_k (reassociated: LLVM sums in vector lanes)."""
+    s = 0.0
+    for k in range(x.size):
+        s += x[k] * y[k]
+    return s
+
+
+@njit(cache=True, nogil=True)
+def gram(signals: np.ndarray, row: np.ndarray, lag: np.ndarray, sign: np.ndarray,
+         k0: int) -> np.ndarray:
+    """AᵀA of :func:`columns`' A without forming A.
+
+    An entry is a dot product of two delayed rows x, y of ``signals``; when the columns
+    before both (a − 1, b − 1) are the same rows one lag less, the entry is theirs with
+    the window moved by a sample: Σ_{k=k0}^{N−1} x(k−l−1) y(k−m−1) = Σ_{k=k0}^{N−1}
+    x(k−l) y(k−m) + x(k0−l−1) y(k0−m−1) − x(N−l−1) y(N−m−1). Only the entries on the
+    first column of a block of lags are summed in full.
+    """
+    n = row.size
+    m = signals.shape[1] - k0
+    G = np.empty((n, n))
+    for a in range(n):  # x(k0 − l) … x(N − l): one more than the window where l ≥ 1
+        xa = signals[row[a], k0 - lag[a] : k0 - lag[a] + m + 1]
+        for b in range(a, n):
+            xb = signals[row[b], k0 - lag[b] : k0 - lag[b] + m + 1]
+            if a > 0 and _next_lag(row, lag, a) and _next_lag(row, lag, b):
+                s = sign[a - 1] * sign[b - 1] * G[a - 1, b - 1]
+                G[a, b] = sign[a] * sign[b] * (s + xa[0] * xb[0] - xa[m] * xb[m])
+            else:
+                G[a, b] = sign[a] * sign[b] * _dot(xa[:m], xb[:m])
+            G[b, a] = G[a, b]
+    return G
+
+
+@njit(cache=True, nogil=True)
+def _next_lag(row: np.ndarray, lag: np.ndarray, c: int) -> bool:
+    """Column c is column c − 1's row one lag later."""
+    return c > 0 and row[c] == row[c - 1] and lag[c] == lag[c - 1] + 1
+
+
+@njit(cache=True, nogil=True)
 def armax_jacobian(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.ndarray,
                    na: int, nb: int, nc: int, delay: int, k0: int) -> np.ndarray:
-    """∂ε(k)/∂θ for k ≥ k0 (k0 ≥ max(na, nb + d, nc)), rows k − k0.
-
-    ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C.
-    """
-    nab = na + nb + 1
-    c = theta[nab:]
-    wy, wu, we = _inverse(ys, c), _inverse(us, c), _inverse(eps, c)
-    J = np.empty((ys.size - k0, nab + nc))
-    for r in range(ys.size - k0):
-        k = r + k0
-        for i in range(1, na + 1):
-            J[r, i - 1] = wy[k - i]
-        for j in range(nb + 1):
-            J[r, na + j] = -wu[k - delay - j]
-        for i in range(1, nc + 1):
-            J[r, nab + i - 1] = -we[k - i]
-    return J
+    """∂ε(k)/∂θ for k ≥ k0 (k0 ≥ max(na, nb + d, nc)), rows k − k0."""
+    row, lag, sign = armax_layout(na, nb, nc, delay)
+    n = row.size - 1
+    return columns(armax_signals(theta, us, ys, eps, na, nb, nc), row[:n], lag[:n],
+                   sign[:n], k0)
 
 
 @njit(cache=True, nogil=True)
@@ -126,16 +212,62 @@ def oe_simulate(theta: np.ndarray, us: np.ndarray, nf: int, nb: int,
 
 
 @njit(cache=True, nogil=True)
+def oe_signals(theta: np.ndarray, us: np.ndarray, yhat: np.ndarray, eps: np.ndarray,
+               nf: int) -> np.ndarray:
+    """Rows ŷ/F, u/F and ε = y − ŷ: what the OE Jacobian's columns are delayed copies
+    of, and the residual."""
+    out = np.empty((3, us.size))
+    _inverse(yhat, theta[:nf], out[0])
+    _inverse(us, theta[:nf], out[1])
+    out[2] = eps
+    return out
+
+
+@njit(cache=True, nogil=True)
+def oe_layout(nf: int, nb: int, delay: int) -> tuple:
+    """(row, lag, sign) of each column of [J | ε] in :func:`oe_signals`' rows:
+    ∂ε/∂f_i = ŷ(k−i)/F, ∂ε/∂b_j = −u(k−d−j)/F, then ε(k) = y(k) − ŷ(k)."""
+    return _layout(nf, nb, 0, delay, 2)
+
+
+@njit(cache=True, nogil=True)
 def oe_jacobian(theta: np.ndarray, us: np.ndarray, yhat: np.ndarray, nf: int, nb: int,
                 delay: int, k0: int) -> np.ndarray:
     """∂ε(k)/∂θ of ε = y − ŷ for k ≥ k0: ∂ε/∂f_i = ŷ(k−i)/F, ∂ε/∂b_j = −u(k−d−j)/F."""
-    f = theta[:nf]
-    wy, wu = _inverse(yhat, f), _inverse(us, f)
-    J = np.empty((us.size - k0, nf + nb + 1))
-    for r in range(us.size - k0):
-        k = r + k0
-        for i in range(1, nf + 1):
-            J[r, i - 1] = wy[k - i]
-        for j in range(nb + 1):
-            J[r, nf + j] = -wu[k - delay - j]
-    return J
+    row, lag, sign = oe_layout(nf, nb, delay)
+    n = row.size - 1
+    # the residual row (here a stand-in) is not among J's columns
+    return columns(oe_signals(theta, us, yhat, yhat, nf), row[:n], lag[:n], sign[:n], k0)
+
+
+@njit(cache=True, nogil=True)
+def reduce_gram(G: np.ndarray, max_cond: float) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares problem of [J ε] reduced to n + 1 rows, from G = [J ε]ᵀ[J ε].
+
+    Returns the residual [q; ρ] and Jacobian [R; 0] with RᵀR = JᵀJ (R upper triangular),
+    Rᵀq = Jᵀε and ρ² = εᵀε − qᵀq, so that ‖q + R p‖² + ρ² = ‖ε + J p‖² for every p; or
+    two empty arrays when J, its columns scaled to unit norm, has a condition number
+    above ``max_cond`` (R is then to come from a QR of [J ε]).
+    """
+    n = G.shape[0] - 1
+    empty = (np.empty(0), np.empty((0, 0)))
+    d = np.sqrt(np.diag(G)[:n])
+    if not np.all(d > 0.0):
+        return empty
+    Gs = G[:n, :n] / np.outer(d, d)
+    w = np.linalg.eigvalsh(Gs)  # κ(J_s)² = κ(J_sᵀ J_s)
+    if not w[0] > w[n - 1] / (max_cond * max_cond):
+        return empty
+    R = np.linalg.cholesky(Gs).T * d  # J = J_s D: R = R_s D
+    q = np.empty(n)
+    for i in range(n):  # Rᵀ q = Jᵀε, Rᵀ lower triangular
+        s = G[i, n]
+        for j in range(i):
+            s -= R[j, i] * q[j]
+        q[i] = s / R[i, i]
+    r = np.empty(n + 1)
+    r[:n] = q
+    r[n] = np.sqrt(max(G[n, n] - np.dot(q, q), 0.0))
+    Jr = np.zeros((n + 1, n))
+    Jr[:n] = R
+    return r, Jr

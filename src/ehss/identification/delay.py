@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import scipy.signal
+from threadpoolctl import threadpool_limits
 
 from ehss._checks import as_record, check_int
 from ehss.errors import DataError
@@ -55,13 +56,16 @@ def _taps(u: np.ndarray, y: np.ndarray, n_taps: int) -> tuple[np.ndarray, np.nda
     rows = np.arange(k0, min(y.size, k0 + _MAX_ROWS))
     phi = np.column_stack([u[rows - j] for j in range(n_taps)]
                           + [-y[rows - i] for i in range(1, _AR_TAIL + 1)])
-    theta, *_ = np.linalg.lstsq(phi, y[rows], rcond=None)
-    e = y[rows] - phi @ theta
-    noise = float(e @ e) / max(rows.size - phi.shape[1], 1)
-    # a floor at rounding level: a noise-free record's taps are exact, not significant
-    # wherever rounding leaves them a little off zero
-    noise = max(noise, 1e-20 * float(y @ y) / y.size)
-    se = np.sqrt(noise * np.diag(np.linalg.pinv(phi.T @ phi)))
+    # one BLAS thread: on a machine whose cores are busy, a multi-threaded LAPACK
+    # spends more time waiting for its threads than solving (BENCHMARKS.md, Order search)
+    with threadpool_limits(limits=1, user_api="blas"):
+        theta, *_ = np.linalg.lstsq(phi, y[rows], rcond=None)
+        e = y[rows] - phi @ theta
+        noise = float(e @ e) / max(rows.size - phi.shape[1], 1)
+        # a floor at rounding level: a noise-free record's taps are exact, not
+        # significant wherever rounding leaves them a little off zero
+        noise = max(noise, 1e-20 * float(y @ y) / y.size)
+        se = np.sqrt(noise * np.diag(np.linalg.pinv(phi.T @ phi)))
     return theta[:n_taps], se[:n_taps], theta[n_taps:]
 
 
