@@ -17,8 +17,9 @@ import json
 import os
 import secrets
 import stat
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 from ehss.errors import DataError, EhssError
 
@@ -30,6 +31,7 @@ __all__ = [
     "check_outputs",
     "check_sidecar",
     "check_writable",
+    "parse_document",
     "read_small_file",
     "sidecar_path",
 ]
@@ -220,6 +222,29 @@ def read_small_file(path: Path, where: str, *, max_bytes: int,
         raise error(f"{where} does not exist") from None
     except OSError as exc:
         raise error(f"cannot read {where}: {exc.strerror or exc}") from None
+
+
+def parse_document(raw: bytes, where: str, *, parse: Callable[[str], Any],
+                   syntax_error: type[ValueError], syntax: str, kind: str,
+                   encoding: str = "utf-8", advice: str = "",
+                   error: type[EhssError] = DataError) -> Any:
+    """The document ``raw`` (read by :func:`read_small_file`) decoded and parsed.
+
+    Every refusal is one ``error`` that starts with ``where``: not ``encoding`` text (the
+    message ends with ``advice``), not valid ``syntax`` (``parse`` raised
+    ``syntax_error``), or nested too deeply to be ``kind``.
+    """
+    try:
+        text = raw.decode(encoding)
+    except UnicodeDecodeError as exc:
+        raise error(f"{where} is not UTF-8 text (byte {exc.start}: "
+                    f"{raw[exc.start:exc.start + 1]!r}){advice}") from None
+    try:
+        return parse(text)
+    except syntax_error as exc:
+        raise error(f"{where} is not valid {syntax}: {exc}") from None
+    except RecursionError:
+        raise error(f"{where} is nested too deeply to be {kind}") from None
 
 
 def sidecar_path(table: str | Path) -> Path:

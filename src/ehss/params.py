@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from ehss._checks import check_bool, check_int, check_real
-from ehss._files import read_small_file
+from ehss._files import parse_document, read_small_file
 from ehss.errors import ParameterError
 
 __all__ = [
@@ -891,17 +891,9 @@ def load_params(path: str | Path) -> RigParams:
     path = Path(path)
     where = f"parameter file {str(path)!r}"
     raw = read_small_file(path, where, max_bytes=MAX_PARAMS_FILE_BYTES, error=ParameterError)
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ParameterError(f"{where} is not UTF-8 text (byte {exc.start}: "
-                             f"{raw[exc.start:exc.start + 1]!r}); save it as UTF-8") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"{where} is not valid TOML: {exc}") from None
-    except RecursionError:
-        raise ParameterError(f"{where} is nested too deeply to be a parameter file") from None
+    data = parse_document(raw, where, parse=tomllib.loads, syntax_error=tomllib.TOMLDecodeError,
+                          syntax="TOML", kind="a parameter file", advice="; save it as UTF-8",
+                          error=ParameterError)
     try:
         return params_from_dict(data)
     except ParameterError as exc:

@@ -70,6 +70,14 @@ def test_huge_b_coefficients_are_refused_or_reported_when_forced():
     assert_allclose(m.simulate(kept.drive), r, rtol=0, atol=1e-12)
 
 
+def test_compensate_refuses_the_keywords_it_does_not_take():
+    """compensate keeps no forced drive and no fade: those are compensation's."""
+    m, r = _model(b=(10.0, 5.0)), _reference()
+    for name, value in (("force", True), ("fade_s", 0.1), ("rate", FS)):
+        with pytest.raises(TypeError, match=rf"unexpected keyword arguments \['{name}'\]"):
+            compensate(m, r, fs=FS, **{name: value})
+
+
 def test_warnings_are_returned_by_the_library_and_emitted_by_compensate():
     m = ArmaxModel(a=[1.0, -1.5, 0.7], b=[0.1, 0.05], delay=2, dt=1 / FS, band_hz=(20.0, 100.0))
     r = _reference()  # most of its power at 5 and 13 Hz, below the band

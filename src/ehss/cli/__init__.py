@@ -80,6 +80,14 @@ def command_help(name: str) -> str:
     return next(text for command, _, text in _COMMANDS if command == name)
 
 
+def add_command(sub: argparse._SubParsersAction, name: str, *, description: str,
+                epilog: str | None = None) -> argparse.ArgumentParser:
+    """Add the parser of subcommand ``name`` with its one-line help (:func:`command_help`)."""
+    parser: argparse.ArgumentParser = sub.add_parser(
+        name, help=command_help(name), description=description, epilog=epilog)
+    return parser
+
+
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The ``ehss`` parser: with every subcommand registered in full, or, for the
     command line ``argv``, only the one it names (the others listed by name and help,

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._outputs import InputFile, OutputFolder
 
 __all__ = ["register", "run", "add_cluster_arguments", "check_cluster_arguments"]
@@ -65,9 +65,8 @@ def _named_records(records: list[str]) -> None:
 def register(sub: argparse._SubParsersAction) -> None:
     from ehss.identification import METHODS
 
-    p = sub.add_parser(
-        "batch",
-        help=command_help("batch"),
+    p = add_command(
+        sub, "batch",
         description="Identify every channel of every record (files by glob, the groups of "
         "an HDF5 file, ehss live recordings, Parquet files) the same way, with the "
         "identification workflow of `ehss identify`, on a Dask cluster. Writes one "

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ehss._checks import check_band
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._dataargs import add_rate_arguments
 from ehss.cli._options import add_options, build_options
 from ehss.cli._outputs import InputFile, OutputFolder, OutputTable
@@ -25,9 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     from ehss.compensation import DEFAULT_MAX_GAIN, DEFAULT_MIN_GAIN, UpdateOptions
     from ehss.params import PRESETS
 
-    p = sub.add_parser(
-        "compensate",
-        help=command_help("compensate"),
+    p = add_command(
+        sub, "compensate",
         description="Invert an identified closed-loop model inside the band it was validated "
         "over (exact stable inversion by default) and apply it to a reference file, or "
         "correct the drive of a previous run. Outside that band the drive is the reference "
@@ -117,9 +116,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_options(it, UpdateOptions)
     p.set_defaults(func=run)
 
-    d = sub.add_parser(
-        "compensate-demo",
-        help=command_help("compensate-demo"),
+    d = add_command(
+        sub, "compensate-demo",
         description="Identify a closed loop on a random test, invert it in its working band "
         "(stable inversion by default), iterate the drive file, and compare tracking "
         "without and with compensation (random and earthquake-like references). Writes "

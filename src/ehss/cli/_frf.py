@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ehss._checks import check_band
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._dataargs import add_record_arguments, load_record, write_outputs
 from ehss.cli._outputs import OutputFile, OutputTable
 from ehss.errors import ParameterError
@@ -15,9 +15,8 @@ __all__ = ["register", "run"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "frf",
-        help=command_help("frf"),
+    p = add_command(
+        sub, "frf",
         description="Estimate the frequency response from --input to --output and its "
         "coherence, and write columns freq_hz, magnitude_db, phase_deg, coherence. Welch "
         "averages of Hann-windowed segments (H1 = S_uy / S_uu) for random and multisine "

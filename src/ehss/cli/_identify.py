@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._dataargs import (
     add_record_arguments,
     load_record,
@@ -46,9 +46,8 @@ PLOT_SAMPLES = 2000
 def register(sub: argparse._SubParsersAction) -> None:
     from ehss.workflow import Acceptance, Estimation, Evaluation, Preparation
 
-    p = sub.add_parser(
-        "identify",
-        help=command_help("identify"),
+    p = add_command(
+        sub, "identify",
         description="Identify A y = q^-d B u + C e from a record: remove the operating point "
         "(or a drift), decimate an oversampled record, fit the model, and validate it on the "
         "held-out end or on a separate record (free-run fit from the least-squares initial "

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._batch import add_cluster_arguments, check_cluster_arguments
 from ehss.cli._outputs import InputFile, OutputFolder
 
@@ -15,9 +15,8 @@ __all__ = ["register", "run"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "montecarlo",
-        help=command_help("montecarlo"),
+    p = add_command(
+        sub, "montecarlo",
         description="Draw N samples of the rig's uncertain parameters (distributions in "
         "TOML; Sobol or Latin hypercube, seeded) and, per sample on the simulated rig, "
         "identify the loop, then track one test reference without compensation, with the "

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._dataargs import (
     add_record_arguments,
     int_list,
@@ -68,9 +68,8 @@ _PREPARATION_HELP = {
 def register(sub: argparse._SubParsersAction) -> None:
     from ehss.workflow import Estimation, Evaluation, OrderGrid, Preparation
 
-    p = sub.add_parser(
-        "order",
-        help=command_help("order"),
+    p = add_command(
+        sub, "order",
         description="Prepare the record as ehss identify does (held-out end or --validate "
         "FILE, detrend, decimation), fit every combination of the candidate orders with "
         "the estimator identify will use, validate each as identify does (free-run fit on "

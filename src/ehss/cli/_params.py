@@ -7,7 +7,7 @@ import argparse
 import dataclasses
 from typing import TYPE_CHECKING
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._outputs import InputFile, OutputFile
 from ehss.params import PRESETS, RigParams, describe_params, load_params, preset, save_params
 
@@ -22,9 +22,8 @@ REQUIRED_GM_DB = 6.0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "params",
-        help=command_help("params"),
+    p = add_command(
+        sub, "params",
         description="Print a parameter set with units, the derived quantities of the "
         "linear model (ωh, ζh, Kh, ω0, ζ0, ωr, ωm, ζm, K0) and the stability of the three "
         "sampled loops (closed-loop pole radius, gain and phase margins of the linearised "

@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._outputs import InputFile, OutputFolder
 from ehss.cli._simulate import whole_number
 
@@ -14,9 +14,8 @@ __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "reproduce",
-        help=command_help("reproduce"),
+    p = add_command(
+        sub, "reproduce",
         description="Step tests of the three loops, then identification of the position, "
         "acceleration and force closed loops with RELS, each validated against the "
         "Hann-window H1 estimate and on held-out data. Writes report.html, report.md, "

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._outputs import InputFile, OutputFile, OutputTable
 from ehss.cli._params import warn_if_unstable
 from ehss.errors import ParameterError
@@ -55,9 +55,8 @@ def seed_argument(text: str) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "simulate",
-        help=command_help("simulate"),
+    p = add_command(
+        sub, "simulate",
         description="Simulate one closed-loop test of the rig: the nonlinear actuator "
         "channel with its digital controller, driven by a generated test signal or by a "
         "reference column read from a file. Writes CSV + JSON (units, parameters, seed) "

@@ -5,16 +5,15 @@ from __future__ import annotations
 
 import argparse
 
-from ehss.cli import command_help
+from ehss.cli import add_command
 from ehss.cli._outputs import OutputFolder
 
 __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "target-code",
-        help=command_help("target-code"),
+    p = add_command(
+        sub, "target-code",
         description="Write ehss_compensator.h, ehss_compensator.c (the filter a real-time "
         "target runs and the decoder of the datagram that carries a compensator to it, "
         "portable C99) and README.md (how a Simulink Real-Time or dSPACE S-function or a "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict, Unpack
 
 import numpy as np
 
@@ -25,9 +25,9 @@ from ehss.compensation.rates import RATE_RTOL, rate_factor, to_model_rate, to_re
 from ehss.errors import EhssWarning, ParameterError
 from ehss.identification.model import ArmaxModel
 
-__all__ = ["compensate", "compensation", "Compensation", "apply_inverse", "OUTSIDE_BAND",
-           "OUTSIDE_SHARE_WARN", "as_reference", "outside_band_note", "warn_if_outside_band",
-           "model_offsets"]
+__all__ = ["compensate", "compensation", "CompensateKeywords", "Compensation", "apply_inverse",
+           "OUTSIDE_BAND", "OUTSIDE_SHARE_WARN", "as_reference", "outside_band_note",
+           "warn_if_outside_band", "model_offsets"]
 
 #: What a drive holds outside the inverse's band limit (:func:`apply_inverse`).
 OUTSIDE_BAND = ("reference", "zero")
@@ -288,23 +288,29 @@ def compensation(
                         decimation=rate_factor(rate, inverse.dt))
 
 
+class CompensateKeywords(TypedDict, total=False):
+    """The keywords :func:`compensate` passes on to :func:`compensation`: all of its
+    settings but ``fade_s`` and ``force``, with the same defaults."""
+
+    fs: float | None
+    method: str
+    band_hz: tuple[float, float] | None
+    preview: int | None
+    known: tuple[Any, Any] | None
+    offsets: Any
+    max_gain: float | None
+    min_gain: float | None
+    limits: DriveLimits | None
+    loop: str | None
+    params: Any
+    require_rest: bool
+    outside_band: str
+
+
 def compensate(
     model: ArmaxModel | InverseModel,
     reference: Any,
-    *,
-    fs: float | None = None,
-    method: str = "stable",
-    band_hz: tuple[float, float] | None = None,
-    preview: int | None = None,
-    known: tuple[Any, Any] | None = None,
-    max_gain: float | None = DEFAULT_MAX_GAIN,
-    min_gain: float | None = DEFAULT_MIN_GAIN,
-    limits: DriveLimits | None = None,
-    loop: str | None = None,
-    params: Any = None,
-    require_rest: bool = True,
-    outside_band: str = "reference",
-    offsets: Any = "model",
+    **settings: Unpack[CompensateKeywords],
 ) -> np.ndarray:
     """Drive that makes the identified closed loop follow ``reference``, checked.
 
@@ -314,22 +320,25 @@ def compensate(
 
     Parameters
     ----------
-    model, reference, fs, method, band_hz, preview, known, offsets
+    model, reference
         As for :func:`compensation`.
-    max_gain, min_gain, limits, loop, params, require_rest, outside_band
-        As for :func:`compensation`.
+    **settings
+        The keywords of :class:`CompensateKeywords` (fs, method, band_hz, preview, known,
+        offsets, max_gain, min_gain, limits, loop, params, require_rest, outside_band), as
+        for :func:`compensation`.
 
     Returns
     -------
     drive : ndarray, shape (n_samples,)
+        The drive of the :class:`Compensation`.
 
     Raises
     ------
-    DataError
-        Bad samples, or a sample rate that is not an integer multiple of the model's.
-    ParameterError
-        No band, an unusable model, a reference not at rest, or a drive that fails its
-        checks (the message gives the numbers).
+    DataError, ParameterError
+        As for :func:`compensation`; a drive that fails its checks is always refused.
+    TypeError
+        A keyword :func:`compensation` takes but this function does not (``fade_s``,
+        ``force``), or no keyword of either.
 
     Examples
     --------
@@ -340,10 +349,10 @@ def compensate(
     >>> bool(np.allclose(m.simulate(u), r, rtol=0, atol=1e-9))
     True
     """
-    result = compensation(model, reference, fs=fs, method=method, band_hz=band_hz,
-                          preview=preview, known=known, offsets=offsets, max_gain=max_gain,
-                          min_gain=min_gain, limits=limits, loop=loop, params=params,
-                          require_rest=require_rest, outside_band=outside_band)
+    unknown = sorted(settings.keys() - CompensateKeywords.__optional_keys__)
+    if unknown:
+        raise TypeError(f"compensate() got unexpected keyword arguments {unknown}")
+    result = compensation(model, reference, **settings)
     for text in result.warnings:
         warnings.warn(text, EhssWarning, stacklevel=2)
     return result.drive

@@ -23,6 +23,12 @@ from ehss.params import ForcePidParams, PositionPidParams, TvcParams
 
 _Settings = TypeVar("_Settings", PidSettings, TvcSettings)
 
+#: Settings of the three-variable controller applied as the parameters give them, under
+#: the same names: Kg of eq (10), the feedback (f) and feed-forward (r) gains of
+#: eqs (11)–(12) and the drive limit.
+_TVC_AS_GIVEN = ("kg", "kdf_v_per_m", "kvf_v_per_m_s", "kaf_v_per_m_s2", "kdr", "kvr_s",
+                 "kar_s2", "output_limit_v")
+
 __all__ = [
     "pid_coefficients",
     "generator_coefficients",
@@ -166,17 +172,10 @@ def tvc_coefficients(tvc: TvcParams, dt_s: float) -> TvcSettings:
         phi_vv=phi[1, 1],
         gamma_r=gam[0],
         gamma_v=gam[1],
-        kg=tvc.kg,
         omega_g_rad_s=wg,
         delta_g_rad2_s2=dg,
-        kdf_v_per_m=tvc.kdf_v_per_m,
-        kvf_v_per_m_s=tvc.kvf_v_per_m_s,
-        kaf_v_per_m_s2=tvc.kaf_v_per_m_s2,
-        kdr=tvc.kdr,
-        kvr_s=tvc.kvr_s,
-        kar_s2=tvc.kar_s2,
         vf_pole=pole,
         vf_gain_y_1_s=by,
         vf_gain_a_s=ba,
-        output_limit_v=tvc.output_limit_v,
+        **{name: getattr(tvc, name) for name in _TVC_AS_GIVEN},
     ))

@@ -21,20 +21,7 @@ True
 
 from __future__ import annotations
 
-from ehss.control._kernels import (
-    PidSettings,
-    PidState,
-    TvcSettings,
-    TvcState,
-    pid_step,
-    tvc_step,
-)
+from ehss.control import _kernels
+from ehss.control._kernels import *  # noqa: F403  (the public face offers every kernel)
 
-__all__ = [
-    "PidSettings",
-    "PidState",
-    "TvcSettings",
-    "TvcState",
-    "pid_step",
-    "tvc_step",
-]
+__all__ = _kernels.__all__

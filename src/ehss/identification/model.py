@@ -32,7 +32,7 @@ from ehss._checks import (
     is_real,
     show,
 )
-from ehss._files import atomic_path, read_small_file
+from ehss._files import atomic_path, parse_document, read_small_file
 from ehss.errors import DataError, EhssWarning, ParameterError
 
 __all__ = ["ArmaxModel", "RoundingSensitivity"]
@@ -550,17 +550,8 @@ class ArmaxModel:
         raw = read_small_file(path, where, max_bytes=MAX_MODEL_FILE_BYTES)
         if not raw.strip():
             raise DataError(f"{where} is empty")
-        try:
-            text = raw.decode("utf-8-sig")
-        except UnicodeDecodeError as exc:
-            raise DataError(f"{where} is not UTF-8 text (byte {exc.start}: "
-                            f"{raw[exc.start:exc.start + 1]!r})") from None
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise DataError(f"{where} is not valid JSON: {exc}") from None
-        except RecursionError:
-            raise DataError(f"{where} is nested too deeply to be a model") from None
+        d = parse_document(raw, where, parse=json.loads, syntax_error=json.JSONDecodeError,
+                           syntax="JSON", kind="a model", encoding="utf-8-sig")
         if not isinstance(d, dict):
             raise DataError(f"{where} does not hold a JSON object (it holds a "
                             f"{type(d).__name__})")

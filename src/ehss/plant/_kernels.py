@@ -307,29 +307,27 @@ def clamp_state(x: PlantState, s: PlantSettings) -> PlantState:
             spool = -1.0
             if rate < 0.0:
                 rate = 0.0
-    return PlantState(
-        spool=spool,
-        spool_rate_1_s=rate,
-        piston_displacement_m=x.piston_displacement_m,
-        piston_velocity_m_s=x.piston_velocity_m_s,
-        p1_pa=min(ps, max(0.0, x.p1_pa)),
-        p2_pa=min(ps, max(0.0, x.p2_pa)),
-        displacement_m=x.displacement_m,
-        velocity_m_s=x.velocity_m_s,
-        accel_highpass_state_m_s=x.accel_highpass_state_m_s,
-    )
+    return _with_valve_and_chambers(x, spool, rate, min(ps, max(0.0, x.p1_pa)),
+                                    min(ps, max(0.0, x.p2_pa)))
 
 
 @njit(cache=True)
 def with_spool(x: PlantState, spool: float) -> PlantState:
     """``x`` with the spool set to ``spool`` (a prescribed spool, open-loop tests)."""
+    return _with_valve_and_chambers(x, spool, x.spool_rate_1_s, x.p1_pa, x.p2_pa)
+
+
+@njit(cache=True)
+def _with_valve_and_chambers(x: PlantState, spool: float, spool_rate_1_s: float,
+                             p1_pa: float, p2_pa: float) -> PlantState:
+    """``x`` with new spool, spool rate and chamber pressures, the motion unchanged."""
     return PlantState(
         spool=spool,
-        spool_rate_1_s=x.spool_rate_1_s,
+        spool_rate_1_s=spool_rate_1_s,
         piston_displacement_m=x.piston_displacement_m,
         piston_velocity_m_s=x.piston_velocity_m_s,
-        p1_pa=x.p1_pa,
-        p2_pa=x.p2_pa,
+        p1_pa=p1_pa,
+        p2_pa=p2_pa,
         displacement_m=x.displacement_m,
         velocity_m_s=x.velocity_m_s,
         accel_highpass_state_m_s=x.accel_highpass_state_m_s,

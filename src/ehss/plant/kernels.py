@@ -21,26 +21,7 @@ True
 
 from __future__ import annotations
 
-from ehss.plant._kernels import (
-    PlantSettings,
-    PlantState,
-    adc,
-    clamp_state,
-    friction_force,
-    plant_derivative,
-    rk4_step,
-    signed_sqrt,
-    with_spool,
-)
+from ehss.plant import _kernels
+from ehss.plant._kernels import *  # noqa: F403  (the public face offers every kernel)
 
-__all__ = [
-    "PlantSettings",
-    "PlantState",
-    "adc",
-    "clamp_state",
-    "friction_force",
-    "plant_derivative",
-    "rk4_step",
-    "signed_sqrt",
-    "with_spool",
-]
+__all__ = _kernels.__all__

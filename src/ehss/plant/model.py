@@ -49,6 +49,10 @@ LAMINAR_DP_FRACTION = 1e-3
 ROD_MASS_FRACTION = 0.1
 JOINT_OMEGA_STEP = 0.5
 STOP_OMEGA_STEP = 0.5
+#: Actuator parameters (eq (5)) the kernels take as they are, under the same names.
+_ACTUATOR_AS_GIVEN = ("piston_area_m2", "total_volume_m3", "bulk_modulus_pa",
+                      "supply_pressure_pa", "return_pressure_pa", "internal_leakage_m3_s_pa",
+                      "external_leakage_m3_s_pa")
 
 
 def plant_settings(
@@ -101,13 +105,7 @@ def plant_settings(
         laminar_dp_pa=LAMINAR_DP_FRACTION * v.rated_pressure_drop_pa,
         null_leakage_m3_s_pa=v.null_leakage_m3_s_pa,
         spool_prescribed=bool(spool_direct),
-        piston_area_m2=a.piston_area_m2,
-        total_volume_m3=a.total_volume_m3,
-        bulk_modulus_pa=a.bulk_modulus_pa,
-        supply_pressure_pa=a.supply_pressure_pa,
-        return_pressure_pa=a.return_pressure_pa,
-        internal_leakage_m3_s_pa=a.internal_leakage_m3_s_pa,
-        external_leakage_m3_s_pa=a.external_leakage_m3_s_pa,
+        **{name: getattr(a, name) for name in _ACTUATOR_AS_GIVEN},
         half_stroke_m=a.stroke_m,
         stop_stiffness_n_m=stop_stiffness,
         stop_damping_n_s_m=2.0 * 0.5 * math.sqrt(stop_stiffness * m_rod),
