@@ -4,7 +4,12 @@ of earlier commits loaded from git into the same process, plus cold compile, fir
 use of new orders and the streaming update.
 
 Run from the project root:  .venv/bin/python benchmarks/bench_rels.py [--quick]
-                            [--rounds R]
+                            [--rounds R] [--lanes]
+
+``--lanes`` runs only the P pass of a bank of (4,3,4) channels in each layout (one
+channel at a time; channels in SIMD lanes with a run-time lane count; the lanes with
+each row's (j, c) update as one loop), with and without FMA contraction, against the
+whole step of the bank and of eight single-channel runs of the baseline.
 
 The earlier kernels are read with ``git show COMMIT:src/ehss/identification/…`` into a
 temporary package and imported next to this tree's, so that every kernel runs in the
