@@ -327,8 +327,8 @@ def _pass_ns(n: int, lanes: int, reps: int, repeats: int) -> dict[str, float]:
     out = {}
     for fm, tag in ((False, ""), ({"contract"}, ", contract")):
         row = _row_pass(n, fm)
-        args = (_on_lines((8, n * n), 1e-3), _on_lines((8, 16), 1e-9),
-                _on_lines((8, 16), 1.0), _on_lines((8, 16), 0.0))
+        args: tuple[Any, ...] = (_on_lines((8, n * n), 1e-3), _on_lines((8, 16), 1e-9),
+                                 _on_lines((8, 16), 1.0), _on_lines((8, 16), 0.0))
         out[f"one channel at a time (the bank){tag}"] = _best_ns(row, args, reps, repeats, 8)
         for name, make in (("lanes", _lanes_pass), ("lanes, (j, c) one loop", _flat_pass)):
             kernel = make(n, fm)
@@ -342,7 +342,7 @@ def _pass_ns(n: int, lanes: int, reps: int, repeats: int) -> dict[str, float]:
     return out
 
 
-def _best_ns(kernel: Any, args: tuple, reps: int, repeats: int, channels: int) -> float:
+def _best_ns(kernel: Any, args: tuple[Any, ...], reps: int, repeats: int, channels: int) -> float:
     kernel(*args, 1)
     best = np.inf
     for _ in range(repeats):
