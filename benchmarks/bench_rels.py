@@ -4,7 +4,12 @@ of earlier commits loaded from git into the same process, plus cold compile, fir
 use of new orders and the streaming update.
 
 Run from the project root:  .venv/bin/python benchmarks/bench_rels.py [--quick]
-                            [--rounds R]
+                            [--rounds R] [--lanes]
+
+``--lanes`` runs only the P pass of a bank of (4,3,4) channels in each layout (one
+channel at a time; channels in SIMD lanes with a run-time lane count; the lanes with
+each row's (j, c) update as one loop), with and without FMA contraction, against the
+whole step of the bank and of eight single-channel runs of the baseline.
 
 The earlier kernels are read with ``git show COMMIT:src/ehss/identification/…`` into a
 temporary package and imported next to this tree's, so that every kernel runs in the
@@ -34,6 +39,7 @@ from typing import Any
 
 import numba
 import numpy as np
+from numba import njit
 from scipy.signal import lfilter
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -189,10 +195,9 @@ def ratio(rates: dict, a: str, b: str) -> str:
     return f"**{np.median(each):.2f}** ({', '.join(f'{r:.2f}' for r in each)})"
 
 
-def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
-    na, nb, nc, n_ch = 4, 3, 4, 8
+def _bank_run(na: int, nb: int, nc: int, n_ch: int) -> Run:
+    """A run of the bank kernel over (u, y), each (N, n_ch), from θ̂ = 0, P(0) = 1e6 I."""
     n = na + nb + 1 + nc
-    u, y = record_of(n_samples, n_ch, seed=7)
     s = RelsSettings(na=na, nb=nb, nc=nc).kernel()  # P(0) = 1e6 I, tr P <= n·1e6
     bank = B.bank_kernel(na, nb, nc, 1)
 
@@ -205,6 +210,26 @@ def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
         bank(blocks, rec, True)
         return time.thread_time() - t0
 
+    return run_bank
+
+
+def _eight_runs(run: Run, u: np.ndarray, y: np.ndarray) -> Run:
+    """One single-channel ``run`` per column of (u, y), in turn (their seconds)."""
+    columns = [(np.ascontiguousarray(u[:, c]), np.ascontiguousarray(y[:, c]))
+               for c in range(u.shape[1])]
+    run(*(x[:50] for x in columns[0]))  # compile or load from the cache
+
+    def total(uu: np.ndarray, yy: np.ndarray) -> float:  # uu, yy unused: the
+        # channels' own columns
+        return sum(run(*column) for column in columns)
+
+    return total
+
+
+def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
+    na, nb, nc, n_ch = 4, 3, 4, 8
+    u, y = record_of(n_samples, n_ch, seed=7)
+    run_bank = _bank_run(na, nb, nc, n_ch)
     singles = {"specialised": runner_this(K.kernel_for(na, nb, nc, 1, compile_now=True),
                                           na, nb, nc, 1.0, "rels"),
                "generic": runner_this(K.rels_run.compile(K.RELS_RUN_SIGNATURE),
@@ -212,21 +237,12 @@ def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
     if BASELINE in old:
         mod, _ = old[BASELINE]
         singles[BASELINE] = runner_3b7(mod, na, nb, nc, 1.0, "rels")
-    columns = {c: (np.ascontiguousarray(u[:, c]), np.ascontiguousarray(y[:, c]))
-               for c in range(n_ch)}
-
-    def eight_runs(run: Run) -> Run:
-        def total(uu: np.ndarray, yy: np.ndarray) -> float:  # uu, yy unused: the
-            # channels' own columns
-            return sum(run(*columns[c]) for c in range(n_ch))
-        return total
 
     ns: dict[str, list[float]] = {"bank": [], **{k: [] for k in singles}}
     for _ in range(rounds):
         ns["bank"].append(1e9 / best_rate(run_bank, u, y, repeats))  # u.size = N·C
         for name, run in singles.items():
-            full = eight_runs(run)
-            run(*(x[:50] for x in columns[0]))
+            full = _eight_runs(run, u, y)
             ns[name].append(1e9 * min(full(u, y) for _ in range(repeats))
                             / (n_samples * n_ch))
     print(f"\n### eight channels of (4,3,4), n = 12, RELS λ = 1, {n_samples} samples "
@@ -238,6 +254,134 @@ def many_channels(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
         label = "one bank kernel" if name == "bank" else f"eight {name} runs"
         print(f"| {label} | {min(values):.1f} | **{np.median(ratios):.2f}** "
               f"({', '.join(f'{r:.2f}' for r in ratios)}) |")
+
+
+# ---------------------------------------------------------------- P pass layouts
+def _lanes_pass(n_: int, fastmath: Any) -> Any:
+    """(22) on C channels in SIMD lanes, P[(i n + j) L + c] (channel innermost, L a
+    run-time count), g = P r in the same pass: ``run(P, w, r, g, L, reps)``."""
+
+    @njit(error_model="numpy", fastmath=fastmath)
+    def run(P: np.ndarray, w: np.ndarray, r: np.ndarray, g: np.ndarray, L: int,
+            reps: int) -> None:
+        for _ in range(reps):
+            g[:] = 0.0
+            for i in range(n_):
+                for j in range(n_):
+                    o = (i * n_ + j) * L
+                    for c in range(L):  # P_ij ← P_ij − w_i w_j;  g_j += P_ij r_i
+                        p = P[o + c] - w[i * L + c] * w[j * L + c]
+                        P[o + c] = p
+                        g[j * L + c] += p * r[i * L + c]
+
+    return run
+
+
+def _flat_pass(n_: int, fastmath: Any) -> Any:
+    """As :func:`_lanes_pass`, each row's (j, c) update one loop over j L + c, with
+    row i's w_i and r_i tiled once per row into arrays of length n L."""
+
+    @njit(error_model="numpy", fastmath=fastmath)
+    def run(P: np.ndarray, w: np.ndarray, r: np.ndarray, g: np.ndarray, L: int,
+            reps: int) -> None:
+        m = n_ * L
+        wt, rt = np.empty(m), np.empty(m)
+        for _ in range(reps):
+            g[:] = 0.0
+            for i in range(n_):
+                for j in range(n_):
+                    for c in range(L):
+                        wt[j * L + c] = w[i * L + c]
+                        rt[j * L + c] = r[i * L + c]
+                for k in range(m):  # P_ij ← P_ij − w_i w_j;  g_j += P_ij r_i
+                    p = P[i * m + k] - wt[k] * w[k]
+                    P[i * m + k] = p
+                    g[k] += p * rt[k]
+
+    return run
+
+
+def _row_pass(n_: int, fastmath: Any) -> Any:
+    """The bank's P pass: the single-channel pass (four rows at a time) on each
+    channel in turn, ``run(P, w, r, g, reps)`` with one channel a row."""
+
+    @njit(error_model="numpy", fastmath=fastmath)
+    def run(P: np.ndarray, w: np.ndarray, r: np.ndarray, g: np.ndarray,
+            reps: int) -> None:
+        for _ in range(reps):
+            for c in range(P.shape[0]):
+                K._update_P_and_gain(P[c], w[c], 1.0, r[c], g[c], n_)
+
+    return run
+
+
+def _on_lines(shape: tuple[int, ...], value: float) -> np.ndarray:
+    """An array of ``shape`` filled with ``value``, starting on a 64-byte line."""
+    a = K.aligned_copy(np.full(int(np.prod(shape)), value))
+    return a.reshape(shape)
+
+
+def _pass_ns(n: int, lanes: int, reps: int, repeats: int) -> dict[str, float]:
+    """ns a channel of one P pass, n = 12, in each layout (rows padded to 16)."""
+    rng = np.random.default_rng(3)
+    out = {}
+    for fm, tag in ((False, ""), ({"contract"}, ", contract")):
+        row = _row_pass(n, fm)
+        args: tuple[Any, ...] = (_on_lines((8, n * n), 1e-3), _on_lines((8, 16), 1e-9),
+                                 _on_lines((8, 16), 1.0), _on_lines((8, 16), 0.0))
+        out[f"one channel at a time (the bank){tag}"] = _best_ns(row, args, reps, repeats, 8)
+        for name, make in (("lanes", _lanes_pass), ("lanes, (j, c) one loop", _flat_pass)):
+            kernel = make(n, fm)
+            for L in (lanes, 2 * lanes):
+                vectors = [_on_lines((n * L,), 0.0) for _ in range(3)]
+                vectors[0][:] = 1e-9 * rng.standard_normal(n * L)
+                vectors[1][:] = rng.standard_normal(n * L)
+                args = (_on_lines((n * n * L,), 1e-3), *vectors, L)
+                out[f"{name}, L = {L} (run time){tag}"] = _best_ns(kernel, args, reps,
+                                                                    repeats, L)
+    return out
+
+
+def _best_ns(kernel: Any, args: tuple[Any, ...], reps: int, repeats: int, channels: int) -> float:
+    kernel(*args, 1)
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.thread_time()
+        kernel(*args, reps)
+        best = min(best, time.thread_time() - t0)
+    return 1e9 * best / (reps * channels)
+
+
+def lane_layouts(old: dict, n_samples: int, repeats: int, rounds: int) -> None:
+    """The P pass of (4,3,4), n = 12, per channel in each layout, against the whole
+    step of the bank and of eight 3b7a2e5 runs (ns a channel-sample): the bound the
+    pass alone sets on a lanes kernel's speed-up."""
+    na, nb, nc, n_ch = 4, 3, 4, 8
+    n = na + nb + 1 + nc
+    u, y = record_of(n_samples, n_ch, seed=7)
+    whole = {"bank step": _bank_run(na, nb, nc, n_ch)}
+    if BASELINE in old:
+        whole[f"{BASELINE} step"] = _eight_runs(runner_3b7(old[BASELINE][0], na, nb, nc,
+                                                           1.0, "rels"), u, y)
+    ns: dict[str, list[float]] = {}
+    for _ in range(rounds):
+        for name, run in whole.items():
+            ns.setdefault(name, []).append(1e9 / best_rate(run, u, y, repeats))
+        for name, value in _pass_ns(n, n_ch, 20_000, repeats).items():
+            ns.setdefault(name, []).append(value)
+    ref = ns.get(f"{BASELINE} step", ns["bank step"])
+    peak = 2 * 4 * 2 * 2.6  # GFLOP/s: 2 FMA units × 4 doubles × 2 flops, 2.6 GHz
+    print(f"\n### P pass of (4,3,4), n = 12 ({4 * n * n} flops a channel), by layout, "
+          f"against the whole step: ns a channel (best of rounds), {BASELINE}'s step "
+          "/ it (round by round), share of the 256-bit FMA peak\n")
+    print(f"| what | ns / channel | {BASELINE} step / it | of {peak:.1f} GFLOP/s |")
+    print("|---|---|---|---|")
+    for name, values in ns.items():
+        ratios = [a / b for a, b in zip(ref, values, strict=True)]
+        flops = 4 * n * n + (10 * n if name.endswith("step") else 0)
+        print(f"| {name} | {min(values):.1f} | **{np.median(ratios):.2f}** "
+              f"({', '.join(f'{r:.2f}' for r in ratios)}) | "
+              f"{flops / min(values) / peak:.0%} |")
 
 
 def streaming(calls: int) -> None:
@@ -362,6 +506,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--quick", action="store_true", help="fewer samples (smoke run)")
     p.add_argument("--rounds", type=int, default=3, help="alternating rounds")
+    p.add_argument("--lanes", action="store_true",
+                   help="only the P pass by layout against the whole step")
     args = p.parse_args()
     n_big = 10**5 if args.quick else 10**6
     repeats = 3 if args.quick else 5
@@ -375,10 +521,14 @@ def main() -> None:
                 old[commit] = (load_old(commit, tmp), make)
             except Exception as exc:  # noqa: BLE001 - reported, the rest still runs
                 print(f"kernel of {commit} not loaded: {type(exc).__name__}: {exc}")
-        single_channel(old, n_big, repeats, args.rounds)
-        many_channels(old, n_big // 5, repeats, args.rounds)
-        streaming(10_000 if args.quick else 100_000)
-        compile_times(tmp)
+        if args.lanes:
+            lane_layouts(old, n_big // 5, repeats, args.rounds)
+        else:
+            single_channel(old, n_big, repeats, args.rounds)
+            many_channels(old, n_big // 5, repeats, args.rounds)
+            lane_layouts(old, n_big // 5, repeats, args.rounds)
+            streaming(10_000 if args.quick else 100_000)
+            compile_times(tmp)
     print(f"\nload average {os.getloadavg()[0]:.1f} at the end")
 
 

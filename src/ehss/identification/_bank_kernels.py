@@ -19,9 +19,13 @@ once for all of them.
 Why not one channel per SIMD lane (P[i, j, c] with the channel innermost in the
 state): numba runs LLVM without its SLP vectoriser, and LLVM fully unrolls a loop of
 a few (compile-time constant) iterations, such as one over 8 channels, into scalar
-code before its loop vectoriser could see it; the lanes layout measured slower than
-the single-channel row pass (BENCHMARKS.md, "Why the bank does not put channels in
-SIMD lanes"): plain loops cannot express lanes in numba.
+code before its loop vectoriser could see it. With the lane count a run-time value
+the lane loop of the P pass is vectorised, but that pass stores P and g for every
+entry and runs one short lane loop, with its run-time alias checks, per entry; the
+forms that would store g less often (two or four rows a pass) are not vectorised at
+all. Measured, the lanes pass alone costs about what the whole step of a channel
+would have to cost for the bank to pay (BENCHMARKS.md, "Why the bank does not put
+channels in SIMD lanes"), so the bank keeps the single-channel step.
 
 The kernel is compiled per orders (the orders as constants, like
 :func:`._kernels.specialised`) and cached on disk.
