@@ -20,6 +20,7 @@ __all__ = [
     "roots_inside",
     "armax_errors",
     "armax_jacobian",
+    "els_layout",
     "oe_simulate",
     "oe_jacobian",
 ]
@@ -127,6 +128,14 @@ def armax_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
     """(row, lag, sign) of each column of [J | ε] in :func:`armax_signals`' rows:
     ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C, then ε(k)."""
     return _layout(na, nb, nc, delay, 3)
+
+
+@njit(cache=True, nogil=True)
+def els_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
+    """(row, lag, sign) of the columns of [−Φ t] in the rows y, u, e: the regression of
+    extended least squares (y(k) = ψ(k)ᵀθ + e(k), ψ(k)ᵀ = [−y(k−1).., u(k−d).., e(k−1)..])
+    is that of the ARMAX Jacobian with y, u, e in place of y/C, u/C, ε/C and target y(k)."""
+    return _layout(na, nb, nc, delay, 0)
 
 
 @njit(cache=True, nogil=True)
