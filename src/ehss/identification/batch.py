@@ -74,15 +74,22 @@ def _els(us: np.ndarray, ys: np.ndarray, na: int, nb: int, nc: int, delay: int,
     iters = 0
     if nc:
         layout, k0 = _pk.els_layout(na, nb, nc, delay), first_sample(na, nb, nc, delay)
+        signals = np.vstack([ys, us, ys])  # y, u and the c-regressors e, set below
         for iters in range(1, max_iter + 1):  # noqa: B007 - reported in meta
-            e = prediction_errors(theta, us, ys, na, nb, nc, delay)
-            new = gram_lstsq(np.vstack([ys, us, e]), layout, k0)
-            new[na + nb + 1 :] = stabilise(new[na + nb + 1 :])
+            signals[2] = _pk.armax_errors(theta, us, ys, na, nb, nc, delay)
+            new = gram_lstsq(signals, layout, k0)
+            new[na + nb + 1 :] = _stable_c(new[na + nb + 1 :])
             change = np.linalg.norm(new - theta) / max(float(np.linalg.norm(new)), 1e-300)
             theta = new
             if change < tol:
                 break
     return theta, iters
+
+
+def _stable_c(c: np.ndarray, radius: float = 0.99) -> np.ndarray:
+    """c, or :func:`stabilise`'s reflection of it when a root of [1, c...] is at or
+    beyond ``radius`` (Schur–Cohn test first: no polynomial roots when all are inside)."""
+    return c if _pk.roots_inside(c, radius) else stabilise(c, radius)
 
 
 #: largest condition number of Φ (columns scaled to unit norm) whose least-squares
