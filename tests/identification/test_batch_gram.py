@@ -7,7 +7,8 @@ the relative error of θ is of order ε κ² (ε = 2.2e-16), through an SVD of o
 each path is checked here against ``lstsq`` of Φ formed by
 :func:`~ehss.identification._common.regression_matrix`, to that bound, on a
 well-conditioned ARMAX record and on an oversampled 6th-order one (κ far above the
-threshold); and the whole ELS iteration against one written with ``lstsq``.
+threshold); and the whole ELS iteration against one written with ``lstsq``. Also the
+prediction-error fit's one-pass filter kernel against the two kernels it fuses.
 """
 
 from __future__ import annotations
@@ -106,3 +107,15 @@ def test_els_iterations_follow_the_lstsq_ones(rng, oversampled):
     # through ΦᵀΦ) and far below a wrong iteration (one less moves θ by > 1e-3)
     assert _rel(theta, ref) <= 1e-6
     assert _rel(_els_lstsq(u, y, na, nb, nc, d, 4), ref) > 1e-3
+
+
+@pytest.mark.parametrize("orders", [(4, 3, 2, 0), (2, 1, 1, 1), (1, 0, 3, 0), (3, 2, 1, 4)])
+def test_one_pass_filters_are_the_errors_and_signals_bit_for_bit(rng, orders):
+    """The prediction-error fit's one-pass kernel against the two it fuses."""
+    na, nb, nc, d = orders
+    u, y, _ = _record(rng, oversampled=False)
+    theta = np.concatenate([0.3 * rng.standard_normal(na + nb + 1),
+                            np.real(np.poly(0.8 * np.exp(2j * np.pi * rng.random(nc))))[1:]])
+    eps = pk.armax_errors(theta, u, y, na, nb, nc, d)
+    ref = pk.armax_signals(theta, u, y, eps, na, nb, nc)
+    assert np.array_equal(pk.armax_filtered(theta, u, y, na, nb, nc, d), ref)

@@ -20,6 +20,7 @@ __all__ = [
     "roots_inside",
     "armax_errors",
     "armax_jacobian",
+    "armax_filtered",
     "els_layout",
     "oe_simulate",
     "oe_jacobian",
@@ -102,6 +103,41 @@ def armax_signals(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.nda
     _inverse(us, c, out[1])
     _inverse(eps, c, out[2])
     out[3] = eps
+    return out
+
+
+@njit(cache=True, nogil=True)
+def armax_filtered(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, na: int, nb: int,
+                   nc: int, delay: int) -> np.ndarray:
+    """:func:`armax_signals` of :func:`armax_errors`' ε, in one pass over the record.
+
+    The four recursions (ε, y/C, u/C, ε/C) are independent from one sample to the next
+    but each is a chain of dependent products; run side by side in one loop, the
+    processor overlaps them. Each is summed in the same order as in those two kernels,
+    so the rows are the same to the last bit.
+    """
+    nab = na + nb + 1
+    c = theta[nab : nab + nc]
+    out = np.empty((4, ys.size))
+    yc, uc, ec, eps = out[0], out[1], out[2], out[3]
+    for k in range(ys.size):
+        v = ys[k]
+        for i in range(1, min(na, k) + 1):
+            v += theta[i - 1] * ys[k - i]
+        for j in range(nb + 1):
+            m = k - delay - j
+            if m >= 0:
+                v -= theta[na + j] * us[m]
+        sy, su = ys[k], us[k]
+        for i in range(1, min(nc, k) + 1):
+            v -= c[i - 1] * eps[k - i]
+        eps[k] = v
+        se = v
+        for i in range(1, min(nc, k) + 1):
+            sy -= c[i - 1] * yc[k - i]
+            su -= c[i - 1] * uc[k - i]
+            se -= c[i - 1] * ec[k - i]
+        yc[k], uc[k], ec[k] = sy, su, se
     return out
 
 
