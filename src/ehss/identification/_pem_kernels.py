@@ -72,23 +72,30 @@ def _inverse(x: np.ndarray, den: np.ndarray, out: np.ndarray) -> None:
         out[k] = s
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _error_at(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.ndarray, k: int,
+              na: int, nb: int, nc: int, delay: int) -> float:
+    """ε(k) = (A y − q^-d B u)(k) − c1 ε(k−1) − … − c_nc ε(k−nc), given ε before k."""
+    nab = na + nb + 1
+    v = ys[k]
+    for i in range(1, min(na, k) + 1):
+        v += theta[i - 1] * ys[k - i]
+    for j in range(nb + 1):
+        m = k - delay - j
+        if m >= 0:
+            v -= theta[na + j] * us[m]
+    for i in range(1, min(nc, k) + 1):
+        v -= theta[nab + i - 1] * eps[k - i]
+    return v
+
+
 @njit(cache=True, nogil=True)
 def armax_errors(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, na: int, nb: int,
                  nc: int, delay: int) -> np.ndarray:
     """ε(k) = (A y − q^-d B u)(k) − c1 ε(k−1) − … − c_nc ε(k−nc) for every k."""
-    nab = na + nb + 1
     eps = np.empty(ys.size)
     for k in range(ys.size):
-        v = ys[k]
-        for i in range(1, min(na, k) + 1):
-            v += theta[i - 1] * ys[k - i]
-        for j in range(nb + 1):
-            m = k - delay - j
-            if m >= 0:
-                v -= theta[na + j] * us[m]
-        for i in range(1, min(nc, k) + 1):
-            v -= theta[nab + i - 1] * eps[k - i]
-        eps[k] = v
+        eps[k] = _error_at(theta, us, ys, eps, k, na, nb, nc, delay)
     return eps
 
 
@@ -121,18 +128,8 @@ def armax_filtered(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, na: int, n
     out = np.empty((4, ys.size))
     yc, uc, ec, eps = out[0], out[1], out[2], out[3]
     for k in range(ys.size):
-        v = ys[k]
-        for i in range(1, min(na, k) + 1):
-            v += theta[i - 1] * ys[k - i]
-        for j in range(nb + 1):
-            m = k - delay - j
-            if m >= 0:
-                v -= theta[na + j] * us[m]
+        se = eps[k] = _error_at(theta, us, ys, eps, k, na, nb, nc, delay)
         sy, su = ys[k], us[k]
-        for i in range(1, min(nc, k) + 1):
-            v -= c[i - 1] * eps[k - i]
-        eps[k] = v
-        se = v
         for i in range(1, min(nc, k) + 1):
             sy -= c[i - 1] * yc[k - i]
             su -= c[i - 1] * uc[k - i]
