@@ -7,7 +7,8 @@ the relative error of θ is of order ε κ² (ε = 2.2e-16), through an SVD of o
 each path is checked here against ``lstsq`` of Φ formed by
 :func:`~ehss.identification._common.regression_matrix`, to that bound, on a
 well-conditioned ARMAX record and on an oversampled 6th-order one (κ far above the
-threshold); and the whole ELS iteration against one written with ``lstsq``. Also the
+threshold) and one near it (κ ≈ 1e4, still through ΦᵀΦ); and the whole ELS iteration
+against one written with ``lstsq``. Also the
 prediction-error fit's one-pass filter kernel against the two kernels it fuses.
 """
 
@@ -68,6 +69,22 @@ def test_the_solve_is_lstsq_to_the_conditioning(rng, oversampled):
     else:  # through ΦᵀΦ: ε κ², with n for the sums' rounding
         assert kappa < 1e3
         assert _rel(theta, ref) <= theta.size * EPS * kappa**2
+
+
+def test_the_solve_through_the_gram_matrix_near_its_threshold(rng):
+    """A 4th-order loop (0.4 and 1 Hz) sampled at 300 Hz, driven by noise band-limited to
+    0.02–2 Hz: κ ≈ 1e4, still through ΦᵀΦ, whose ε κ² bound is then ~1e-7."""
+    n, fs = 6000, 300.0
+    a = np.real(np.poly(sum((resonance_poles(f, 0.3, fs) for f in (0.4, 1.0)), [])))
+    u = band_limited(rng, n, 0.02, 2.0, fs)
+    y = lfilter([0.0, 1.0, 0.5], a, u)
+    y = (y + 0.03 * np.std(y) * rng.standard_normal(n)) / np.std(y)
+    e = rng.standard_normal(n)
+    ref, phi, k0 = _reference(u, y, e, 4, 2, 2, 1)
+    theta = gram_lstsq(np.vstack([y, u, e]), pk.els_layout(4, 2, 2, 1), k0)
+    kappa = _kappa(phi)
+    assert 1e3 < kappa < _COND_GRAM
+    assert _rel(theta, ref) <= theta.size * EPS * kappa**2
 
 
 def test_arx_solve_with_no_c_regressors(rng):
