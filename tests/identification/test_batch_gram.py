@@ -8,8 +8,8 @@ each path is checked here against ``lstsq`` of Φ formed by
 :func:`~ehss.identification._common.regression_matrix`, to that bound, on a
 well-conditioned ARMAX record and on an oversampled 6th-order one (κ far above the
 threshold) and one near it (κ ≈ 1e4, still through ΦᵀΦ); and the whole ELS iteration
-against one written with ``lstsq``. Also the
-prediction-error fit's one-pass filter kernel against the two kernels it fuses.
+against one written with ``lstsq``. Also the prediction-error fit's one-pass filter
+kernel against the two kernels it fuses.
 """
 
 from __future__ import annotations
