@@ -13,12 +13,14 @@ its own ``NUMBA_CACHE_DIR``, after one untimed warm-up run of each (numba compil
 caches its kernels there). Wall-clock seconds and CPU seconds (user + system, of the
 process and its threads) of the whole command are printed per run, then the median of
 each side and their ratios, and whether both recommended the same orders with the same
-simulation fit (the ``best by ...`` line).
+simulation fit (the ``best by ...`` line), and whether their order tables are the same
+to the last printed digit.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
 import platform
 import re
@@ -40,8 +42,8 @@ def _cpu_of_children() -> float:
 
 
 def _run(src: Path, record: Path, cache: Path) -> tuple[float, float, str]:
-    """(wall seconds, CPU seconds, the recommended orders and their simulation fit) of
-    one ``ehss order`` process."""
+    """(wall seconds, CPU seconds, the recommended orders and their simulation fit,
+    followed by the order table as printed) of one ``ehss order`` process."""
     env = {**os.environ, "PYTHONPATH": str(src), "NUMBA_CACHE_DIR": str(cache)}
     t0, c0 = time.perf_counter(), _cpu_of_children()
     out = subprocess.run([sys.executable, "-m", "ehss", "order", str(record), *ARGS],
@@ -50,7 +52,8 @@ def _run(src: Path, record: Path, cache: Path) -> tuple[float, float, str]:
     best = " ".join(out[out.index("best by"):].split())
     pick = re.sub(r"\(method.*", "", best).strip()
     fit = re.search(r"simulation fit [-0-9.]+ %", best)
-    return wall, cpu, f"{pick} ({fit.group(0) if fit else 'no fit'})"
+    table = out[: out.index("best by")]
+    return wall, cpu, f"{pick} ({fit.group(0) if fit else 'no fit'})\n{table}"
 
 
 def main() -> None:
@@ -72,8 +75,8 @@ def main() -> None:
                 times[name].append(wall)
                 cpus[name].append(cpu)
                 picks[name] = pick
-                print(f"round {r + 1}  {name:9s}  {wall:7.1f} s wall  {cpu:7.1f} s CPU   {pick}",
-                      flush=True)
+                print(f"round {r + 1}  {name:9s}  {wall:7.1f} s wall  {cpu:7.1f} s CPU   "
+                      f"{pick.splitlines()[0]}", flush=True)
     med = {name: statistics.median(v) for name, v in times.items()}
     med_cpu = {name: statistics.median(v) for name, v in cpus.items()}
     print(f"\n{platform.node()} · {os.cpu_count()} cores · Python {platform.python_version()}")
@@ -82,7 +85,13 @@ def main() -> None:
         print(f"median {name:9s} {m:7.1f} s wall  {med_cpu[name]:7.1f} s CPU")
     print(f"speed-up (baseline / this tree): {med['baseline'] / med['this tree']:.2f}x wall, "
           f"{med_cpu['baseline'] / med_cpu['this tree']:.2f}x CPU")
-    print(f"same recommendation: {picks['baseline'] == picks['this tree']}")
+    first = {name: pick.splitlines()[0] for name, pick in picks.items()}
+    print(f"same recommendation: {first['baseline'] == first['this tree']}")
+    print(f"same order table: {picks['baseline'] == picks['this tree']}")
+    for line in difflib.unified_diff(picks["baseline"].splitlines(),
+                                     picks["this tree"].splitlines(), "baseline",
+                                     "this tree", n=0, lineterm=""):
+        print(line)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,8 @@ __all__ = [
     "roots_inside",
     "armax_errors",
     "armax_jacobian",
+    "armax_filtered",
+    "els_layout",
     "oe_simulate",
     "oe_jacobian",
 ]
@@ -70,23 +72,30 @@ def _inverse(x: np.ndarray, den: np.ndarray, out: np.ndarray) -> None:
         out[k] = s
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _error_at(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.ndarray, k: int,
+              na: int, nb: int, nc: int, delay: int) -> float:
+    """ε(k) = (A y − q^-d B u)(k) − c1 ε(k−1) − … − c_nc ε(k−nc), given ε before k."""
+    nab = na + nb + 1
+    v = ys[k]
+    for i in range(1, min(na, k) + 1):
+        v += theta[i - 1] * ys[k - i]
+    for j in range(nb + 1):
+        m = k - delay - j
+        if m >= 0:
+            v -= theta[na + j] * us[m]
+    for i in range(1, min(nc, k) + 1):
+        v -= theta[nab + i - 1] * eps[k - i]
+    return v
+
+
 @njit(cache=True, nogil=True)
 def armax_errors(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, na: int, nb: int,
                  nc: int, delay: int) -> np.ndarray:
     """ε(k) = (A y − q^-d B u)(k) − c1 ε(k−1) − … − c_nc ε(k−nc) for every k."""
-    nab = na + nb + 1
     eps = np.empty(ys.size)
     for k in range(ys.size):
-        v = ys[k]
-        for i in range(1, min(na, k) + 1):
-            v += theta[i - 1] * ys[k - i]
-        for j in range(nb + 1):
-            m = k - delay - j
-            if m >= 0:
-                v -= theta[na + j] * us[m]
-        for i in range(1, min(nc, k) + 1):
-            v -= theta[nab + i - 1] * eps[k - i]
-        eps[k] = v
+        eps[k] = _error_at(theta, us, ys, eps, k, na, nb, nc, delay)
     return eps
 
 
@@ -101,6 +110,31 @@ def armax_signals(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, eps: np.nda
     _inverse(us, c, out[1])
     _inverse(eps, c, out[2])
     out[3] = eps
+    return out
+
+
+@njit(cache=True, nogil=True)
+def armax_filtered(theta: np.ndarray, us: np.ndarray, ys: np.ndarray, na: int, nb: int,
+                   nc: int, delay: int) -> np.ndarray:
+    """:func:`armax_signals` of :func:`armax_errors`' ε, in one pass over the record.
+
+    The four recursions (ε, y/C, u/C, ε/C) are independent from one sample to the next
+    but each is a chain of dependent products; run side by side in one loop, the
+    processor overlaps them. Each is summed in the same order as in those two kernels,
+    so the rows are the same to the last bit.
+    """
+    nab = na + nb + 1
+    c = theta[nab : nab + nc]
+    out = np.empty((4, ys.size))
+    yc, uc, ec, eps = out[0], out[1], out[2], out[3]
+    for k in range(ys.size):
+        se = eps[k] = _error_at(theta, us, ys, eps, k, na, nb, nc, delay)
+        sy, su = ys[k], us[k]
+        for i in range(1, min(nc, k) + 1):
+            sy -= c[i - 1] * yc[k - i]
+            su -= c[i - 1] * uc[k - i]
+            se -= c[i - 1] * ec[k - i]
+        yc[k], uc[k], ec[k] = sy, su, se
     return out
 
 
@@ -127,6 +161,14 @@ def armax_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
     """(row, lag, sign) of each column of [J | ε] in :func:`armax_signals`' rows:
     ∂ε/∂a_i = y(k−i)/C, ∂ε/∂b_j = −u(k−d−j)/C, ∂ε/∂c_i = −ε(k−i)/C, then ε(k)."""
     return _layout(na, nb, nc, delay, 3)
+
+
+@njit(cache=True, nogil=True)
+def els_layout(na: int, nb: int, nc: int, delay: int) -> tuple:
+    """(row, lag, sign) of the columns of [−Φ t] in the rows y, u, e: the regression of
+    extended least squares (y(k) = ψ(k)ᵀθ + e(k), ψ(k)ᵀ = [−y(k−1).., u(k−d).., e(k−1)..])
+    is that of the ARMAX Jacobian with y, u, e in place of y/C, u/C, ε/C and target y(k)."""
+    return _layout(na, nb, nc, delay, 0)
 
 
 @njit(cache=True, nogil=True)

@@ -11,12 +11,15 @@ from __future__ import annotations
 from typing import Any, Unpack
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from ehss.errors import IdentificationError
+from ehss.identification import _pem_kernels as _pk
 from ehss.identification._common import (
     ArmaxOrders,
     OrderKeywords,
     check_batch,
+    first_sample,
     prediction_errors,
     regression_matrix,
     rms_scale,
@@ -65,21 +68,56 @@ def els_theta(
 
 def _els(us: np.ndarray, ys: np.ndarray, na: int, nb: int, nc: int, delay: int,
          max_iter: int, tol: float) -> tuple[np.ndarray, int]:
-    phi, t, _ = regression_matrix(us, ys, None, na, nb, 0, delay)
     theta = np.zeros(na + nb + 1 + nc)
-    theta[: na + nb + 1] = np.linalg.lstsq(phi, t, rcond=None)[0]
+    theta[: na + nb + 1] = gram_lstsq(np.vstack([ys, us]), _pk.els_layout(na, nb, 0, delay),
+                                      first_sample(na, nb, 0, delay))
     iters = 0
     if nc:
+        layout, k0 = _pk.els_layout(na, nb, nc, delay), first_sample(na, nb, nc, delay)
+        signals = np.vstack([ys, us, ys])  # y, u and the c-regressors e, set below
         for iters in range(1, max_iter + 1):  # noqa: B007 - reported in meta
-            e = prediction_errors(theta, us, ys, na, nb, nc, delay)
-            phi, t, _ = regression_matrix(us, ys, e, na, nb, nc, delay)
-            new = np.linalg.lstsq(phi, t, rcond=None)[0]
-            new[na + nb + 1 :] = stabilise(new[na + nb + 1 :])
+            signals[2] = _pk.armax_errors(theta, us, ys, na, nb, nc, delay)
+            new = gram_lstsq(signals, layout, k0)
+            new[na + nb + 1 :] = _stable_c(new[na + nb + 1 :])
             change = np.linalg.norm(new - theta) / max(float(np.linalg.norm(new)), 1e-300)
             theta = new
             if change < tol:
                 break
     return theta, iters
+
+
+def _stable_c(c: np.ndarray, radius: float = 0.99) -> np.ndarray:
+    """c, or :func:`stabilise`'s reflection of it when a root of [1, c...] is at or
+    beyond ``radius`` (Schur–Cohn test first: no polynomial roots when all are inside)."""
+    return c if _pk.roots_inside(c, radius) else stabilise(c, radius)
+
+
+#: largest condition number of Φ (columns scaled to unit norm) whose least-squares
+#: problem is solved through ΦᵀΦ: its relative error grows as ε κ² there (ε = 2.2e-16),
+#: as ε κ (plus ε κ² times the relative residual) through ``lstsq``; up to κ = 1e5 that
+#: is ≤ 2e-6, the tolerance to which an extended-least-squares start is wanted (it is a
+#: start: the prediction-error fit takes it from there). Beyond it, ``lstsq`` of Φ.
+_COND_GRAM = 1e5
+
+
+def gram_lstsq(signals: np.ndarray, layout: tuple[np.ndarray, np.ndarray, np.ndarray],
+               k0: int) -> np.ndarray:
+    """θ minimising ‖t − Φθ‖ where the columns of [−Φ t] are delayed rows of ``signals``
+    (``layout``: their (row, lag, sign), as :func:`._pem_kernels.els_layout` gives them),
+    rows k ≥ k0.
+
+    Through the Gram matrix G = [−Φ t]ᵀ[−Φ t] (compiled, Φ not formed) and its Cholesky
+    factor when Φ is well enough conditioned (``_COND_GRAM``): with RᵀR = ΦᵀΦ and
+    Rᵀq = −Φᵀt (:func:`._pem_kernels.reduce_gram`), ‖t − Φθ‖² = ‖q + Rθ‖² + ρ², so
+    θ = −R⁻¹q. Otherwise Φ is formed and solved by ``numpy.linalg.lstsq`` (SVD).
+    """
+    row, lag, sign = layout
+    r, Rz = _pk.reduce_gram(_pk.gram(signals, row, lag, sign, k0), _COND_GRAM)
+    n = row.size - 1
+    if r.size == 0:
+        A = _pk.columns(signals, row, lag, sign, k0)
+        return np.linalg.lstsq(A[:, :n], -A[:, n], rcond=None)[0]
+    return -solve_triangular(Rz[:n], r[:n])
 
 
 def armax_els(

@@ -154,7 +154,7 @@ class _Predictor:
         return theta[: self.na] if self.oe else theta[self.na + self.nb + 1 :]
 
     def _signals_at(self, theta: np.ndarray) -> np.ndarray:
-        """The filtered signals at θ (rows of :func:`armax_signals`/:func:`oe_signals`,
+        """The filtered signals at θ (rows of :func:`armax_filtered`/:func:`oe_signals`,
         the residual last), from the cache if there."""
         if self._theta is None or not np.array_equal(theta, self._theta):
             th = np.ascontiguousarray(theta, dtype=np.float64)
@@ -162,9 +162,8 @@ class _Predictor:
                 yhat = _pk.oe_simulate(th, self.us, self.na, self.nb, self.delay)
                 sig = _pk.oe_signals(th, self.us, yhat, self.ys - yhat, self.na)
             else:
-                eps = _pk.armax_errors(th, self.us, self.ys, self.na, self.nb, self.nc,
-                                       self.delay)
-                sig = _pk.armax_signals(th, self.us, self.ys, eps, self.na, self.nb, self.nc)
+                sig = _pk.armax_filtered(th, self.us, self.ys, self.na, self.nb, self.nc,
+                                         self.delay)
             self._theta, self._signals, self._reduced = th.copy(), sig, None
         return self._signals
 
