@@ -174,22 +174,29 @@ def test_live_replay_names_the_columns_it_needs(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------------- datagrams
-def test_one_datagram_with_a_wild_index_is_dropped_not_believed():
-    lay = RecordLayout(("t", "ref1", "fb1"))
-    src = UdpSource(lay, ("127.0.0.1", 0), fs=1000.0)
-    x = np.arange(60.0).reshape(20, 3)
+def _received(src: UdpSource, datagrams: list[bytes]) -> list:
+    """The blocks ``src`` makes of ``datagrams`` sent to it over loopback, 1 ms apart."""
     try:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-            for k in range(20):
-                if k == 10:  # well formed, but its index is the largest a uint64 holds
-                    tx.sendto(lay.encode(2**64 - 1, x[k:k + 1]), src.address)
-                tx.sendto(lay.encode(k, x[k:k + 1]), src.address)
+            for datagram in datagrams:
+                tx.sendto(datagram, src.address)
                 time.sleep(0.001)
             blocks = []
             for _ in range(50):
                 blocks += src.poll(0.02)
     finally:
         src.close()
+    return blocks
+
+
+def test_one_datagram_with_a_wild_index_is_dropped_not_believed():
+    lay = RecordLayout(("t", "ref1", "fb1"))
+    src = UdpSource(lay, ("127.0.0.1", 0), fs=1000.0)
+    x = np.arange(60.0).reshape(20, 3)
+    datagrams = [lay.encode(k, x[k:k + 1]) for k in range(20)]
+    # well formed, but its index is the largest a uint64 holds
+    datagrams.insert(10, lay.encode(2**64 - 1, x[10:11]))
+    blocks = _received(src, datagrams)
     assert [b.first_index for b in blocks] == list(range(20))
     c = src.counters
     assert (c["malformed"], c["late"], c["lost_samples"], c["samples"]) == (1, 0, 0, 20)
@@ -200,17 +207,8 @@ def test_a_sender_that_restarts_its_count_is_followed():
     src = UdpSource(lay, ("127.0.0.1", 0), fs=1000.0)
     x = np.arange(30.0).reshape(10, 3)
     restart = 2**40  # far from the count: the first such datagram alone is not believed
-    try:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-            for k in range(10):
-                first = k if k < 5 else restart + k
-                tx.sendto(lay.encode(first, x[k:k + 1]), src.address)
-                time.sleep(0.001)
-            blocks = []
-            for _ in range(50):
-                blocks += src.poll(0.02)
-    finally:
-        src.close()
+    blocks = _received(src, [lay.encode(k if k < 5 else restart + k, x[k:k + 1])
+                             for k in range(10)])
     assert [b.first_index for b in blocks] == [0, 1, 2, 3, 4] + [restart + k
                                                                  for k in range(6, 10)]
     assert src.counters["late"] == 0
