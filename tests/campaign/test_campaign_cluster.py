@@ -100,6 +100,7 @@ def test_unreachable_scheduler_is_one_line(tmp_path):
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "cannot reach the Dask scheduler" in lines[0], res.stderr
+    assert not (tmp_path / "u").exists()  # nothing left behind for a run that never began
 
 
 def test_worker_without_ehss_records_the_error(tmp_path):

@@ -16,6 +16,7 @@ import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -27,6 +28,7 @@ from ehss.campaign.engine import (
     check_same_campaign,
     error_line,
     read_results,
+    record_campaign,
     run_campaign,
 )
 from ehss.campaign.figures import loop_figures
@@ -380,12 +382,12 @@ def batch(
     found = discover(patterns)
     out = Path(out)
     # the records may grow between runs; how each is identified may not
-    check_same_campaign(out, {k: v for k, v in settings.summary().items()
-                              if k != "records"})
+    same = {k: v for k, v in settings.summary().items() if k != "records"}
+    check_same_campaign(out, same)
     tasks = [Task(r.key, (r, settings), {"record": r.name}) for r in found]
     run = run_campaign(batch_task, tasks, out, seed=settings.seed, scheduler=scheduler,
                        workers=workers, quiet=quiet, connect_timeout_s=connect_timeout_s,
-                       description="batch")
+                       description="batch", begin=partial(record_campaign, settings=same))
     frame = flag_campaign(read_results(out, sort_by=("record", "channel")),
                           settings.outliers)
     write_json(out / "settings.json", {"settings": settings.summary(),

@@ -263,6 +263,7 @@ def run_campaign(
     connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
     quiet: bool = True,
     description: str = "campaign",
+    begin: Callable[[Path], None] | None = None,
 ) -> CampaignRun:
     """Run ``function`` over ``tasks`` on a Dask cluster; each task writes its own rows.
 
@@ -288,6 +289,10 @@ def run_campaign(
         How long to wait for ``scheduler``.
     quiet : bool, default True
         No progress bar and no dashboard line.
+    begin : callable ``(out) -> None``, optional
+        Called once the cluster is reached, before any task: writes what the campaign
+        records beside its rows (its settings). A scheduler that cannot be reached
+        leaves nothing behind.
 
     Returns
     -------
@@ -312,19 +317,17 @@ def run_campaign(
     start = time.perf_counter()
     out = Path(out)
     folder = out / TASKS_FOLDER
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise DataError(f"cannot create the campaign folder {str(folder)!r}: "
-                        f"{exc.strerror or exc}") from None
     keys = [t.key for t in tasks]
     if len(set(keys)) != len(keys):
         dup = next(k for k in keys if keys.count(k) > 1)
         raise ParameterError(f"task key {dup!r} appears more than once")
-    done = _done_keys(folder)
-    pending = [t for t in tasks if t.key not in done]
     n_done = n_failed = 0
     with _client(scheduler, workers, connect_timeout_s) as client:
+        # made once the cluster is reached: a scheduler that cannot be reached leaves
+        # no folder behind
+        _begin(folder, out, begin)
+        done = _done_keys(folder)
+        pending = [t for t in tasks if t.key not in done]
         dashboard = client.dashboard_link
         if not quiet:
             print(f"ehss {description}: Dask dashboard at {dashboard}", file=sys.stderr)
@@ -438,11 +441,23 @@ def _missing_module(exc: BaseException | None) -> BaseException | None:
     return None
 
 
+def _begin(folder: Path, out: Path, begin: Callable[[Path], None] | None) -> None:
+    """Make the campaign's folder of rows, then write what ``begin`` records beside it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DataError(f"cannot create the campaign folder {str(folder)!r}: "
+                        f"{exc.strerror or exc}") from None
+    if begin is not None:
+        begin(out)
+
+
 def check_same_campaign(out: str | Path, settings: dict[str, Any]) -> None:
     """Refuse to resume a campaign folder made with other settings.
 
-    ``out/campaign.json`` records the settings of the first run (written here when
-    missing); a re-run must give the same, or its rows would mix two campaigns.
+    ``out/campaign.json`` records the settings of the first run
+    (:func:`record_campaign`); a re-run must give the same, or its rows would mix two
+    campaigns. Nothing is written here.
 
     Raises
     ------
@@ -452,13 +467,11 @@ def check_same_campaign(out: str | Path, settings: dict[str, Any]) -> None:
     """
     import json
 
-    from ehss.io import to_jsonable, write_json
+    from ehss.io import to_jsonable
 
     path = Path(out) / "campaign.json"
     plain = to_jsonable(settings)
     if not path.exists():
-        Path(out).mkdir(parents=True, exist_ok=True)
-        write_json(path, plain)
         return
     try:
         old = json.loads(path.read_text(encoding="utf-8"))
@@ -471,6 +484,16 @@ def check_same_campaign(out: str | Path, settings: dict[str, Any]) -> None:
         raise ParameterError(f"{str(out)!r} holds a campaign with other settings ({key}: "
                              f"{old.get(key)!r} then, {plain.get(key)!r} now); resume it "
                              "with the same settings or use another --out")
+
+
+def record_campaign(out: str | Path, settings: dict[str, Any]) -> None:
+    """Write ``out/campaign.json``, the settings a resumed run must repeat, unless a first
+    run wrote it (:func:`check_same_campaign` has compared them)."""
+    from ehss.io import to_jsonable, write_json
+
+    path = Path(out) / "campaign.json"
+    if not path.exists():
+        write_json(path, to_jsonable(settings))
 
 
 def result_files(out: str | Path) -> list[Path]:

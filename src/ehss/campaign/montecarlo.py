@@ -37,6 +37,7 @@ from ehss.campaign.engine import (
     check_same_campaign,
     error_line,
     read_results,
+    record_campaign,
     run_campaign,
     task_seed,
 )
@@ -420,20 +421,25 @@ def montecarlo(
         settings = dataclasses.replace(settings, seed=seed)
     out = Path(out)
     # more samples later extend the same draw (a Sobol prefix); nothing else may change
-    check_same_campaign(out, {k: v for k, v in to_plain(settings).items()
-                              if k != "samples" or settings.sampling != "sobol"})
+    same = {k: v for k, v in to_plain(settings).items()
+            if k != "samples" or settings.sampling != "sobol"}
+    check_same_campaign(out, same)
     values = draw_samples(settings)
     names = [p.name for p in settings.parameters]
     nominal = identify_rig(settings.nominal_params(), settings,
                            task_seed(settings.seed, "nominal").generate_state(2))
-    if not (out / "nominal_model.json").exists():  # a resumed run keeps the first
-        nominal.model.save_json(out / "nominal_model.json")
+
+    def begin(out: Path) -> None:
+        record_campaign(out, same)
+        if not (out / "nominal_model.json").exists():  # a resumed run keeps the first
+            nominal.model.save_json(out / "nominal_model.json")
+
     tasks = [Task(f"s{i:06d}", (dict(zip(names, map(float, v), strict=True)),
                                       settings, nominal.model), {"sample": str(i)})
              for i, v in enumerate(values)]
     run_campaign(montecarlo_task, tasks, out, seed=settings.seed, scheduler=scheduler,
                  workers=workers, quiet=quiet, connect_timeout_s=connect_timeout_s,
-                 description="montecarlo")
+                 description="montecarlo", begin=begin)
     frame = read_results(out, sort_by=("task",))
     outcome = acceptance_fraction(frame, settings)
     write_json(out / "settings.json", {"settings": to_plain(settings),
