@@ -3,6 +3,7 @@ that carries a compensator to it, and the same filter and decoder in portable C9
 (``c/ehss_compensator.h``, ``c/ehss_compensator.c``; ``ehss target-code`` writes them out).
 """
 
+from ehss.target import filter as _filter
 from ehss.target.datagram import (
     FAULTS,
     RESULTS,
@@ -11,24 +12,11 @@ from ehss.target.datagram import (
     decode,
     encode,
 )
-from ehss.target.filter import (
-    MAX_PREVIEW,
-    MAX_SECTIONS,
-    MAX_TAPS,
-    SAMPLE_RATE_TOLERANCE,
-    Compensator,
-    CompensatorFilter,
-    coefficient_fault,
-)
+from ehss.target.filter import *  # noqa: F403  (every name of the filter is offered here)
 
+#: The filter's names, and those of the datagram a host sends a compensator with.
 __all__ = [
-    "MAX_SECTIONS",
-    "MAX_TAPS",
-    "MAX_PREVIEW",
-    "SAMPLE_RATE_TOLERANCE",
-    "Compensator",
-    "CompensatorFilter",
-    "coefficient_fault",
+    *_filter.__all__,
     "CompensatorUpdate",
     "FAULTS",
     "encode",
