@@ -37,12 +37,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ehss._checks import as_signal, check_fs, check_real
 from ehss.errors import ParameterError
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 __all__ = [
     "DEFAULT_MAX_GAIN",
@@ -98,8 +101,16 @@ class DriveLimits:
             object.__setattr__(self, name, _optional_positive(name, getattr(self, name)))
 
 
+class _Figures:
+    """A dataclass of figures that a sidecar or log records as JSON."""
+
+    def to_dict(self: DataclassInstance) -> dict[str, Any]:
+        """JSON-ready figures (every field; containers copied)."""
+        return dataclasses.asdict(self)
+
+
 @dataclass(frozen=True, kw_only=True)
-class DriveCheck:
+class DriveCheck(_Figures):
     """What :func:`check_drive` measured (drive and reference about the operating point).
 
     Attributes
@@ -124,10 +135,6 @@ class DriveCheck:
     peak_rate: float
     peak_rate2: float
     rig: dict
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready figures (every field; ``rig`` a copy)."""
-        return dataclasses.asdict(self)
 
 
 def _rms(x: np.ndarray) -> float:

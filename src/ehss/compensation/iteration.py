@@ -35,7 +35,6 @@ of their cross-correlation, refined by a parabola), and the drive's gain.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -46,7 +45,7 @@ import scipy.signal
 
 from ehss._checks import as_signal, check_band, check_bool, check_int, check_real, show
 from ehss.compensation.apply import Compensation, apply_inverse, model_offsets
-from ehss.compensation.checks import check_at_rest, checked_drive, fade_to_rest
+from ehss.compensation.checks import _Figures, check_at_rest, checked_drive, fade_to_rest
 from ehss.compensation.inverse import METHODS, _band_and_cutoff, design_inverse
 from ehss.compensation.inverse_model import InverseModel, _fft_band_limit, band_taper
 from ehss.compensation.rates import rate_factor
@@ -122,7 +121,7 @@ def lag_samples(reference: Any, output: Any) -> float:
 
 
 @dataclass(frozen=True, kw_only=True)
-class RunRecord:
+class RunRecord(_Figures):
     """Log of one played run (reference, drive and output about the operating point).
 
     Attributes
@@ -143,10 +142,6 @@ class RunRecord:
     lag_samples: float
     drive_rms_gain: float
     drive_peak_gain: float
-
-    def to_dict(self) -> dict[str, float]:
-        """JSON-ready figures (every field)."""
-        return dataclasses.asdict(self)
 
 
 def run_record(reference: Any, drive: Any, output: Any) -> RunRecord:
