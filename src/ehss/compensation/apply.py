@@ -99,6 +99,7 @@ def apply_inverse(
     Returns
     -------
     drive : ndarray, shape (n_samples,)
+        At the reference's rate ``fs``, about the model's operating point.
 
     Raises
     ------

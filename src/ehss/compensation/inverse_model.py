@@ -225,6 +225,7 @@ class InverseModel:
         Returns
         -------
         drive : ndarray, shape (n_samples,)
+            At the model's rate ``1/dt``, as the reference.
 
         Raises
         ------
