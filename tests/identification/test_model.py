@@ -84,6 +84,23 @@ def test_paper_form_round_trip_and_simulate():
     assert m.poles().size == 6
 
 
+def test_simulate_with_innovation_follows_the_difference_equation():
+    # A y = q^-d B u + C e, written out sample by sample from the definition
+    m = ArmaxModel(a=[1.0, -0.8, 0.15], b=[0.5, 0.2], c=[1.0, 0.5], delay=2, dt=DT_S)
+    rng = np.random.default_rng(3)
+    u, e = rng.standard_normal(200), 0.1 * rng.standard_normal(200)
+    y = np.zeros(200)
+    for k in range(200):
+        y[k] = (sum(m.b[i] * u[k - 2 - i] for i in range(2) if k - 2 - i >= 0)
+                + e[k] + sum(m.c[i] * e[k - i] for i in range(1, 2) if k - i >= 0)
+                - sum(m.a[i] * y[k - i] for i in range(1, 3) if k - i >= 0))
+    # summation order differs from lfilter's: a few ulps of |y| ~ 1
+    assert_allclose(m.simulate(u, innovation=e), y, rtol=0, atol=1e-13)
+    assert_allclose(m.simulate(u), m.simulate(u, innovation=np.zeros(200)), rtol=0, atol=0)
+    with pytest.raises(DataError, match="innovation has shape"):
+        m.simulate(u, innovation=e[:-1])
+
+
 def test_format_paper_full_precision():
     m = ArmaxModel(a=[1.0, -0.123456789012345678], b=[0.1], delay=1, dt=1e-3)
     s = m.format_paper()

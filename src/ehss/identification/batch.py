@@ -158,11 +158,10 @@ def armax_els(
     Examples
     --------
     >>> import numpy as np
-    >>> from scipy.signal import lfilter
+    >>> true = ArmaxModel(a=[1, -0.8], b=[0.5], c=[1, 0.5])
     >>> rng = np.random.default_rng(0)
     >>> u = rng.standard_normal(5000)
-    >>> e = 0.1 * rng.standard_normal(5000)
-    >>> y = lfilter([0, 0.5], [1, -0.8], u) + lfilter([1, 0.5], [1, -0.8], e)
+    >>> y = true.simulate(u, innovation=0.1 * rng.standard_normal(5000))
     >>> m = armax_els(u, y, na=1, nb=0, nc=1)
     >>> m.meta["method"], bool(abs(m.a[1] + 0.8) < 0.01)
     ('armax_els', True)

@@ -352,13 +352,33 @@ class ArmaxModel:
         den = np.polyval(self.a[::-1], zi)
         return zi**self.delay * num / den
 
-    def simulate(self, u: Any) -> np.ndarray:
-        """Noise-free output B/A u with zero initial conditions."""
+    def simulate(self, u: Any, innovation: Any = None) -> np.ndarray:
+        """Output of the model with zero initial conditions: y = q^-d B/A u (+ C/A ξ).
+
+        Parameters
+        ----------
+        u : array_like, shape (n_samples,)
+            Input.
+        innovation : array_like, shape (n_samples,), optional
+            The white noise ξ of the model; without it the output is noise-free.
+
+        Raises
+        ------
+        DataError
+            If ``innovation`` and ``u`` differ in shape.
+        """
         from scipy.signal import lfilter
 
         u = np.asarray(u, dtype=np.float64)
         bd = np.concatenate([np.zeros(self.delay), self.b])
-        return lfilter(bd, self.a, u)
+        y = lfilter(bd, self.a, u)
+        if innovation is None:
+            return y
+        e = np.asarray(innovation, dtype=np.float64)
+        if e.shape != u.shape:
+            raise DataError(f"innovation has shape {e.shape}, the input {u.shape}: they "
+                            "must match")
+        return y + lfilter(self.c, self.a, e)
 
     def predict(self, u: Any, y: Any, horizon: int = 1) -> np.ndarray:
         """k-step-ahead ARMAX predictor ŷ(k | k − horizon), zero initial conditions.

@@ -266,11 +266,10 @@ def armax_pem(
     Examples
     --------
     >>> import numpy as np
-    >>> from scipy.signal import lfilter
+    >>> true = ArmaxModel(a=[1, -0.8], b=[0.5], c=[1, 0.5])
     >>> rng = np.random.default_rng(0)
     >>> u = rng.standard_normal(3000)
-    >>> e = 0.1 * rng.standard_normal(3000)
-    >>> y = lfilter([0, 0.5], [1, -0.8], u) + lfilter([1, 0.5], [1, -0.8], e)
+    >>> y = true.simulate(u, innovation=0.1 * rng.standard_normal(3000))
     >>> m = armax_pem(u, y, na=1, nb=0, nc=1)
     >>> bool(abs(m.a[1] + 0.8) < 0.01 and abs(m.c[1] - 0.5) < 0.05)
     True
@@ -470,11 +469,13 @@ def oe_pem(
 
     Examples
     --------
+    An output error model's noise is white at the output:
+
     >>> import numpy as np
-    >>> from scipy.signal import lfilter
+    >>> true = ArmaxModel(a=[1, -0.8], b=[0.5])
     >>> rng = np.random.default_rng(0)
     >>> u = rng.standard_normal(3000)
-    >>> y = lfilter([0, 0.5], [1, -0.8], u) + 0.1 * rng.standard_normal(3000)
+    >>> y = true.simulate(u) + 0.1 * rng.standard_normal(3000)
     >>> m = oe_pem(u, y, nf=1, nb=0)
     >>> bool(abs(m.a[1] + 0.8) < 0.01) and bool(np.array_equal(m.a, m.c))
     True
