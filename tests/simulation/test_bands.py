@@ -28,7 +28,7 @@ def _measured_response(loop: str, **size):
     u = run.reference - run.reference.mean()
     y = run.output - run.output.mean()
     frf = h1_estimate(u, y, FS, nperseg=2048)
-    assert run.drive_saturation_fraction == 0.0  # a linear test, not a saturated one
+    assert run.limit_fractions["drive_saturated"] == 0.0  # a linear test, not a saturated one
     return frf
 
 

@@ -100,7 +100,7 @@ def test_force_loop_starts_in_equilibrium_on_an_offset():
 def test_limits_are_reported():
     # a 9 cm step in 0.3 s is beyond the valve: the drive saturates
     r = simulate("position", _step(0.09, 300, start=10), seed=6)
-    assert r.drive_saturation_fraction > 0.05
+    assert r.limit_fractions["drive_saturated"] > 0.05
     assert "drive_saturated" in r.limits_hit
 
 

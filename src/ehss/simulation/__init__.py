@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from ehss.simulation.core import (
+    LIMIT_FLAGS,
     LOOPS,
     SimulationResult,
     SimulationState,
@@ -12,5 +13,5 @@ from ehss.simulation.core import (
 )
 from ehss.simulation.open_loop import simulate_open_loop
 
-__all__ = ["LOOPS", "SimulationResult", "SimulationState", "simulate", "simulate_open_loop",
-           "with_control_rate"]
+__all__ = ["LOOPS", "LIMIT_FLAGS", "SimulationResult", "SimulationState", "simulate",
+           "simulate_open_loop", "with_control_rate"]

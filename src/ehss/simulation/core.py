@@ -39,7 +39,14 @@ from ehss.plant.model import (
 )
 from ehss.simulation import _kernels as SK
 
-__all__ = ["LOOPS", "SimulationResult", "SimulationState", "simulate", "with_control_rate"]
+__all__ = [
+    "LOOPS",
+    "LIMIT_FLAGS",
+    "SimulationResult",
+    "SimulationState",
+    "simulate",
+    "with_control_rate",
+]
 
 #: Closed loops that :func:`simulate` can run.
 LOOPS = ("position", "acceleration", "force")
@@ -49,6 +56,14 @@ _OUTPUT = {
     "position": ("lvdt_m", "m"),
     "acceleration": ("accel_m_s2", "m/s²"),
     "force": ("force_cell_n", "N"),
+}
+
+#: The 0/1 limit flags among the signals, and when each is set.
+LIMIT_FLAGS = {
+    "drive_saturated": "the drive is clipped at the controller's output limit",
+    "spool_saturated": "the spool is at ±1",
+    "stroke_end": "the piston is beyond ±stroke (on the end stops)",
+    "pressure_limit": "a chamber pressure is at 0 or Ps",
 }
 
 _SIGNAL_UNITS = {
@@ -67,10 +82,7 @@ _SIGNAL_UNITS = {
     "accel_m_s2": "m/s²",
     "force_cell_n": "N",
     "generated_acceleration_m_s2": "m/s²",
-    "drive_saturated": "-",
-    "spool_saturated": "-",
-    "stroke_end": "-",
-    "pressure_limit": "-",
+    **dict.fromkeys(LIMIT_FLAGS, "-"),
 }
 
 
@@ -166,39 +178,17 @@ class SimulationResult:
         cols.update(self.signals)
         return cols
 
-    def _fraction(self, name: str) -> float:
-        return float(np.mean(self.signals[name])) if self.t.size else 0.0
-
     @property
-    def drive_saturation_fraction(self) -> float:
-        """Fraction of control periods with the drive clipped at its output limit."""
-        return self._fraction("drive_saturated")
-
-    @property
-    def spool_saturation_fraction(self) -> float:
-        """Fraction of samples with the spool at ±1."""
-        return self._fraction("spool_saturated")
-
-    @property
-    def stroke_end_fraction(self) -> float:
-        """Fraction of samples with the piston beyond ±stroke (on the end stops)."""
-        return self._fraction("stroke_end")
-
-    @property
-    def pressure_limit_fraction(self) -> float:
-        """Fraction of samples with a chamber pressure at 0 or Ps."""
-        return self._fraction("pressure_limit")
+    def limit_fractions(self) -> dict[str, float]:
+        """Fraction of the samples each limit flag is set in, by flag
+        (:data:`LIMIT_FLAGS` says what each counts)."""
+        return {name: float(np.mean(self.signals[name])) if self.t.size else 0.0
+                for name in LIMIT_FLAGS}
 
     @property
     def limits_hit(self) -> dict[str, float]:
-        """The limit fractions that are non-zero, by name."""
-        fractions = {
-            "drive_saturated": self.drive_saturation_fraction,
-            "spool_saturated": self.spool_saturation_fraction,
-            "stroke_end": self.stroke_end_fraction,
-            "pressure_limit": self.pressure_limit_fraction,
-        }
-        return {k: v for k, v in fractions.items() if v > 0.0}
+        """The limit fractions that are non-zero, by flag."""
+        return {k: v for k, v in self.limit_fractions.items() if v > 0.0}
 
 
 # ----------------------------------------------------------------------------- helpers
