@@ -16,7 +16,6 @@ import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,10 +24,8 @@ import numpy as np
 from ehss._checks import check_band, check_choice, check_int, check_real, show
 from ehss.campaign.engine import (
     Task,
-    check_same_campaign,
     error_line,
     read_results,
-    record_campaign,
     run_campaign,
 )
 from ehss.campaign.figures import loop_figures
@@ -383,11 +380,10 @@ def batch(
     out = Path(out)
     # the records may grow between runs; how each is identified may not
     same = {k: v for k, v in settings.summary().items() if k != "records"}
-    check_same_campaign(out, same)
     tasks = [Task(r.key, (r, settings), {"record": r.name}) for r in found]
     run = run_campaign(batch_task, tasks, out, seed=settings.seed, scheduler=scheduler,
                        workers=workers, quiet=quiet, connect_timeout_s=connect_timeout_s,
-                       description="batch", begin=partial(record_campaign, settings=same))
+                       description="batch", settings=same)
     frame = flag_campaign(read_results(out, sort_by=("record", "channel")),
                           settings.outliers)
     write_json(out / "settings.json", {"settings": settings.summary(),

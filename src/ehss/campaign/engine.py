@@ -263,6 +263,7 @@ def run_campaign(
     connect_timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
     quiet: bool = True,
     description: str = "campaign",
+    settings: dict[str, Any] | None = None,
     begin: Callable[[Path], None] | None = None,
 ) -> CampaignRun:
     """Run ``function`` over ``tasks`` on a Dask cluster; each task writes its own rows.
@@ -289,10 +290,14 @@ def run_campaign(
         How long to wait for ``scheduler``.
     quiet : bool, default True
         No progress bar and no dashboard line.
+    settings : dict, optional
+        What defines the campaign: a folder made with other settings is refused
+        (:func:`check_same_campaign`), and the first run records them
+        (:func:`record_campaign`) once the cluster is reached.
     begin : callable ``(out) -> None``, optional
-        Called once the cluster is reached, before any task: writes what the campaign
-        records beside its rows (its settings). A scheduler that cannot be reached
-        leaves nothing behind.
+        Called once the cluster is reached (after ``settings`` are recorded), before any
+        task: writes what else the campaign keeps beside its rows. A scheduler that
+        cannot be reached leaves nothing behind.
 
     Returns
     -------
@@ -303,7 +308,7 @@ def run_campaign(
     DataError
         If the scheduler cannot be reached, or ``out`` cannot hold the results.
     ParameterError
-        If two tasks share a key.
+        If two tasks share a key, or ``out`` holds a campaign with other settings.
     KeyboardInterrupt
         Passed on after the futures are cancelled; the finished tasks' files stay.
     """
@@ -321,11 +326,13 @@ def run_campaign(
     if len(set(keys)) != len(keys):
         dup = next(k for k in keys if keys.count(k) > 1)
         raise ParameterError(f"task key {dup!r} appears more than once")
+    if settings is not None:
+        check_same_campaign(out, settings)
     n_done = n_failed = 0
     with _client(scheduler, workers, connect_timeout_s) as client:
         # made once the cluster is reached: a scheduler that cannot be reached leaves
         # no folder behind
-        _begin(folder, out, begin)
+        _begin(folder, out, settings, begin)
         done = _done_keys(folder)
         pending = [t for t in tasks if t.key not in done]
         dashboard = client.dashboard_link
@@ -441,13 +448,17 @@ def _missing_module(exc: BaseException | None) -> BaseException | None:
     return None
 
 
-def _begin(folder: Path, out: Path, begin: Callable[[Path], None] | None) -> None:
-    """Make the campaign's folder of rows, then write what ``begin`` records beside it."""
+def _begin(folder: Path, out: Path, settings: dict[str, Any] | None,
+           begin: Callable[[Path], None] | None) -> None:
+    """Make the campaign's folder of rows, then record its settings and what ``begin``
+    writes beside it."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DataError(f"cannot create the campaign folder {str(folder)!r}: "
                         f"{exc.strerror or exc}") from None
+    if settings is not None:
+        record_campaign(out, settings)
     if begin is not None:
         begin(out)
 

@@ -37,7 +37,6 @@ from ehss.campaign.engine import (
     check_same_campaign,
     error_line,
     read_results,
-    record_campaign,
     run_campaign,
     task_seed,
 )
@@ -423,14 +422,13 @@ def montecarlo(
     # more samples later extend the same draw (a Sobol prefix); nothing else may change
     same = {k: v for k, v in to_plain(settings).items()
             if k != "samples" or settings.sampling != "sobol"}
-    check_same_campaign(out, same)
+    check_same_campaign(out, same)  # before the nominal loop is identified, not after
     values = draw_samples(settings)
     names = [p.name for p in settings.parameters]
     nominal = identify_rig(settings.nominal_params(), settings,
                            task_seed(settings.seed, "nominal").generate_state(2))
 
     def begin(out: Path) -> None:
-        record_campaign(out, same)
         if not (out / "nominal_model.json").exists():  # a resumed run keeps the first
             nominal.model.save_json(out / "nominal_model.json")
 
@@ -439,7 +437,7 @@ def montecarlo(
              for i, v in enumerate(values)]
     run_campaign(montecarlo_task, tasks, out, seed=settings.seed, scheduler=scheduler,
                  workers=workers, quiet=quiet, connect_timeout_s=connect_timeout_s,
-                 description="montecarlo", begin=begin)
+                 description="montecarlo", settings=same, begin=begin)
     frame = read_results(out, sort_by=("task",))
     outcome = acceptance_fraction(frame, settings)
     write_json(out / "settings.json", {"settings": to_plain(settings),
