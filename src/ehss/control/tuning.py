@@ -9,9 +9,9 @@ The defaults in :mod:`ehss.params` are these results for ``preset("default")``, 
 
 Requirements (Table 2): closed loops within ±3 dB over position 0–20 Hz, acceleration
 1–50 Hz, force 0–20 Hz, each with a gain margin of at least 6 dB. The designs aim at
-``gain_margin_db`` = 6.5 dB, leaving 0.5 dB for rounding and model error. Position and
-force meet their bands; the acceleration band cannot be met at 6 dB gain margin with the
-paper's TVC structure (see :func:`tune_tvc`).
+``gain_margin_db`` = :data:`DESIGN_GAIN_MARGIN_DB`, leaving 0.5 dB for rounding and model
+error. Position and force meet their bands; the acceleration band cannot be met at 6 dB
+gain margin with the paper's TVC structure (see :func:`tune_tvc`).
 """
 
 from __future__ import annotations
@@ -27,7 +27,11 @@ from ehss._checks import check_real
 from ehss.errors import ParameterError
 from ehss.params import ForcePidParams, PositionPidParams, RigParams, TvcParams
 
-__all__ = ["tune_position", "tune_tvc", "tune_force", "tvc_pole_placement"]
+__all__ = ["tune_position", "tune_tvc", "tune_force", "tvc_pole_placement",
+           "DESIGN_GAIN_MARGIN_DB"]
+
+#: Gain margin of the sampled loop every tuning aims at, dB (6 dB required, Table 2).
+DESIGN_GAIN_MARGIN_DB = 6.5
 
 
 def _check_gm(gain_margin_db: float) -> None:
@@ -43,7 +47,10 @@ def _scale_to_margin(params: RigParams, loop: str, target_db: float) -> float:
 
 
 def tune_position(
-    params: RigParams, *, gain_margin_db: float = 6.5, integral_ratio: float = 0.05
+    params: RigParams,
+    *,
+    gain_margin_db: float = DESIGN_GAIN_MARGIN_DB,
+    integral_ratio: float = 0.05,
 ) -> PositionPidParams:
     """Position PI gains from the discrete loop's gain margin, eq (9).
 
@@ -91,7 +98,9 @@ def tune_position(
     return dataclasses.replace(pos, kp_v_per_m=kp, ki_v_per_m_per_s=kp * w_i)
 
 
-def tune_force(params: RigParams, *, gain_margin_db: float = 6.5) -> ForcePidParams:
+def tune_force(
+    params: RigParams, *, gain_margin_db: float = DESIGN_GAIN_MARGIN_DB
+) -> ForcePidParams:
     """Force PI gains: zero on the pressure pole ωr of eq (8), gain from the margin.
 
     Notes
@@ -169,12 +178,12 @@ def tvc_pole_placement(
 def tune_tvc(
     params: RigParams,
     *,
-    gain_margin_db: float = 6.5,
+    gain_margin_db: float = DESIGN_GAIN_MARGIN_DB,
     omega_nc_ratio: float = 1.05,
     damping_nc: float = 0.7,
-    kg: float = 1.0,
-    generator_omega_rad_s: float = 3.14,
-    generator_damping: float = 0.7,
+    kg: float = TvcParams.kg,
+    generator_omega_rad_s: float = TvcParams.generator_omega_rad_s,
+    generator_damping: float = TvcParams.generator_damping,
 ) -> TvcParams:
     """TVC gains by pole placement (eqs (10)–(13)) with the widest ωd the margin allows.
 
@@ -186,8 +195,8 @@ def tune_tvc(
     omega_nc_ratio, damping_nc : float
         ωnc/ωh (1.05–1.2 in the paper) and ζnc (≈ 0.7) of eq (11).
     kg, generator_omega_rad_s, generator_damping : float
-        Kg, ωn, ζn of the acceleration generator, eq (10) (Table 3: ωn = 3.14 rad/s,
-        ζn = 0.7).
+        Kg, ωn, ζn of the acceleration generator, eq (10); by default those of
+        :class:`~ehss.params.TvcParams` (Table 3: ωn = 3.14 rad/s, ζn = 0.7).
 
     Notes
     -----
