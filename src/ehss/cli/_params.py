@@ -16,10 +16,6 @@ if TYPE_CHECKING:
 
 __all__ = ["register", "loop_check", "warn_if_unstable"]
 
-LOOPS = ("position", "acceleration", "force")
-#: the gain margin the loops are designed for (Table 2: at least 6 dB)
-REQUIRED_GM_DB = 6.0
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(
@@ -85,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
+    from ehss.control.tuning import REQUIRED_GAIN_MARGIN_DB
+    from ehss.linear import LOOPS
+
     params = load_params(args.params) if args.params else preset(args.preset)
     if args.tune:
         params = _tuned(params)
@@ -103,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
     for loop in LOOPS:
         radius, m = loop_check(params, loop)
         verdict = ("UNSTABLE" if radius >= 1.0 else
-                   f"below {REQUIRED_GM_DB:g} dB" if m.gain_margin_db < REQUIRED_GM_DB else "ok")
+                   f"below {REQUIRED_GAIN_MARGIN_DB:g} dB"
+                   if m.gain_margin_db < REQUIRED_GAIN_MARGIN_DB else "ok")
         loops.add_row(loop, f"{radius:.4f}", f"{m.gain_margin_db:.2f} dB",
                       f"{m.phase_margin_deg:.1f}°", verdict)
     console.print(loops)
