@@ -75,9 +75,9 @@ def test_demonstration_and_its_figure_are_bit_identical_in_a_second_process(pool
     there = collect(submit(pool, demonstrate, "position", **kw))
     assert there.figures() == here.figures()
     for name in here.references:
-        np.testing.assert_array_equal(there.outputs_with[name], here.outputs_with[name])
+        np.testing.assert_array_equal(there.with_.outputs[name], here.with_.outputs[name])
         np.testing.assert_array_equal(there.drives[name], here.drives[name])
-    np.testing.assert_array_equal(there.h1_with, here.h1_with)
+    np.testing.assert_array_equal(there.with_.h1, here.with_.h1)
     png_there = collect(submit(pool, render_png, compensation_figure, here))
     assert png_there == render_png(compensation_figure, here)
 

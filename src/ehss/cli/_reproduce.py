@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     for name, demo in result.compensation.items():
         band = demo.compensation_model.band_hz
         where = "no validated band" if band is None else f"band {band[0]:g}-{band[1]:g} Hz"
-        gain = demo.rms_error_without["random"] / demo.one_shot_rms_error["random"]
+        gain = demo.without.rms_error["random"] / demo.one_shot_rms_error["random"]
         lines.append(f"{name:>12}: compensate with {out / compensation_file(name)} "
                      f"({where}; one shot {gain:.0f}x less RMS error on the demonstration's "
                      "random reference)")

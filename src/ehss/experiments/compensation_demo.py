@@ -45,7 +45,7 @@ from ehss.compensation import InverseModel, UpdateOptions, design_inverse
 from ehss.errors import ParameterError
 from ehss.experiments.refinement import refine, rms
 
-__all__ = ["CompensationDemo", "LOOP_SETTINGS", "demonstrate", "write_demo_report",
+__all__ = ["CompensationDemo", "Tracking", "LOOP_SETTINGS", "demonstrate", "write_demo_report",
            "plot_demo", "earthquake_reference", "random_reference"]
 
 #: Per loop: working band (Table 2), identification band and size, model orders, the
@@ -137,20 +137,19 @@ class CompensationDemo:
     inverse : InverseModel
         Its inverse (rest⁻¹ ∘ known⁻¹).
     fs : float
-    references, outputs_without, outputs_with, drives : dict of str to ndarray
+    references, drives : dict of str to ndarray
         Per test (``"random"``, ``"earthquake"``).
-    rms_error_without, rms_error_with : dict of str to float
+    freq_hz : ndarray
+        Frequencies of the H1 estimates (reference → output).
+    without, with_ : Tracking
+        How the loop tracked the references without compensation and with the refined
+        drive.
     improvement : dict of str to float
-        ``rms_error_without / rms_error_with``.
+        RMS error without / with, per test.
     one_shot_rms_error : dict of str to float
         RMS error per test with the one-shot inverse (before refinement).
     refine_rms_error : dict of str to ndarray
         RMS error per test and refinement run (drive-file iteration).
-    freq_hz : ndarray
-        Frequencies of the H1 estimates (reference → output).
-    h1_without, h1_with : ndarray of complex
-    max_abs_db_without, max_abs_db_with, max_abs_deg_without, max_abs_deg_with : float
-        Worst deviation from unity in ``judge_hz``.
     validation : ValidationReport
         ``model`` validated on the random test run without compensation (reference →
         output), as :func:`ehss.workflow.assess` validates on a separate record.
@@ -172,21 +171,13 @@ class CompensationDemo:
     fs: float
     unit: str
     references: dict = field(repr=False)
-    outputs_without: dict = field(repr=False)
-    outputs_with: dict = field(repr=False)
     drives: dict = field(repr=False)
-    rms_error_without: dict
-    rms_error_with: dict
+    freq_hz: np.ndarray = field(repr=False)
+    without: Tracking
+    with_: Tracking
     improvement: dict
     one_shot_rms_error: dict
     refine_rms_error: dict
-    freq_hz: np.ndarray = field(repr=False)
-    h1_without: np.ndarray = field(repr=False)
-    h1_with: np.ndarray = field(repr=False)
-    max_abs_db_without: float
-    max_abs_db_with: float
-    max_abs_deg_without: float
-    max_abs_deg_with: float
     validation: Any = field(repr=False)
     verdict: Any
     compensation_model: Any = field(repr=False)
@@ -194,17 +185,18 @@ class CompensationDemo:
     def summary(self) -> str:
         """A few lines for a terminal or a report."""
         lo, hi = self.judge_hz
+        off, on = self.without, self.with_
         lines = [
             f"{self.loop} loop, {self.method.upper()} inverse (preview {self.inverse.preview} "
             f"samples, band {self.band_hz[0]:g}-{self.band_hz[1]:g} Hz)",
             f"  amplitude ratio / phase in {lo:g}-{hi:g} Hz: without "
-            f"±{self.max_abs_db_without:.2f} dB / ±{self.max_abs_deg_without:.1f}°, with "
-            f"±{self.max_abs_db_with:.2f} dB / ±{self.max_abs_deg_with:.1f}°",
+            f"±{off.max_abs_db:.2f} dB / ±{off.max_abs_deg:.1f}°, with "
+            f"±{on.max_abs_db:.2f} dB / ±{on.max_abs_deg:.1f}°",
         ]
         for name in self.references:
             lines.append(
-                f"  {name}: RMS error {self.rms_error_without[name]:.4g} → "
-                f"{self.rms_error_with[name]:.4g} {self.unit} "
+                f"  {name}: RMS error {off.rms_error[name]:.4g} → "
+                f"{on.rms_error[name]:.4g} {self.unit} "
                 f"({self.improvement[name]:.1f}× better; one-shot inverse "
                 f"{self.one_shot_rms_error[name]:.4g})"
             )
@@ -217,17 +209,16 @@ class CompensationDemo:
 
     def figures(self) -> dict[str, Any]:
         """JSON-ready key figures."""
+        off, on = self.without, self.with_
         return {
             "loop": self.loop, "method": self.method, "band_hz": list(self.band_hz),
             "judge_hz": list(self.judge_hz), "preview_samples": self.inverse.preview,
-            "rms_error_without": self.rms_error_without,
-            "rms_error_with": self.rms_error_with, "improvement": self.improvement,
-            "one_shot_rms_error": self.one_shot_rms_error,
+            "rms_error_without": off.rms_error, "rms_error_with": on.rms_error,
+            "improvement": self.improvement, "one_shot_rms_error": self.one_shot_rms_error,
             "refine_rms_error": {k: v.tolist() for k, v in self.refine_rms_error.items()},
-            "max_abs_db_without": self.max_abs_db_without,
-            "max_abs_db_with": self.max_abs_db_with,
-            "max_abs_deg_without": self.max_abs_deg_without,
-            "max_abs_deg_with": self.max_abs_deg_with, "unit": self.unit,
+            "max_abs_db_without": off.max_abs_db, "max_abs_db_with": on.max_abs_db,
+            "max_abs_deg_without": off.max_abs_deg, "max_abs_deg_with": on.max_abs_deg,
+            "unit": self.unit,
             "model": self.model.to_dict() if hasattr(self.model, "to_dict") else None,
             "compensation_model": self.compensation_model.to_dict(),
             "validation": self.validation.summary(),
@@ -235,17 +226,45 @@ class CompensationDemo:
         }
 
 
-def _h1(r: np.ndarray, y: np.ndarray, fs: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True, kw_only=True)
+class Tracking:
+    """How the loop tracked the demonstration's references, without or with compensation.
+
+    Attributes
+    ----------
+    outputs : dict of str to ndarray
+        Measured output per test (``"random"``, ``"earthquake"``).
+    rms_error : dict of str to float
+        RMS tracking error per test.
+    h1 : ndarray of complex
+        H1 estimate reference → output of the random test, at
+        :attr:`CompensationDemo.freq_hz`.
+    max_abs_db, max_abs_deg : float
+        Worst deviation of ``h1`` from unity in the judged band.
+    """
+
+    outputs: dict = field(repr=False)
+    rms_error: dict
+    h1: np.ndarray = field(repr=False)
+    max_abs_db: float
+    max_abs_deg: float
+
+
+def _tracking(references: dict[str, np.ndarray], outputs: dict[str, np.ndarray], fs: float,
+              judge: tuple[float, float]) -> tuple[np.ndarray, Tracking]:
+    """The tracking figures of one set of runs, and the frequencies of its H1 (reference →
+    output of the random test, about 0.5 Hz resolution)."""
     from ehss.frequency import h1_estimate
 
-    est = h1_estimate(r, y, fs, nperseg=nperseg)
-    return est.freq_hz, est.response
-
-
-def _worst(freq: np.ndarray, h: np.ndarray, band: tuple[float, float]) -> tuple[float, float]:
-    sel = (freq >= band[0] - 1e-9) & (freq <= band[1] + 1e-9)
-    return (float(np.max(np.abs(20 * np.log10(np.abs(h[sel]))))),
-            float(np.max(np.abs(np.degrees(np.angle(h[sel]))))))
+    r = references["random"]
+    nperseg = min(int(2 ** round(math.log2(fs / 0.5))), r.size // 4)
+    est = h1_estimate(r, outputs["random"], fs, nperseg=nperseg)
+    freq, h = est.freq_hz, est.response
+    sel = (freq >= judge[0] - 1e-9) & (freq <= judge[1] + 1e-9)
+    return freq, Tracking(
+        outputs=outputs, rms_error={k: rms(outputs[k] - references[k]) for k in references},
+        h1=h, max_abs_db=float(np.max(np.abs(20 * np.log10(np.abs(h[sel]))))),
+        max_abs_deg=float(np.max(np.abs(np.degrees(np.angle(h[sel]))))))
 
 
 def demonstrate(
@@ -346,27 +365,17 @@ def demonstrate(
     final_inverse = design_inverse(final_rest, method=method, known=known)
     final_model = final_rest if known is None else dataclasses.replace(
         compose(final_rest, num, den), band_hz=band)
-    err0 = {k: rms(outputs_without[k] - references[k]) for k in references}
-    err1 = {k: rms(outputs_with[k] - references[k]) for k in references}
-    nperseg = int(2 ** round(math.log2(fs / 0.5)))  # ~0.5 Hz resolution
-    nperseg = min(nperseg, references["random"].size // 4)
-    freq, h0 = _h1(references["random"], outputs_without["random"], fs, nperseg)
-    _, h1 = _h1(references["random"], outputs_with["random"], fs, nperseg)
-    db0, deg0 = _worst(freq, h0, judge)
-    db1, deg1 = _worst(freq, h1, judge)
+    freq, without = _tracking(references, outputs_without, fs, judge)
+    _, with_ = _tracking(references, outputs_with, fs, judge)
     validation, verdict, compensation_model = _validate(
         final_model, (u_id, y_id), (references["random"], outputs_without["random"]),
         fs, band)
     return CompensationDemo(
         loop=loop, method=method, band_hz=band, judge_hz=judge, model=final_model,
         inverse=final_inverse, fs=fs, unit=cfg["unit"], references=references,
-        outputs_without=outputs_without, outputs_with=outputs_with, drives=drives,
-        rms_error_without=err0, rms_error_with=err1,
-        improvement={k: err0[k] / err1[k] for k in references},
+        drives=drives, freq_hz=freq, without=without, with_=with_,
+        improvement={k: without.rms_error[k] / with_.rms_error[k] for k in references},
         one_shot_rms_error=one_shot, refine_rms_error=history,
-        freq_hz=freq, h1_without=h0, h1_with=h1,
-        max_abs_db_without=db0, max_abs_db_with=db1,
-        max_abs_deg_without=deg0, max_abs_deg_with=deg1,
         validation=validation, verdict=verdict, compensation_model=compensation_model,
     )
 
@@ -401,16 +410,16 @@ def plot_demo(result: CompensationDemo, path: str | Path | None = None) -> Any:
     lo, hi = result.judge_hz
     ax = axes[0, 0]
     ax.axhspan(-1, 1, color="0.9", label="±1 dB")
-    ax.semilogx(f[sel], 20 * np.log10(np.abs(result.h1_without[sel])), label="without")
-    ax.semilogx(f[sel], 20 * np.log10(np.abs(result.h1_with[sel])), label="with")
+    ax.semilogx(f[sel], 20 * np.log10(np.abs(result.without.h1[sel])), label="without")
+    ax.semilogx(f[sel], 20 * np.log10(np.abs(result.with_.h1[sel])), label="with")
     ax.axvline(lo, color="0.5", ls=":")
     ax.axvline(hi, color="0.5", ls=":")
     ax.set(ylabel="amplitude ratio (dB)", title=f"{result.loop} loop: reference → output (H1)")
     ax.legend()
     ax = axes[1, 0]
     ax.axhspan(-5, 5, color="0.9", label="±5°")
-    ax.semilogx(f[sel], np.degrees(np.angle(result.h1_without[sel])), label="without")
-    ax.semilogx(f[sel], np.degrees(np.angle(result.h1_with[sel])), label="with")
+    ax.semilogx(f[sel], np.degrees(np.angle(result.without.h1[sel])), label="without")
+    ax.semilogx(f[sel], np.degrees(np.angle(result.with_.h1[sel])), label="with")
     ax.axvline(lo, color="0.5", ls=":")
     ax.axvline(hi, color="0.5", ls=":")
     ax.set(xlabel="frequency (Hz)", ylabel="phase (deg)")
@@ -421,8 +430,8 @@ def plot_demo(result: CompensationDemo, path: str | Path | None = None) -> Any:
         i0 = int(np.argmax(np.abs(r)))
         w = slice(max(0, i0 - int(0.5 * result.fs)), min(r.size, i0 + int(0.5 * result.fs)))
         ax.plot(t[w], r[w], "k", lw=1.5, label="reference")
-        ax.plot(t[w], result.outputs_without[name][w], label="without")
-        ax.plot(t[w], result.outputs_with[name][w], "--", label="with")
+        ax.plot(t[w], result.without.outputs[name][w], label="without")
+        ax.plot(t[w], result.with_.outputs[name][w], "--", label="with")
         ax.set(title=f"{name}: RMS error ×1/{result.improvement[name]:.1f}",
                ylabel=result.unit, xlabel="time (s)")
         ax.legend(fontsize=8)
@@ -442,17 +451,17 @@ def write_demo_report(result: CompensationDemo, folder: str | Path) -> list[Path
     f = result.freq_hz
     paths.append(write_csv(folder / f"{stem}_frf.csv", {
         "freq_hz": f,
-        "without_db": 20 * np.log10(np.abs(result.h1_without)),
-        "without_deg": np.degrees(np.angle(result.h1_without)),
-        "with_db": 20 * np.log10(np.abs(result.h1_with)),
-        "with_deg": np.degrees(np.angle(result.h1_with)),
+        "without_db": 20 * np.log10(np.abs(result.without.h1)),
+        "without_deg": np.degrees(np.angle(result.without.h1)),
+        "with_db": 20 * np.log10(np.abs(result.with_.h1)),
+        "with_deg": np.degrees(np.angle(result.with_.h1)),
     }))
     cols: dict[str, np.ndarray] = {"t": np.arange(result.references["random"].size) / result.fs}
     for name in result.references:
         cols[f"{name}_reference"] = result.references[name]
         cols[f"{name}_drive"] = result.drives[name]
-        cols[f"{name}_without"] = result.outputs_without[name]
-        cols[f"{name}_with"] = result.outputs_with[name]
+        cols[f"{name}_without"] = result.without.outputs[name]
+        cols[f"{name}_with"] = result.with_.outputs[name]
     paths.append(write_csv(folder / f"{stem}_traces.csv", cols))
     fig = plot_demo(result)
     png = folder / f"{stem}.png"
