@@ -10,6 +10,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.stats import norm
 
+from ehss.campaign.demo import RigHealthYear
 from ehss.campaign.engine import Task, task_seed
 from ehss.campaign.figures import loop_figures
 from ehss.campaign.montecarlo import (
@@ -186,3 +187,24 @@ def test_the_trend_plot_is_a_png_of_its_own(tmp_path):
     assert flagged["flagged"].to_list()[25]
     path = write_trend_png(flagged, tmp_path / "trend.png", OutlierRule())
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(("field", "value", "error"), [
+    ("days", 0, ParameterError),
+    ("days", 3.0, TypeError),
+    ("duration_s", 0.0, ParameterError),
+    ("bulk_modulus_loss", 1.0, ParameterError),
+    ("fault_day", -1, ParameterError),
+    ("fault_flow_factor", 0.0, ParameterError),
+    ("rms_m", float("nan"), ParameterError),
+    ("start", "first of January", ParameterError),
+])
+def test_a_rig_health_year_refuses_a_bad_field_by_name(field, value, error):
+    with pytest.raises(error, match=field):
+        RigHealthYear(**{field: value})
+
+
+def test_a_rig_health_year_keeps_its_fields_as_given():
+    year = RigHealthYear(days=2, duration_s=1.5, fault_day=400)  # no fault in the year
+    assert (year.days, year.duration_s, year.fault_day) == (2, 1.5, 400)
+    assert year == RigHealthYear(days=2, duration_s=1.5, fault_day=400)

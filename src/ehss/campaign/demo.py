@@ -18,39 +18,61 @@ from typing import Any
 
 import numpy as np
 
+from ehss._checks import check_int, check_real
 from ehss.campaign.engine import Task, read_results, run_campaign
+from ehss.errors import ParameterError
+from ehss.workflow.options import check_fields, option
 
 __all__ = ["RigHealthYear", "rig_health_task", "write_rig_health_archive"]
 
 
+def _positive(value: Any, name: str) -> float:
+    return check_real(value, name, lo=0.0, lo_open=True)
+
+
+def _time(value: Any, name: str) -> str:
+    """An ISO 8601 time (``2026-01-01T08:00:00+00:00``), as written in the records."""
+    try:
+        dt.datetime.fromisoformat(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name}={value!r} must be an ISO 8601 time such as "
+                             "'2026-01-01T08:00:00+00:00'") from None
+    return value
+
+
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class RigHealthYear:
-    """The simulated year.
+    """The simulated year, each field checked when it is made.
 
     Attributes
     ----------
     days : int, default 365
+        At least one.
     duration_s : float, default 4
         Length of each day's test, s.
     bulk_modulus_loss : float, default 0.3
-        Fraction of the bulk modulus lost, linearly, over the year.
+        Fraction of the bulk modulus lost, linearly, over the year, in [0, 1).
     fault_day : int, default 200
-        The day of the valve fault.
+        The day of the valve fault (a day past the year: no fault).
     fault_flow_factor : float, default 0.6
         The valve's rated flow on that day, as a fraction of its nominal.
     rms_m : float, default 1e-4
         RMS of the 0–100 Hz random test, m.
     start : str, default "2026-01-01T08:00:00+00:00"
-        The first day's record time.
+        The first day's record time (ISO 8601).
     """
 
-    days: int = 365
-    duration_s: float = 4.0
-    bulk_modulus_loss: float = 0.3
-    fault_day: int = 200
-    fault_flow_factor: float = 0.6
-    rms_m: float = 1e-4
-    start: str = "2026-01-01T08:00:00+00:00"
+    days: int = option(365, check=lambda v, n: check_int(v, n, lo=1))
+    duration_s: float = option(4.0, check=_positive)
+    bulk_modulus_loss: float = option(
+        0.3, check=lambda v, n: check_real(v, n, lo=0.0, hi=1.0, hi_open=True))
+    fault_day: int = option(200, check=lambda v, n: check_int(v, n, lo=0))
+    fault_flow_factor: float = option(0.6, check=_positive)
+    rms_m: float = option(1e-4, check=_positive)
+    start: str = option("2026-01-01T08:00:00+00:00", check=_time)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 def rig_health_task(payload: tuple[int, RigHealthYear, str], seed: np.random.SeedSequence,
