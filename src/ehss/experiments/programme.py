@@ -22,11 +22,12 @@ from collections.abc import Callable
 from concurrent.futures import Executor
 from dataclasses import dataclass, field, replace
 from functools import partial
+from typing import Any
 
 import numpy as np
 
 from ehss import signals
-from ehss._checks import check_int
+from ehss._checks import check_bool, check_int, check_int_list, check_real
 from ehss._warm import warm_up
 from ehss.control.known import known_factors
 from ehss.errors import DataError, ParameterError
@@ -45,6 +46,7 @@ from ehss.identification import OrderSelection, select_order
 from ehss.linear import closed_loop_radius
 from ehss.params import GRAVITY_M_S2, RigParams, preset
 from ehss.simulation import SimulationResult, simulate
+from ehss.workflow.options import check_fields, option
 
 __all__ = [
     "LoopSetup",
@@ -101,29 +103,79 @@ DEFAULT_SETUPS: dict[str, LoopSetup] = {
 }
 
 
+def _duration(value: Any, name: str) -> float:
+    if not (math.isfinite(value) and value >= 5.0):
+        raise ParameterError(f"{name}={value!r} must be at least 5 s")
+    return value
+
+
+def _holdout(value: Any, name: str) -> float:
+    if not 0.05 <= value <= 0.6:
+        raise ParameterError(f"{name}={value!r} must be in [0.05, 0.6]")
+    return value
+
+
+def _positive(value: Any, name: str) -> float:
+    return check_real(value, name, lo=0.0, lo_open=True)
+
+
+def _orders(lo: int) -> Callable[[Any, str], tuple[int, ...]]:
+    return lambda value, name: tuple(check_int_list(value, name, lo=lo))
+
+
+def _setups(value: Any, name: str) -> dict[str, LoopSetup]:
+    for key, setup in value.items():
+        if not isinstance(setup, LoopSetup):
+            raise TypeError(f"{name}[{key!r}] must be a LoopSetup, not {type(setup).__name__}")
+    return value
+
+
 @dataclass(frozen=True, kw_only=True)
 class ProgrammeSettings:
-    """Settings of one run of the programme (all recorded in the report)."""
+    """Settings of one run of the programme (all recorded in the report), each checked
+    when the settings are made.
 
-    seed: int = 0
-    duration_s: float = 40.0
-    step_duration_s: float = 1.0
-    holdout: float = 0.3
-    forgetting: float = 1.0
-    p0: float = 1.0e6
-    setups: dict[str, LoopSetup] = field(default_factory=lambda: dict(DEFAULT_SETUPS))
-    order_grid: tuple[int, ...] = (2, 3, 4, 5, 6, 7, 8)
-    noise_orders: tuple[int, ...] = (0, 2)
-    max_search_order: int = 12
-    compensation: bool = True
-    compensation_duration_s: float = 16.0
+    Attributes
+    ----------
+    seed : int, default 0
+    duration_s : float, default 40
+        Length of each identification record, at least 5 s.
+    step_duration_s : float, default 1
+        Length of each step test.
+    holdout : float, default 0.3
+        Share of each record held out for validation, in [0.05, 0.6].
+    forgetting, p0 : float, default 1 and 1e6
+        RELS forgetting factor in (0, 1] and initial covariance scale.
+    setups : dict of str to LoopSetup, default :data:`DEFAULT_SETUPS`
+    order_grid, noise_orders : tuple of int
+        The orders na (nb = na − 1) and nc the order selection searches.
+    max_search_order : int, default 12
+        Highest na searched for a model that meets the acceptance.
+    compensation : bool, default True
+        Demonstrate the compensation of the position and acceleration loops.
+    compensation_duration_s : float, default 16
+        Length of each compensation test record, at least 4 s (:func:`ehss.experiments.
+        compensation_demo.demonstrate`).
+    """
+
+    seed: int = option(0, check=lambda v, n: check_int(v, n, lo=0))
+    duration_s: float = option(40.0, check=_duration)
+    step_duration_s: float = option(1.0, check=_positive)
+    holdout: float = option(0.3, check=_holdout)
+    forgetting: float = option(
+        1.0, check=lambda v, n: check_real(v, n, lo=0.0, hi=1.0, lo_open=True))
+    p0: float = option(1.0e6, check=_positive)
+    setups: dict[str, LoopSetup] = field(default_factory=lambda: dict(DEFAULT_SETUPS),
+                                         metadata={"check": _setups})
+    order_grid: tuple[int, ...] = option((2, 3, 4, 5, 6, 7, 8), check=_orders(1))
+    noise_orders: tuple[int, ...] = option((0, 2), check=_orders(0))
+    max_search_order: int = option(12, check=lambda v, n: check_int(v, n, lo=1))
+    compensation: bool = option(True, check=check_bool)
+    compensation_duration_s: float = option(
+        16.0, check=lambda v, n: check_real(v, n, lo=4.0, unit="s"))
 
     def __post_init__(self) -> None:
-        check_int(self.seed, "seed", lo=0)
-        if not (math.isfinite(self.duration_s) and self.duration_s >= 5.0):
-            raise ParameterError(f"duration_s={self.duration_s!r} must be at least 5 s")
-        if not 0.05 <= self.holdout <= 0.6:
-            raise ParameterError(f"holdout={self.holdout!r} must be in [0.05, 0.6]")
+        check_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
