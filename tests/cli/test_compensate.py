@@ -154,6 +154,19 @@ def test_drive_breaking_the_rig_limits_is_refused(tmp_path, capsys):
     assert main([*args, "--loop", "position"]) == 2
     assert "peak velocity" in capsys.readouterr().err and not out.exists()
     assert main([*args, "--max-velocity", "1.0", "--max-stroke", "0.05"]) == 0
+    limits = json.loads(out.with_suffix(".json").read_text())["checks"]["limits"]
+    assert limits == {"max_abs": 0.05, "max_rate": 1.0, "max_rate2": None}
+
+
+@pytest.mark.parametrize("flag", ["--max-velocity", "--max-acceleration"])
+def test_a_bound_that_is_not_positive_is_named_by_its_flag(tmp_path, reference, capsys, flag):
+    model = _write_model(tmp_path / "m.json")
+    ref = _write_reference(tmp_path / "r.csv", reference)
+    out = tmp_path / "drive.csv"
+    assert main(["compensate", str(model), str(ref), "--out", str(out), flag, "-1"]) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} -1.0 must be in (0, inf)" in err and err.count("\n") == 1
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("offsets", [{"input": 1.0}, {"input": "x", "output": 0.0}, [1, 2],

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ _DRIVE_LOOPS = ("position", "acceleration", "force", "valve")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ehss.compensation import DEFAULT_MAX_GAIN, DEFAULT_MIN_GAIN, UpdateOptions
+    from ehss.compensation import DEFAULT_MAX_GAIN, DEFAULT_MIN_GAIN, DriveLimits, UpdateOptions
     from ehss.params import PRESETS
 
     p = add_command(
@@ -90,10 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="bound on |drive| (e.g. m of stroke)")
     ck.add_argument("--max-command", type=float, metavar="V",
                     help="bound on |drive| for a valve-command drive (V)")
-    ck.add_argument("--max-velocity", type=float, metavar="X_PER_S",
-                    help="bound on |d drive/dt|")
-    ck.add_argument("--max-acceleration", type=float, metavar="X_PER_S2",
-                    help="bound on |d² drive/dt²|")
+    add_options(ck, DriveLimits)
     it = p.add_argument_group(
         "drive-file iteration",
         "Correct the drive of a previous run from what the rig did: u+ = u + L Q F (r - y), "
@@ -143,8 +141,7 @@ def _limits(args: argparse.Namespace) -> Any:
     bound = args.max_stroke if args.max_stroke is not None else args.max_command
     if bound is None and args.max_velocity is None and args.max_acceleration is None:
         return None
-    return DriveLimits(max_abs=bound, max_rate=args.max_velocity,
-                       max_rate2=args.max_acceleration)
+    return build_options(args, DriveLimits, max_abs=bound)
 
 
 def _rig(args: argparse.Namespace) -> tuple[str | None, Any]:
@@ -307,9 +304,7 @@ def _sidecar(args: argparse.Namespace, model: Any, result: Any, band: tuple[floa
         "checks": {"forced": bool(args.force),
                    "failed": result.failed_check,
                    "figures": None if result.check is None else result.check.to_dict(),
-                   "limits": None if limits is None else {
-                       "max_abs": limits.max_abs, "max_rate": limits.max_rate,
-                       "max_rate2": limits.max_rate2},
+                   "limits": None if limits is None else dataclasses.asdict(limits),
                    "loop": checks["loop"],
                    "rig": None if checks["params"] is None else checks["params"].name},
         "warnings": list(result.warnings),

@@ -43,6 +43,7 @@ import numpy as np
 
 from ehss._checks import as_signal, check_fs, check_real
 from ehss.errors import ParameterError
+from ehss.workflow.options import check_fields, option
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -73,13 +74,18 @@ REST_TOLERANCE = 0.01
 LOOPS = ("position", "acceleration", "force", "valve")
 
 
-def _optional_positive(name: str, value: Any) -> float | None:
+def _bound(value: Any, name: str) -> float | None:
+    """A bound of a check: a positive number, or None for none."""
     return None if value is None else check_real(value, name, lo=0.0, lo_open=True)
 
 
 @dataclass(frozen=True, kw_only=True)
 class DriveLimits:
     """Explicit bounds on a drive, in the units of the model's input.
+
+    Each field is declared once with its check and, for ``ehss compensate``, its flag
+    (:func:`ehss.workflow.options.option`); ``max_abs`` has two there, ``--max-stroke``
+    and ``--max-command``, which the command declares.
 
     Attributes
     ----------
@@ -92,13 +98,15 @@ class DriveLimits:
         Bound on ``|d²u/dt²|`` (acceleration for a position drive).
     """
 
-    max_abs: float | None = None
-    max_rate: float | None = None
-    max_rate2: float | None = None
+    max_abs: float | None = option(None, check=_bound)
+    max_rate: float | None = option(None, check=_bound, flag="--max-velocity", type=float,
+                                    metavar="X_PER_S", help="bound on |d drive/dt|")
+    max_rate2: float | None = option(None, check=_bound, flag="--max-acceleration",
+                                     type=float, metavar="X_PER_S2",
+                                     help="bound on |d² drive/dt²|")
 
     def __post_init__(self) -> None:
-        for name in ("max_abs", "max_rate", "max_rate2"):
-            object.__setattr__(self, name, _optional_positive(name, getattr(self, name)))
+        check_fields(self)
 
 
 class _Figures:
@@ -194,8 +202,8 @@ def check_drive(
     if u.size != r.size:
         raise ParameterError(f"drive and reference differ in length ({u.size} != {r.size})")
     fs = check_fs(fs)
-    max_gain = _optional_positive("max_gain", max_gain)
-    min_gain = _optional_positive("min_gain", min_gain)
+    max_gain = _bound(max_gain, "max_gain")
+    min_gain = _bound(min_gain, "min_gain")
     if limits is not None and not isinstance(limits, DriveLimits):
         raise TypeError(f"limits must be a DriveLimits, not {type(limits).__name__}")
     if (loop is None) != (params is None):
