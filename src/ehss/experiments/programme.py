@@ -34,6 +34,7 @@ from ehss.errors import DataError, ParameterError
 from ehss.experiments.compensation_demo import CompensationDemo, demonstrate
 from ehss.experiments.loop_identification import (
     ModelCheck,
+    Record,
     convergence,
     identify_and_check,
     loop_record,
@@ -41,7 +42,6 @@ from ehss.experiments.loop_identification import (
 )
 from ehss.experiments.pool import collect, submit
 from ehss.experiments.steps import StepTest, step_tests
-from ehss.frequency import FrequencyResponse
 from ehss.identification import OrderSelection, select_order
 from ehss.linear import closed_loop_radius
 from ehss.params import GRAVITY_M_S2, RigParams, preset
@@ -182,18 +182,15 @@ class ProgrammeSettings:
 class LoopResult:
     """Everything the report shows for one identified loop.
 
-    ``band_hz`` is the band the models were validated over (the excitation band clipped
-    to [0.5 Hz, 0.45 fs]): with ``settings.holdout``, mean removal and no decimation it
-    makes ``ehss identify``'s options for the same record.
+    ``record`` is the record as identified and validated: its ``band_hz`` is the band the
+    models were validated over (the excitation band clipped to [0.5 Hz, 0.45 fs]); with
+    ``settings.holdout``, mean removal and no decimation it makes ``ehss identify``'s
+    options for the same record.
     """
 
     setup: LoopSetup
     sim: SimulationResult
-    band_hz: tuple[float, float]
-    n_ident: int
-    input_mean: float
-    output_mean: float
-    frf: FrequencyResponse
+    record: Record = field(repr=False)
     paper: ModelCheck
     selection: OrderSelection
     recommended: ModelCheck
@@ -266,7 +263,6 @@ def _run_loop(
     lam, p0 = settings.forgetting, settings.p0
     paper = identify_and_check(rec, setup.orders, forgetting=lam, p0=p0)
     theta_t, theta_history = convergence(rec, paper.model, forgetting=lam, p0=p0)
-    n = rec.n_ident
     selection = select_order(
         rec.prepared.u,
         rec.prepared.y,
@@ -294,11 +290,7 @@ def _run_loop(
     return LoopResult(
         setup=setup,
         sim=_trim(sim, skip),
-        band_hz=rec.band_hz,
-        n_ident=n,
-        input_mean=rec.input_mean,
-        output_mean=rec.output_mean,
-        frf=rec.frf,
+        record=rec,
         paper=paper,
         selection=selection,
         recommended=recommended,

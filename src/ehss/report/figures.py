@@ -83,8 +83,8 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
     fixed_layout(fig, left=0.75, right=0.15, bottom=0.5, top=0.8, wspace=0.75, hspace=0.75)
 
     sim = res.sim
-    fs = res.frf.fs
-    i0 = res.n_ident
+    fs = res.record.frf.fs
+    i0 = res.record.n_ident
     i1 = min(sim.t.size, i0 + int(round(window_s * fs)))
     window = (sim.t[i0], sim.t[i1 - 1])
     plot_series(ax_t, sim.t[i0:i1], sim.reference[i0:i1] * scale, dpi=REPORT_DPI,
@@ -106,7 +106,7 @@ def loop_figure(res: LoopResult, *, title: str, window_s: float = 1.0) -> Figure
         for c in checks
     }
     # Above the band the reference has no content and H1 means nothing: stop there.
-    bode_compare(res.frf.band(0.0, band[1]), models, band_hz=band, axes=(ax_m, ax_p, ax_c))
+    bode_compare(res.record.frf.band(0.0, band[1]), models, band_hz=band, axes=(ax_m, ax_p, ax_c))
     ax_m.set_title(f"(b) magnitude (max errors vs the held-out H1 where γ² ≥ "
                    f"{ACCEPTANCE.min_coherence:g})", fontsize=10)
     ax_p.set_title("(c) phase", fontsize=10)

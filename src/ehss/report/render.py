@@ -135,11 +135,11 @@ def summary_dict(result: ProgrammeResult) -> dict[str, Any]:
             "signal_size": r.setup.size,
             "signal_offset": r.setup.offset,
             "n_samples": int(r.sim.t.size),
-            "n_identification": int(r.n_ident),
-            "h1_resolution_hz": float(r.frf.resolution_hz),
-            "h1_nperseg": int(r.frf.nperseg),
+            "n_identification": int(r.record.n_ident),
+            "h1_resolution_hz": float(r.record.frf.resolution_hz),
+            "h1_nperseg": int(r.record.frf.nperseg),
             "validation_settings": {"holdout": result.settings.holdout,
-                                    "band_hz": list(r.band_hz), "detrend": "mean",
+                                    "band_hz": list(r.record.band_hz), "detrend": "mean",
                                     "decimate": None},
             "rels_resets": int(r.paper.model.meta.get("resets", 0)),
             **_check_summary(r.paper),
@@ -210,17 +210,17 @@ def _loop_markdown(name: str, r: LoopResult, fig_name: str) -> list[str]:
     m, printed = r.paper.model, PRINTED_MODELS[name]
     vf = r.paper.report.frf
     k = ACCEPTANCE.uncertainty_sigmas
-    lo, hi = r.band_hz
+    lo, hi = r.record.band_hz
     lines = [
         f"### {name.capitalize()} loop",
         "",
         f"![{name}]({fig_name})",
         "",
-        f"Record: {r.sim.t.size} samples at {r.frf.fs:g} Hz, identified on the first "
-        f"{r.n_ident}, validated on the rest. Band {lo:g}–{hi:g} Hz. The verdicts compare "
+        f"Record: {r.sim.t.size} samples at {r.record.frf.fs:g} Hz, identified on the first "
+        f"{r.record.n_ident}, validated on the rest. Band {lo:g}–{hi:g} Hz. The verdicts compare "
         f"with the held-out end's own H1 estimate ({vf.method}, resolution "
         f"{vf.resolution_hz:.2f} Hz, {vf.n_averages} averages); the figure shows the whole "
-        f"record's (resolution {r.frf.resolution_hz:.2f} Hz). RELS covariance resets: "
+        f"record's (resolution {r.record.frf.resolution_hz:.2f} Hz). RELS covariance resets: "
         f"{int(m.meta.get('resets', 0))}.",
         "",
         *_model_block("Identified with the paper's structure", m),
