@@ -75,14 +75,15 @@ Compilation
 -----------
 The kernels allocate nothing (work space is in the block), so they are compiled
 without numba's reference counting (``_nrt=False``): arrays are borrowed from the
-caller for the duration of a call, and a sample no longer pays the atomic increments
-and decrements that every array crossing a call costs (about fifty a sample before,
-a third of its time). The per-sample path (:func:`_sample` and the three steps it
-calls) is inlined by numba into the loop (``inline="always"``); the small leaf
-helpers and the P pass are compiled once and inlined by LLVM where they are called
-(``forceinline=True``: a call passes every array as a struct of seven words, which
-cost more than the helpers' work, and hides the constant orders of a specialised
-loop from the pass; inlining them through numba instead cost 3–5 s of cold compile);
+caller for the duration of a call, and a sample pays no atomic increments and
+decrements for the arrays that cross its calls. The per-sample path (:func:`_sample`'s
+three parts and the steps they call) is inlined by numba into the loop
+(``inline="always"``), with the pass over P at one place only (numba types and
+compiles each inlined copy again); the small leaf helpers and the P pass are compiled
+once and inlined by LLVM where they are called (``forceinline=True``: a call passes
+every array as a struct of seven words, which costs more than the helpers' work, and
+hides the constant orders of a specialised loop from the pass; inlining them through
+numba instead costs seconds of cold compile, BENCHMARKS.md);
 the rare paths (:func:`_gain` of P(0), :func:`_restart`, :func:`_project_c`) stay
 calls. What is compiled is kept to what runs: the helpers have no Python entry point
 (:data:`HELPER`: numba would otherwise generate and compile a CPython and a C wrapper
@@ -717,8 +718,22 @@ def _sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
 
     ``u``, ``y`` are scaled and finite (checked by the callers). e(k) = y(k) −
     ψ̂ᵀ(k)θ̂(k−1) is the a-priori error (0 if it overflows); ξ̂(k) is eq (19)
-    (0 if it overflows); ``pending``: θ̂ moved, and w holds its (22).
+    (0 if it overflows); ``pending``: θ̂ moved, and w holds its (22). Its three
+    parts: :func:`_open_sample`, the pass over P that applies the (22) of the sample
+    before (:func:`_bring_P_up_to_date`), :func:`_close_sample`.
     """
+    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
+    e = _open_sample(s, counters, st, u, y)
+    r = psi_f[: s.na + s.nb + 1 + s.nc] if s.rml else psi
+    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
+    return _close_sample(s, block, counters, st, r, e, y)
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _open_sample(s: RelsSettings, counters: np.ndarray, st: tuple[np.ndarray, ...],
+                 u: float, y: float) -> float:
+    """A sample up to its pass over P: ψ̂(k) takes u(k), RML filters it into ψ_f(k)
+    (the r of that pass); returns the a-priori error e(k)."""
     theta, P, psi, g, w, u_line, c_work, psi_f, io = st
     _push_input(u_line, psi, u, s.na, s.nb, s.delay)
     # ŷ(k|k−1) = ψ̂ᵀ(k) θ̂(k−1);  e(k) = y(k) − ŷ  (the bracket of eq 20)
@@ -728,8 +743,17 @@ def _sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
     # r, the regressor of the gain and of (22): ψ̂(k) (RELS) or ψ_f(k) (RML)
     if s.rml:
         _filter_regressor(psi_f, psi, theta, s.na + s.nb + 1, n, s.nc)
-    r = psi_f[:n] if s.rml else psi
-    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
+    return e
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _close_sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
+                  st: tuple[np.ndarray, ...], r: np.ndarray, e: float,
+                  y: float) -> tuple[float, float, bool]:
+    """A sample after its pass over P (g = P(k−1) r(k)): (19)–(21), the noise
+    variance, and ψ̂ shifted for k+1; returns (e(k), ξ̂(k), pending) as :func:`_sample`.
+    """
+    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
     moved = False
     xi = e  # ξ̂(k) = e(k) whenever θ̂ is not updated (frozen or skipped)
     if s.enabled and np.isfinite(e):
@@ -748,7 +772,7 @@ def _sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
     nv = block[NOISE_VAR] + (xi * xi - block[NOISE_VAR]) / cnt
     if np.isfinite(nv):
         block[NOISE_VAR] = nv
-    _shift_regressors(psi, psi_f, n, s.na, s.nc, s.rml, y, xi)
+    _shift_regressors(psi, psi_f, s.na + s.nb + 1 + s.nc, s.na, s.nc, s.rml, y, xi)
     return (e if np.isfinite(e) else 0.0), xi, moved
 
 
@@ -759,10 +783,11 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
     specialised to the orders ``na_`` … ``delay_`` (``fixed`` True; :func:`specialised`).
 
     One source for both, a closure (numba's cache tells closures apart by the values
-    they hold). Each order is ``na_ if fixed else int(block[0])``: a choice on a
+    they hold). Each order is ``na_ if fixed else np.int64(block[0])``: a choice on a
     constant, which LLVM folds before it optimises the loop, so that in a specialised
-    kernel every loop bound is a number. (The loop was a function inlined by numba into
-    each entry point; that extra level of inlining cost ~0.8 s of cold compile.)
+    kernel every loop bound is a number. (The loop is the entry point's own body, not
+    a function inlined by numba into each entry point: that extra level of inlining
+    costs cold compile, BENCHMARKS.md.)
     """
 
     def rels_run(block: np.ndarray, rec: np.ndarray, hist: np.ndarray, hist_every: int,
@@ -803,14 +828,30 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
         inv_us, inv_ys = 1.0 / s.u_scale, 1.0 / s.y_scale
         # (22) of the previous sample not yet applied (w holds it)
         pending = block[PENDING] != 0.0
+        # r, the regressor of the gain and of (22): ψ̂(k) (RELS) or ψ_f(k) (RML)
+        r = psi_f[: na + nb + 1 + nc] if s.rml else psi
         countdown = hist_every
         row = 0
         n_run = 0
-        for k in range(rec.shape[1]):
-            u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
-            if not (np.isfinite(u) and np.isfinite(y)):
+        u = y = e = 0.0
+        # _sample's three parts, so that the pass over P is written once in the loop:
+        # the run ends at k = N or before a sample that is not finite, where with
+        # ``settle`` the pass applies the last pending (22) only (the block then
+        # holds P(k))
+        for k in range(rec.shape[1] + 1):
+            end = k == rec.shape[1]
+            if not end:
+                u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
+                end = not (np.isfinite(u) and np.isfinite(y))
+            if end and not (settle and pending):
                 break
-            e, xi, pending = _sample(s, block, counters, st, pending, u, y, fixed)
+            if not end:
+                e = _open_sample(s, counters, st, u, y)
+            _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
+            if end:
+                pending = False
+                break
+            e, xi, pending = _close_sample(s, block, counters, st, r, e, y)
             rec[2, k] = e * s.y_scale
             rec[3, k] = xi * s.y_scale
             n_run += 1
@@ -821,10 +862,6 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
                     for i in range(hist.shape[1]):
                         hist[row, i] = theta[i]
                     row += 1
-        if settle and pending:  # the last pending (22): the block holds P(k)
-            r = psi_f[: na + nb + 1 + nc] if s.rml else psi
-            _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, True, fixed)
-            pending = False
         block[PENDING] = 1.0 if pending else 0.0
         return n_run
 
