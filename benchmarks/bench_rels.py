@@ -4,9 +4,10 @@ of earlier commits loaded from git into the same process, plus cold compile, fir
 use of new orders and the streaming update.
 
 Run from the project root:  .venv/bin/python benchmarks/bench_rels.py [--quick]
-                            [--rounds R] [--lanes]
+                            [--rounds R] [--lanes | --compile]
 
-``--lanes`` runs only the P pass of a bank of (4,3,4) channels in each layout (one
+``--compile`` runs only the cold compile, in R alternating rounds. ``--lanes`` runs
+only the P pass of a bank of (4,3,4) channels in each layout (one
 channel at a time; channels in SIMD lanes with a run-time lane count; the lanes with
 each row's (j, c) update as one loop), with and without FMA contraction, against the
 whole step of the bank and of eight single-channel runs of the baseline.
@@ -421,6 +422,7 @@ import time
 t0, c0 = time.perf_counter(), time.process_time()
 import numpy as np
 from ehss.identification.rels import RelsEstimator, rels
+ci = time.process_time()
 u = np.random.default_rng(0).standard_normal(200)
 rels(u, np.roll(u, 1), na=2, nb=1, nc=2)
 rels(u, np.roll(u, 1), na=2, nb=1, nc=2, method="rml")
@@ -434,7 +436,7 @@ t2, c2 = time.perf_counter(), time.process_time()
 from ehss.identification.bank import RelsBank
 RelsBank(n_channels=8, na=4, nb=3, nc=4).update(np.ones(8), np.ones(8))
 t3, c3 = time.perf_counter(), time.process_time()
-print(c1 - c0, t1 - t0, c2 - c1, t2 - t1, c3 - c2, t3 - t2)
+print(c1 - c0, t1 - t0, c2 - c1, t2 - t1, c3 - c2, t3 - t2, ci - c0)
 """
 
 WARM = """
@@ -458,7 +460,7 @@ def extract(commit: str, into: Path) -> Path:
     return into / "src"
 
 
-def compile_times(tmp: Path) -> None:
+def compile_times(tmp: Path, rounds: int = COMPILE_ROUNDS) -> None:
     def python(code: str, src: Path, cache: Path) -> Any:
         env = {**os.environ, "PYTHONPATH": str(src), "NUMBA_CACHE_DIR": str(cache)}
         out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
@@ -467,11 +469,11 @@ def compile_times(tmp: Path) -> None:
 
     base_src = extract(BASELINE, tmp / "baseline-tree")
     base_code = COLD.split("t1, c1")[0] + "print(time.process_time() - c0, " \
-        "time.perf_counter() - t0)"
+        "time.perf_counter() - t0, 0, 0, 0, 0, ci - c0)"
     # alternating rounds, each with empty caches: one cold compile varies by ±10 % on a
     # shared machine, so the medians and each round's ratio are reported
     bases, colds = [], []
-    for r in range(COMPILE_ROUNDS):
+    for r in range(rounds):
         bases.append(python(base_code, base_src, tmp / f"cold-base-{r}"))
         colds.append(python(COLD, ROOT / "src", tmp / f"cold-cache-{r}"))
     warm = python(WARM, ROOT / "src", tmp / "cold-cache-0")
@@ -479,10 +481,11 @@ def compile_times(tmp: Path) -> None:
     cold = np.median(colds, axis=0)
     each = ", ".join(f"{c[0] / b[0]:.2f}" for c, b in zip(colds, bases, strict=True))
     print("\nCompile, fresh process, empty numba cache (CPU s / wall s, median of "
-          f"{COMPILE_ROUNDS} alternating rounds): identification kernels used by "
+          f"{rounds} alternating rounds): identification kernels used by "
           f"`ehss reproduce` (rels + rml, batch + streaming, generic loop) "
-          f"{cold[0]:.1f} / {cold[1]:.1f} (the tree at {BASELINE}: {base[0]:.1f} / "
-          f"{base[1]:.1f}; CPU ratio this / {BASELINE} round by round: {each}); first use "
+          f"{cold[0]:.1f} / {cold[1]:.1f}, of which {cold[6]:.1f} CPU s importing (the tree "
+          f"at {BASELINE}: {base[0]:.1f} / {base[1]:.1f}, {base[6]:.1f} importing; CPU "
+          f"ratio this / {BASELINE} round by round: {each}); first use "
           f"of new orders, specialise_rels(6,6,4,1) {cold[2]:.1f} / {cold[3]:.1f}; a "
           f"RelsBank's first use of its orders {cold[4]:.1f} / {cold[5]:.1f}; the "
           f"specialised loop loaded from the disk cache by a later process (import "
@@ -508,6 +511,8 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=3, help="alternating rounds")
     p.add_argument("--lanes", action="store_true",
                    help="only the P pass by layout against the whole step")
+    p.add_argument("--compile", action="store_true",
+                   help="only the cold compile (with --rounds alternating rounds)")
     args = p.parse_args()
     n_big = 10**5 if args.quick else 10**6
     repeats = 3 if args.quick else 5
@@ -515,6 +520,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         os.environ.setdefault("NUMBA_CACHE_DIR", str(tmp / "cache"))
+        if args.compile:
+            compile_times(tmp, args.rounds)
+            print(f"\nload average {os.getloadavg()[0]:.1f} at the end")
+            return
         old = {}
         for commit, make in ((BASELINE, runner_3b7), (IR_KERNEL, runner_b935)):
             try:

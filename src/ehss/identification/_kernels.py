@@ -75,16 +75,21 @@ Compilation
 -----------
 The kernels allocate nothing (work space is in the block), so they are compiled
 without numba's reference counting (``_nrt=False``): arrays are borrowed from the
-caller for the duration of a call, and a sample no longer pays the atomic increments
-and decrements that every array crossing a call costs (about fifty a sample before,
-a third of its time). The per-sample path (:func:`_sample` and the three steps it
-calls) is inlined by numba into the loop (``inline="always"``); the small leaf
-helpers and the P pass are compiled once and inlined by LLVM where they are called
-(``forceinline=True``: a call passes every array as a struct of seven words, which
-cost more than the helpers' work, and hides the constant orders of a specialised
-loop from the pass; inlining them through numba instead cost 3–5 s of cold compile);
+caller for the duration of a call, and a sample pays no atomic increments and
+decrements for the arrays that cross its calls. The per-sample path (:func:`_sample`'s
+three parts and the steps they call) is inlined by numba into the loop
+(``inline="always"``), with the pass over P at one place only (numba types and
+compiles each inlined copy again); the small leaf helpers and the P pass are compiled
+once and inlined by LLVM where they are called (``forceinline=True``: a call passes
+every array as a struct of seven words, which costs more than the helpers' work, and
+hides the constant orders of a specialised loop from the pass; inlining them through
+numba instead costs seconds of cold compile, BENCHMARKS.md);
 the rare paths (:func:`_gain` of P(0), :func:`_restart`, :func:`_project_c`) stay
-calls. No complex arithmetic (slow to compile), no fastmath (measured: no gain).
+calls. What is compiled is kept to what runs: the helpers have no Python entry point
+(:data:`HELPER`: numba would otherwise generate and compile a CPython and a C wrapper
+for each), and the kernels write ``min``, ``max`` and ``int()`` out as a comparison
+and ``np.int64`` (numba compiles each of those built-ins as a function of its own on
+first use). No complex arithmetic (slow to compile), no fastmath (measured: no gain).
 Literal constants are never passed to a kernel from Python: numba would compile the
 callee once more for each literal.
 
@@ -126,6 +131,11 @@ from numba import types
 njit: Callable[..., Any] = _numba_njit
 
 __all__: list[str] = []  # private module: the public API is in rels.py
+
+#: options of the helpers that only kernels call: no Python entry point (no CPython or
+#: C wrapper to generate and compile; calling one from Python is not possible)
+HELPER: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False,
+                          "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 
 #: δ = EPS_FLOOR · n · tr P is added to P's diagonal after each update when λ < 1
 EPS_FLOOR = 8.0 * 2.220446049250313e-16
@@ -216,13 +226,13 @@ def set_enabled(block: np.ndarray, enabled: bool) -> None:
 def state_views(block: np.ndarray) -> RelsState:
     """The named state arrays of ``block`` (views: writing them writes the block).
 
-    Runs :func:`views` as the plain Python function it is written as (numpy slicing
-    gives the same views), so that the layout is defined once and nothing is compiled
-    for Python callers.
+    Runs :func:`_views_at` and :func:`_starts` as the plain Python functions they are
+    written as (numpy slicing gives the same views), so that the layout is defined
+    once and nothing is compiled for Python callers.
     """
     na, nb, nc, delay = (int(v) for v in block[:4])
-    n = na + nb + 1 + nc
-    st = RelsState(*_views_with.py_func(block, na, nb, nc, delay))
+    n, nu = na + nb + 1 + nc, delay + nb + 1
+    st = RelsState(*_views_at.py_func(block, _starts.py_func(n, nu, nc), n, nu, nc))
     return st._replace(P=st.P.reshape((n, n)), psi_f=st.psi_f.reshape((nc + 1, n)))
 
 
@@ -286,7 +296,14 @@ def _views_with(block: np.ndarray, na: int, nb: int, nc: int,
     LLVM cannot see through, which would hide the constant row length."""
     n = na + nb + 1 + nc
     nu = delay + nb + 1
-    o_theta, o_P, o_psi, o_g, o_w, o_u, o_c, o_f, o_io, _ = _starts(n, nu, nc)
+    return _views_at(block, _starts(n, nu, nc), n, nu, nc)
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _views_at(block: np.ndarray, starts: tuple[int, ...], n: int, nu: int,
+              nc: int) -> tuple[np.ndarray, ...]:
+    """The state arrays of ``block`` that start at ``starts`` (:func:`_starts`)."""
+    o_theta, o_P, o_psi, o_g, o_w, o_u, o_c, o_f, o_io, _ = starts
     return (block[o_theta : o_theta + n],
             block[o_P : o_P + n * n],
             block[o_psi : o_psi + n],
@@ -299,7 +316,7 @@ def _views_with(block: np.ndarray, na: int, nb: int, nc: int,
 
 
 # ---------------------------------------------------------------- small helpers
-@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**HELPER, forceinline=True)
 def _dot(p: np.ndarray, q: np.ndarray, n: int) -> float:
     """pᵀq, in four partial sums.
 
@@ -321,7 +338,7 @@ def _dot(p: np.ndarray, q: np.ndarray, n: int) -> float:
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**HELPER, forceinline=True)
 def _push_input(u_line: np.ndarray, psi: np.ndarray, u: float, na: int, nb: int,
                 delay: int) -> None:
     """u_line[j] = u(k−j); ψ̂'s u-part becomes u(k−d)..u(k−d−nb)."""
@@ -332,7 +349,7 @@ def _push_input(u_line: np.ndarray, psi: np.ndarray, u: float, na: int, nb: int,
         psi[na + j] = u_line[delay + j]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**HELPER, forceinline=True)
 def _filter_regressor(psi_f: np.ndarray, psi: np.ndarray, theta: np.ndarray, o: int,
                       n: int, nc: int) -> None:
     """RML: ψ_f(k) = ψ̂(k) − ĉ1 ψ_f(k−1) − … − ĉnc ψ_f(k−nc), into row 0.
@@ -350,7 +367,7 @@ def _filter_regressor(psi_f: np.ndarray, psi: np.ndarray, theta: np.ndarray, o: 
             f0[i] -= cj * fj[i]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**HELPER, forceinline=True)
 def _shift_regressors(psi: np.ndarray, psi_f: np.ndarray, n: int, na: int, nc: int,
                       rml: bool, y: float, xi: float) -> None:
     """ψ̂ for k+1: the y-part gets −y(k), the c-part ξ̂(k) (the u-part: _push_input);
@@ -371,7 +388,7 @@ def _shift_regressors(psi: np.ndarray, psi_f: np.ndarray, n: int, na: int, nc: i
 
 
 # ---------------------------------------------------------------- the C check
-@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**HELPER, forceinline=True)
 def _c_within(theta: np.ndarray, o: int, nc: int, radius: float, cw: np.ndarray) -> bool:
     """True if all roots of z^nc + c1 z^(nc−1) + … + c_nc lie strictly inside ``radius``.
 
@@ -410,7 +427,7 @@ def _c_within(theta: np.ndarray, o: int, nc: int, radius: float, cw: np.ndarray)
     return True
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(**HELPER)
 def _poly_roots(c: np.ndarray, re: np.ndarray, im: np.ndarray) -> None:
     """Roots of z^nc + c1 z^(nc−1) + … + c_nc, as re + j im, by the Weierstrass
     (Durand–Kerner) iteration z_i ← z_i − C(z_i) / Π_{j≠i} (z_i − z_j).
@@ -423,7 +440,8 @@ def _poly_roots(c: np.ndarray, re: np.ndarray, im: np.ndarray) -> None:
     nc = c.shape[0]
     bound = 1.0
     for j in range(nc):
-        bound = max(bound, 1.0 + abs(c[j]))
+        bj = 1.0 + abs(c[j])
+        bound = bj if bj > bound else bound  # max(bound, bj)
     zr, zi = bound, 0.0  # bound (0.4 + 0.9j)^i
     for i in range(nc):
         re[i], im[i] = zr, zi
@@ -443,12 +461,13 @@ def _poly_roots(c: np.ndarray, re: np.ndarray, im: np.ndarray) -> None:
             xr, xi = (pr * dr + pi * di) / m2, (pi * dr - pr * di) / m2
             re[i] = zr - xr
             im[i] = zi - xi
-            change = max(change, np.sqrt(xr * xr + xi * xi))
+            step = np.sqrt(xr * xr + xi * xi)
+            change = step if step > change else change  # max(change, step)
         if not change > 2.220446049250313e-16 * bound:  # converged, or NaN
             break
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(**HELPER)
 def _project_c(c: np.ndarray, radius: float, work: np.ndarray) -> None:
     """Move the roots of C(z) = z^nc + c1 z^(nc−1) + … inside ``radius``, in place.
 
@@ -464,7 +483,8 @@ def _project_c(c: np.ndarray, radius: float, work: np.ndarray) -> None:
     # coefficients c_j / σ^j are at most 1 in size (no overflow in the iteration)
     sigma = 1.0
     for j in range(nc):
-        sigma = max(sigma, abs(c[j]) ** (1.0 / (j + 1)))
+        root = abs(c[j]) ** (1.0 / (j + 1))
+        sigma = root if root > sigma else sigma  # max(sigma, root)
     scale = 1.0
     for j in range(nc):
         scale *= sigma  # σ^(j+1)
@@ -498,7 +518,7 @@ def _project_c(c: np.ndarray, radius: float, work: np.ndarray) -> None:
 
 
 # ---------------------------------------------------------------- eqs (21)–(22)
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(**HELPER)
 def _gain(P: np.ndarray, r: np.ndarray, g: np.ndarray, n: int) -> None:
     """g = P r for symmetric P, as g += P[j, :] r_j (row axpys, which vectorise)."""
     for i in range(n):
@@ -509,7 +529,7 @@ def _gain(P: np.ndarray, r: np.ndarray, g: np.ndarray, n: int) -> None:
             g[i] += P[j * n + i] * rj
 
 
-@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**HELPER, forceinline=True)
 def _update_P_and_gain(P: np.ndarray, w: np.ndarray, inv_lam: float, r: np.ndarray,
                        g: np.ndarray, n: int) -> tuple[float, float]:
     """(22) P(k−1) = P(k−2)/λ − w wᵀ and, in the same pass, g = P(k−1) r(k).
@@ -560,11 +580,12 @@ def _update_P_and_gain(P: np.ndarray, w: np.ndarray, inv_lam: float, r: np.ndarr
     dmin = np.inf
     for i in range(n):
         tr += P[i * n + i]
-        dmin = min(dmin, P[i * n + i])
+        pii = P[i * n + i]
+        dmin = pii if pii < dmin else dmin  # min(dmin, P_ii)
     return tr, dmin
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(**HELPER)
 def _restart(s: RelsSettings, counters: np.ndarray, P: np.ndarray, psi_f: np.ndarray,
              psi: np.ndarray, theta: np.ndarray, r: np.ndarray, g: np.ndarray) -> None:
     """P = P(0) = diag(α (a- and b-part), α_c (c-part)), counted as a reset, and
@@ -664,7 +685,8 @@ def _update_theta(s: RelsSettings, counters: np.ndarray, theta: np.ndarray, g: n
     """
     inv_den = 1.0 / den
     nab = s.na + s.nb + 1
-    t_max = max(s.trace_max, nab * s.alpha + s.nc * s.alpha_c)
+    tr0 = nab * s.alpha + s.nc * s.alpha_c  # tr P(0)
+    t_max = tr0 if tr0 > s.trace_max else s.trace_max  # max(trace_max, tr P(0))
     if not np.isfinite(np.sqrt(t_max * (den - s.lam)) * (abs(e) * inv_den)):
         return False, e
     # (21) K = P ψ̂ / (λ + ψ̂ᵀ P ψ̂);  (20) θ̂(k) = θ̂(k−1) + K e
@@ -696,8 +718,22 @@ def _sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
 
     ``u``, ``y`` are scaled and finite (checked by the callers). e(k) = y(k) −
     ψ̂ᵀ(k)θ̂(k−1) is the a-priori error (0 if it overflows); ξ̂(k) is eq (19)
-    (0 if it overflows); ``pending``: θ̂ moved, and w holds its (22).
+    (0 if it overflows); ``pending``: θ̂ moved, and w holds its (22). Its three
+    parts: :func:`_open_sample`, the pass over P that applies the (22) of the sample
+    before (:func:`_bring_P_up_to_date`), :func:`_close_sample`.
     """
+    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
+    e = _open_sample(s, counters, st, u, y)
+    r = psi_f[: s.na + s.nb + 1 + s.nc] if s.rml else psi
+    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
+    return _close_sample(s, block, counters, st, r, e, y)
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _open_sample(s: RelsSettings, counters: np.ndarray, st: tuple[np.ndarray, ...],
+                 u: float, y: float) -> float:
+    """A sample up to its pass over P: ψ̂(k) takes u(k), RML filters it into ψ_f(k)
+    (the r of that pass); returns the a-priori error e(k)."""
     theta, P, psi, g, w, u_line, c_work, psi_f, io = st
     _push_input(u_line, psi, u, s.na, s.nb, s.delay)
     # ŷ(k|k−1) = ψ̂ᵀ(k) θ̂(k−1);  e(k) = y(k) − ŷ  (the bracket of eq 20)
@@ -707,8 +743,17 @@ def _sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
     # r, the regressor of the gain and of (22): ψ̂(k) (RELS) or ψ_f(k) (RML)
     if s.rml:
         _filter_regressor(psi_f, psi, theta, s.na + s.nb + 1, n, s.nc)
-    r = psi_f[:n] if s.rml else psi
-    _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
+    return e
+
+
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+def _close_sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
+                  st: tuple[np.ndarray, ...], r: np.ndarray, e: float,
+                  y: float) -> tuple[float, float, bool]:
+    """A sample after its pass over P (g = P(k−1) r(k)): (19)–(21), the noise
+    variance, and ψ̂ shifted for k+1; returns (e(k), ξ̂(k), pending) as :func:`_sample`.
+    """
+    theta, P, psi, g, w, u_line, c_work, psi_f, io = st
     moved = False
     xi = e  # ξ̂(k) = e(k) whenever θ̂ is not updated (frozen or skipped)
     if s.enabled and np.isfinite(e):
@@ -720,11 +765,14 @@ def _sample(s: RelsSettings, block: np.ndarray, counters: np.ndarray,
     if not np.isfinite(xi):
         xi = 0.0
     # running mean of ξ̂² over the last min(k, 1/(1−λ)) samples (kept if not finite)
-    cnt = min(counters[COUNT], 1.0 / (1.0 - s.lam)) if s.lam < 1.0 else counters[COUNT]
+    cnt = counters[COUNT]
+    if s.lam < 1.0:
+        window = 1.0 / (1.0 - s.lam)
+        cnt = window if window < cnt else cnt  # min(k, window)
     nv = block[NOISE_VAR] + (xi * xi - block[NOISE_VAR]) / cnt
     if np.isfinite(nv):
         block[NOISE_VAR] = nv
-    _shift_regressors(psi, psi_f, n, s.na, s.nc, s.rml, y, xi)
+    _shift_regressors(psi, psi_f, s.na + s.nb + 1 + s.nc, s.na, s.nc, s.rml, y, xi)
     return (e if np.isfinite(e) else 0.0), xi, moved
 
 
@@ -735,10 +783,11 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
     specialised to the orders ``na_`` … ``delay_`` (``fixed`` True; :func:`specialised`).
 
     One source for both, a closure (numba's cache tells closures apart by the values
-    they hold). Each order is ``na_ if fixed else int(block[0])``: a choice on a
+    they hold). Each order is ``na_ if fixed else np.int64(block[0])``: a choice on a
     constant, which LLVM folds before it optimises the loop, so that in a specialised
-    kernel every loop bound is a number. (The loop was a function inlined by numba into
-    each entry point; that extra level of inlining cost ~0.8 s of cold compile.)
+    kernel every loop bound is a number. (The loop is the entry point's own body, not
+    a function inlined by numba into each entry point: that extra level of inlining
+    costs cold compile, BENCHMARKS.md.)
     """
 
     def rels_run(block: np.ndarray, rec: np.ndarray, hist: np.ndarray, hist_every: int,
@@ -768,10 +817,10 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
             finite (the run stops before sample k; the callers check the records, so
             this only happens for a streaming sample or a scale that overflows).
         """
-        na = na_ if fixed else int(block[0])
-        nb = nb_ if fixed else int(block[1])
-        nc = nc_ if fixed else int(block[2])
-        delay = delay_ if fixed else int(block[3])
+        na = na_ if fixed else np.int64(block[0])
+        nb = nb_ if fixed else np.int64(block[1])
+        nc = nc_ if fixed else np.int64(block[2])
+        delay = delay_ if fixed else np.int64(block[3])
         s = _settings_with(block, na, nb, nc, delay)
         counters = block[N_SETTINGS:NOISE_VAR]
         st = _views_with(block, na, nb, nc, delay)
@@ -779,14 +828,30 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
         inv_us, inv_ys = 1.0 / s.u_scale, 1.0 / s.y_scale
         # (22) of the previous sample not yet applied (w holds it)
         pending = block[PENDING] != 0.0
+        # r, the regressor of the gain and of (22): ψ̂(k) (RELS) or ψ_f(k) (RML)
+        r = psi_f[: na + nb + 1 + nc] if s.rml else psi
         countdown = hist_every
         row = 0
         n_run = 0
-        for k in range(rec.shape[1]):
-            u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
-            if not (np.isfinite(u) and np.isfinite(y)):
+        u = y = e = 0.0
+        # _sample's three parts, so that the pass over P is written once in the loop:
+        # the run ends at k = N or before a sample that is not finite, where with
+        # ``settle`` the pass applies the last pending (22) only (the block then
+        # holds P(k))
+        for k in range(rec.shape[1] + 1):
+            end = k == rec.shape[1]
+            if not end:
+                u, y = rec[0, k] * inv_us, rec[1, k] * inv_ys
+                end = not (np.isfinite(u) and np.isfinite(y))
+            if end and not (settle and pending):
                 break
-            e, xi, pending = _sample(s, block, counters, st, pending, u, y, fixed)
+            if not end:
+                e = _open_sample(s, counters, st, u, y)
+            _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, pending, fixed)
+            if end:
+                pending = False
+                break
+            e, xi, pending = _close_sample(s, block, counters, st, r, e, y)
             rec[2, k] = e * s.y_scale
             rec[3, k] = xi * s.y_scale
             n_run += 1
@@ -797,10 +862,6 @@ def _entry(na_: int, nb_: int, nc_: int, delay_: int, fixed: bool) -> Any:
                     for i in range(hist.shape[1]):
                         hist[row, i] = theta[i]
                     row += 1
-        if settle and pending:  # the last pending (22): the block holds P(k)
-            r = psi_f[: na + nb + 1 + nc] if s.rml else psi
-            _bring_P_up_to_date(s, counters, P, w, r, g, psi_f, psi, theta, True, fixed)
-            pending = False
         block[PENDING] = 1.0 if pending else 0.0
         return n_run
 
