@@ -46,6 +46,7 @@ from ehss.compensation.adaptive import (
 )
 from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
+from ehss.live.detect import TrackingTrigger, TriggerSettings
 
 __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
            "Target", "DatagramSender", "UdpTarget", "JUDGE_IN", "Snapshot", "Verdict",
@@ -115,6 +116,22 @@ class CompensationSettings:
         estimator with the tracker's kept short lowers the scatter of the models judged
         in steady running, but the first estimator then lags a change longer, and the
         choice between the two does not pick the tracker reliably meanwhile.
+    trigger : TriggerSettings or None
+        The quick test for a change of the loop on its tracking error
+        (:class:`ehss.live.detect.TrackingTrigger`; None: none). It flags a change
+        within a few tenths of a second, before any estimate of the loop moves; each
+        trigger is logged (``"kind": "compensator_change"``) and makes the first
+        estimator follow for ``follow_s``. A false trigger only speeds that estimator
+        up for a while: the guards still decide what is sent.
+    follow_s : float
+        How long the first estimator follows after a trigger: its bound of tr P lifted
+        to ``follow_trace_bound``, so that its forgetting acts as the tracker's does,
+        and θ̂ averaged from the trigger on only; then P is set back to its value at
+        the trigger (the gain of steady running) under its own bound. About the
+        time the tracker needs to follow a change (0.75 s for a memory of 0.3 s) and
+        a little more: longer, its models take up the scatter of the tracker's.
+    follow_trace_bound : float
+        The bound of tr P while following (as ``tracker_trace_bound``).
     h1_window_s : float
         Length of the sliding H1 estimate that must confirm a model (and of the recent
         reference the drive checks run on). A change of the rig shows in full in it
@@ -161,6 +178,9 @@ class CompensationSettings:
     tracker_trace_bound: float | None = 1e12
     tracker_memory_s: float | None = None
     average_s: float = 0.3
+    trigger: TriggerSettings | None = field(default_factory=TriggerSettings)
+    follow_s: float = 0.75
+    follow_trace_bound: float = 1e12
     h1_window_s: float = 1.5
     update_s: float = 0.25
     start_s: float = 2.0
@@ -271,6 +291,10 @@ class ChannelAdapter:
         self._thetas: collections.deque = collections.deque()
         self.chosen = "estimator"
         self.judging = Judging(self.fs, s, self.compensator)
+        self.trigger = None if s.trigger is None else TrackingTrigger(self.fs, s.trigger)
+        self._trace_bound = self.estimator.settings.trace_bound
+        self._follow_until: int | None = None
+        self._steady_P = self.estimator.P
 
     def _new_estimator(self, theta0: np.ndarray | None, *, trace_bound: float | None = None,
                        memory_s: float | None = None) -> ehss.RelsEstimator:
@@ -282,19 +306,47 @@ class ChannelAdapter:
             dt=1.0 / self.fs,
             u_scale=self._scale, y_scale=self._scale)
 
-    def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> None:
-        """Consecutive samples of the drive (model input), feedback and desired reference."""
+    def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> bool:
+        """Consecutive samples of the drive (model input), feedback and desired
+        reference; True if the trigger flagged a change of the loop in them."""
         self.estimator.update_many(drive, feedback)
         if self.tracker is not None:
             self.tracker.update_many(drive, feedback)
         self.window.push(np.vstack([drive, feedback, desired]))
         self._n += drive.size
+        if self._follow_until is not None and self._n >= self._follow_until:
+            self._end_follow()
         thetas = [self.estimator.theta]
         if self.tracker is not None:
             thetas.append(self.tracker.theta)
         self._thetas.append((self._n, np.array(thetas)))
         while self._thetas and self._thetas[0][0] < self._n - self._n_average:
             self._thetas.popleft()
+        changed = self.trigger is not None and self.trigger(desired - feedback)
+        if changed:
+            self.follow_change()
+        return changed
+
+    def follow_change(self) -> None:
+        """The loop changed (a trigger): the estimator follows quickly for
+        ``follow_s``, and θ̂ is averaged from here on only.
+
+        Its bound of tr P is lifted to ``follow_trace_bound`` (its forgetting then
+        acts, as the tracker's does), and at the end P is set back to the one it had
+        here, the gain of its steady running, with its own bound.
+        """
+        while len(self._thetas) > 1:  # the newest stays: a snapshot needs one
+            self._thetas.popleft()
+        est = self.estimator
+        if self._follow_until is None:
+            self._steady_P = est.P
+        est.set_trace_bound(self.settings.follow_trace_bound)
+        self._follow_until = self._n + int(round(self.settings.follow_s * self.fs))
+
+    def _end_follow(self) -> None:
+        self._follow_until = None
+        self.estimator.set_trace_bound(self._trace_bound)
+        self.estimator.set_covariance(self._steady_P)
 
     def snapshot(self) -> Snapshot:
         """What a judgement needs, copied: the windows and θ̂ averaged over the last
@@ -629,7 +681,9 @@ class AdaptiveLoop:
                 continue
             parts.append(block)
             for k, ad in enumerate(self.adapters):
-                ad.feed(block.drive[k], block.feedback[k], block.desired[k])
+                if ad.feed(block.drive[k], block.feedback[k], block.desired[k]):
+                    self._event({"kind": "compensator_change", "channel": ad.name,
+                                 "t_s": self.target.index / self.fs})
             self._collect()
             t_s = self.target.index / self.fs
             turn = [k for k in range(len(next_update)) if t_s + 1e-12 >= next_update[k]]
