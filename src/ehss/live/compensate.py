@@ -25,6 +25,7 @@ datagrams. ``apply_index`` counts drive samples from the start of the stream.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 import re
 import time
@@ -198,6 +199,8 @@ class CompensationSettings:
             raise ParameterError(f"judge_in={self.judge_in!r} must be one of {JUDGE_IN}")
         for name in ("memory_s", "h1_window_s", "update_s"):
             check_real(getattr(self, name), name, lo=0.0, lo_open=True, unit="s")
+        check_real(self.follow_s, "follow_s", lo=0.0, unit="s")
+        check_real(self.follow_trace_bound, "follow_trace_bound", lo=0.0, lo_open=True)
 
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
@@ -205,7 +208,9 @@ class CompensationSettings:
                 "start_s": self.start_s, "adapt_until_s": self.adapt_until_s,
                 "n_taps": self.n_taps, "estimator": [self.na, self.nb, self.nc, self.delay,
                                                      self.method],
-                "judge_in": self.judge_in, "min_interval_s": self.guard.min_interval_s,
+                "judge_in": self.judge_in, "follow_s": self.follow_s,
+                "trigger": None if self.trigger is None else dataclasses.asdict(self.trigger),
+                "min_interval_s": self.guard.min_interval_s,
                 "crossfade_s": self.guard.crossfade_s, "max_gain": self.guard.max_gain}
 
 
