@@ -12,7 +12,9 @@ channel that had a good compensator starts refusing, a clear when it accepts aga
 A judgement runs on a worker (:attr:`CompensationSettings.judge_in`) on a copy of the
 channel's windows and θ̂ (:class:`Snapshot`, :class:`Judging`), and its decision is
 taken up at the next channel's turn, so that the stream's samples never wait for a
-design.
+design. A change of the loop shows first in the channel's own tracking error: a quick
+sequential test on it (:class:`~ehss.live.detect.TrackingTrigger`) makes the
+channel's first estimator follow for a while (:meth:`ChannelAdapter.follow_change`).
 
 The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
 ``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
