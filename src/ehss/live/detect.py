@@ -170,6 +170,12 @@ DRIFT = 0.5
 #: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
 #: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
 CLEAR_LEVEL = 0.5
+#: A block this many σ above the learnt level belongs to the change (one block of an
+#: unchanged loop in 40 lies there, under the Gaussian model): the first such block
+#: since the CUSUM last was zero dates the change's start. The last zero alone (Page's
+#: estimate) dates it too early whenever blocks of the unchanged loop have lifted the
+#: sum above zero by its drift of 0.5 σ, one block in three.
+ONSET_Z = 2.0
 #: Fewest independent blocks of learning the test is calibrated from.
 MIN_EFFECTIVE_BLOCKS = 5
 #: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
@@ -528,6 +534,13 @@ class TriggerSettings:
                                  f"{MIN_EFFECTIVE_BLOCKS} blocks of {self.block_s} s")
 
 
+def _onset_blocks(run: list[float]) -> int:
+    """Blocks of ``run`` (the z since the CUSUM's last zero) from its first at or above
+    :data:`ONSET_Z` on (all of them if none is)."""
+    first = next((i for i, z in enumerate(run) if z >= ONSET_Z), 0)
+    return len(run) - first
+
+
 class TrackingTrigger:
     """A quick sequential test for a change of a compensated loop, on its own errors.
 
@@ -559,12 +572,17 @@ class TrackingTrigger:
         self._fill = 0
         self._x: list[float] = []
         self._cusum = 0.0
+        self._run: list[float] = []
         self.triggers = 0
+        #: at the latest trigger, how long before it the change began (s), as near as
+        #: the blocks tell (:data:`ONSET_Z`)
+        self.onset_s = 0.0
 
     def restart(self) -> None:
         """Learn anew (the loop changed): the test waits ``learn_s`` of blocks."""
         self._x = []
         self._cusum = 0.0
+        self._run = []
 
     def __call__(self, error: np.ndarray) -> bool:
         """Take the next samples of the tracking error; True if a change is flagged
@@ -594,8 +612,11 @@ class TrackingTrigger:
                 # S_k = max(0, S_{k−1} + z_k − κ), alarm at S_k ≥ h
                 z = (x - cal.mean) / cal.sd
                 self._cusum = max(0.0, self._cusum + z - DRIFT)
+                # the z of the blocks since the sum last was zero
+                self._run = self._run + [z] if self._cusum > 0.0 else []
                 if self._cusum >= cal.threshold:
                     self.triggers += 1
+                    self.onset_s = _onset_blocks(self._run) * self.settings.block_s
                     self.restart()
                     return True
             self._x.pop(0)
