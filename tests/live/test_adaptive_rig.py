@@ -36,10 +36,11 @@ _WINDOWS_S = [(t, t + 2.0) for t in np.arange(22.0, 40.0, 2.0)]
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("seeds", "factor", "first_bound"),
-                         [((1, 2), 1.4, 1.5), ((3, 4), 1.4, 2.0), ((3, 4), 0.7, 1.5)],
-                         ids=["+40%", "+40%, other references", "-30%, other references"])
-def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
+@pytest.mark.parametrize(("seeds", "factor"),
+                         [((1, 2), 1.4), ((3, 4), 1.4), ((1, 2), 0.7), ((3, 4), 0.7)],
+                         ids=["+40%", "+40%, other references", "-30%",
+                              "-30%, other references"])
+def test_adaptation_follows_a_payload_change(seeds, factor):
     desired = _desired(40.0, seeds)
     change = (RigEvent(20.0, "load.mass_kg", factor * ehss.preset("default").load.mass_kg,
                        "1"),)
@@ -61,19 +62,16 @@ def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
     first = [c for c in changes if c[1] < 30.0]
     assert len(first) == 1 and first[0][0] == "1" and 20.0 < first[0][1] <= 20.75
     assert all(c[0] == "1" for c in changes)
+    # once flagged, the change is followed by a correction of the running compensator
+    # fitted to the data since it (a short FIR: README, "Adaptive compensation")
+    flagged = [ld for ld in adapted.loads if ld["channel"] == "1" and ld["t_s"] > first[0][1]]
+    assert flagged[0]["model"] == "correction"
     after = [adapted.tracking_rms(*w) for w in _WINDOWS_S]
-    # channel 1 over [22, 24) s: the aim is 1.5x its level before. Reached after -30 %
-    # (0.7-0.9x) and after +40 % on the first references (1.24x); on the second 1.8x
-    # (1.6-2.7x on others), so 2x bounds what is reached there: the heavier loop's own
-    # level is 1.2-1.7x, and the models of the first 1.5 s after the change scatter at
-    # the heavier mass (README, "Adaptive compensation")
-    assert after[0][0] <= first_bound * before[0]
-    # from 4 s after the change on, every 2-s stretch within 2x: the heavier loop's own
-    # level, adapted from the start, is 1.4x the lighter one's, and a 2-s stretch of an
-    # unchanged channel scatters up to 1.6x around its mean (channel 2 here)
-    assert all(a[0] <= 2.0 * before[0] for a in after[1:])
-    # and over [22, 40) s as a whole within 1.5x
-    assert adapted.tracking_rms(22.0, 40.0)[0] <= 1.5 * before[0]
+    # channel 1 from 2 s after the change on, over [22, 24) s and every later 2-s
+    # stretch: within 1.5x its level before (the aim; the heavier loop's own level,
+    # adapted from the start, is 1.2-1.7x the lighter one's)
+    for a in after:
+        assert a[0] <= 1.5 * before[0]
     # while the inverse built before the change, not adapted, stays at least 2x worse in
     # every stretch from 2 s after the change
     for w, a in zip(_WINDOWS_S, after, strict=True):
