@@ -76,3 +76,18 @@ def test_it_takes_blocks_across_calls(rng):
 def test_bad_settings(kwargs, message):
     with pytest.raises(ParameterError, match=message):
         TriggerSettings(**kwargs)
+
+
+@pytest.mark.parametrize("rise", [2.0, 3.0])
+def test_a_trigger_dates_the_change(rng, rise):
+    # the run of blocks before a trigger from the first one 2 sigma up: the change at
+    # 20 s lies in the block it dates (100 samples), or the next when that block holds
+    # too little of it (a rise of 2x in RMS lifts ln(median e²) by ln 4 = 1.4, about
+    # 4.6 of its standard deviations)
+    e = rng.standard_normal(40_000)
+    e[20_000:] *= rise
+    trigger = TrackingTrigger(FS)
+    times = _run(trigger, e, step=100)
+    assert len(times) == 1
+    onset = times[0] - trigger.onset_s
+    assert 19.9 <= onset <= 20.1 + 1e-9

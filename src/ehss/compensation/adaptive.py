@@ -575,11 +575,13 @@ def fit_correction(desired: Any, feedback: Any, *, fs_hz: float, band_hz: tuple[
         raise DataError("the feedback does not vary: no correction can be fitted")
     miss = want[n_fit:] - ymat[n_fit:] @ kappa
     was = want[n_fit:] - ymat[n_fit:] @ parts[-1][1]
-    ratio = float(np.linalg.norm(miss) / max(float(np.linalg.norm(was)), 1e-300))
+    level = float(np.linalg.norm(want[n_fit:]))
+    # (a loop without error leaves nothing to correct: measured against rounding then)
+    ratio = float(np.linalg.norm(miss) / max(float(np.linalg.norm(was)), 1e-12 * level,
+                                             1e-300))
     corr = Correction(taps=kappa, fs_hz=float(fs_hz), band_hz=band_hz, n_fit=n_fit,
                       n_check=int(n_check), check_ratio=ratio,
-                      check_residual=float(np.linalg.norm(miss) / max(
-                          float(np.linalg.norm(want[n_fit:])), 1e-300)),
+                      check_residual=float(np.linalg.norm(miss) / max(level, 1e-300)),
                       refines=any(isinstance(t, np.ndarray) for _, _, t in spans),
                       gain_range=(0.0, 0.0), max_phase_deg=0.0)
     k = corr.frequency_response(np.linspace(band_hz[0], band_hz[1], 64))
