@@ -3,8 +3,8 @@
 The simulated rig, position loop, two channels, a 0.5–20 Hz random reference of
 0.5 mm RMS, +40 % payload on channel 1 at t = 20 s; adaptive compensation in preview
 mode (the reference known 128 samples ahead; the change flagged by the tracking-error
-trigger, dotted, then corrected), the same with the inverse frozen at t = 19.9 s, and the rig without
-compensation; then the causal mode on one channel.
+trigger, dotted, then corrected), the same with the inverse frozen at t = 19.9 s, and
+the rig without compensation; then the causal mode on one channel.
 Run from the repository: ``PYTHONPATH=src python docs/adaptive_compensation.py``.
 """
 
