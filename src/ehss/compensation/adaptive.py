@@ -39,6 +39,13 @@ and fit the newest quarter-second of feedback (fresh data, the free-run fit that
 Otherwise the last good compensator stays and the reason is logged. Updates are at most
 one per ``min_interval_s``.
 
+After a change of the rig, before a full model of the new loop can be trusted, the
+running compensator can be *corrected* (preview mode): :func:`fit_correction` fits a
+short non-causal FIR ``K`` with ``L K ≈ 1`` to the data since the change (``L`` the
+loop as compensated now), :func:`fold_correction` refits the FIR part to ``C K``, and
+:meth:`AdaptiveCompensator.assess_correction` guards it (checked on fresh data, its
+gain and phase bounded, the drive checks).
+
 References: eqs (16)–(22) of the paper (the model and its recursive estimate).
 """
 

@@ -14,7 +14,10 @@ channel's windows and θ̂ (:class:`Snapshot`, :class:`Judging`), and its decisi
 taken up at the next channel's turn, so that the stream's samples never wait for a
 design. A change of the loop shows first in the channel's own tracking error: a quick
 sequential test on it (:class:`~ehss.live.detect.TrackingTrigger`) makes the
-channel's first estimator follow for a while (:meth:`ChannelAdapter.follow_change`).
+channel's first estimator follow for a while (:meth:`ChannelAdapter.follow_change`)
+and, in preview mode, has the running compensator corrected from the data since the
+change (:func:`~ehss.compensation.adaptive.fit_correction`, a five-tap FIR folded into
+it) until the full model's inverse takes over again.
 
 The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
 ``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
