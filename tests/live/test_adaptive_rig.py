@@ -160,3 +160,13 @@ def test_judging_anywhere_else_is_refused():
 
     with pytest.raises(ParameterError, match="judge_in"):
         CompensationSettings(band_hz=BAND, judge_in="gpu")
+
+
+def test_a_correction_needs_a_whole_span_and_time():
+    from ehss.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="correction_span"):
+        CompensationSettings(band_hz=BAND, correction_span=-1)
+    with pytest.raises(ParameterError, match="correct_s"):
+        CompensationSettings(band_hz=BAND, correct_s=-1.0)
+    assert CompensationSettings(band_hz=BAND).to_dict()["correction_span"] == 2

@@ -42,7 +42,7 @@ from typing import Any, Protocol
 import numpy as np
 
 import ehss
-from ehss._checks import check_real
+from ehss._checks import check_int, check_real
 from ehss.compensation.adaptive import (
     MODES,
     AdaptiveCompensator,
@@ -141,14 +141,17 @@ class CompensationSettings:
     follow_trace_bound : float
         The bound of tr P while following (as ``tracker_trace_bound``).
     correct_s : float
-        For this long after a trigger, in preview mode, the running compensator is
-        corrected instead of replaced: a short non-causal FIR ``K`` (``correction_span``
-        taps each side) fitted to the data since the trigger
-        (:func:`ehss.compensation.adaptive.fit_correction`), as soon as they suffice,
-        and again on the data under each correction. Then the full model's inverse
-        takes over as before. 0: no corrections.
+        For at most this long after a trigger, in preview mode, the running compensator
+        is corrected instead of replaced: a short non-causal FIR ``K``
+        (``correction_span`` taps each side) fitted to the data since the change
+        (:func:`ehss.compensation.adaptive.fit_correction`) as soon as they suffice,
+        and fitted again once the data under each correction suffice to check the next
+        on; the full model is not judged meanwhile. The first correction refused (it
+        does not halve the error left, or a guard fails) ends it, and the full model's
+        inverse takes over as before. 0: no corrections.
     correction_span : int
-        ``m`` of the correction: ``2 m + 1`` taps.
+        ``m`` of the correction: ``2 m + 1`` taps (2: a gain, a lead and a second
+        derivative, and the two next terms).
     h1_window_s : float
         Length of the sliding H1 estimate that must confirm a model (and of the recent
         reference the drive checks run on). A change of the rig shows in full in it
@@ -220,6 +223,7 @@ class CompensationSettings:
         check_real(self.follow_s, "follow_s", lo=0.0, unit="s")
         check_real(self.follow_trace_bound, "follow_trace_bound", lo=0.0, lo_open=True)
         check_real(self.correct_s, "correct_s", lo=0.0, unit="s")
+        check_int(self.correction_span, "correction_span", lo=0)
 
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
