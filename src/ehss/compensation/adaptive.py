@@ -81,6 +81,7 @@ __all__ = [
     "Correction",
     "fit_correction",
     "fold_correction",
+    "predicted_error_ratio",
 ]
 
 #: Reference modes: known ahead (a drive file streamed) or made online.
@@ -599,11 +600,32 @@ def fit_correction(desired: Any, feedback: Any, *, fs_hz: float, band_hz: tuple[
 
 def _through(x: np.ndarray, then: CompensatorDesign, base: CompensatorDesign) -> np.ndarray:
     """``x`` (band-limited) through ``C_then / C_base``, by FFT over the record padded to
-    twice its length (the rows it is taken at lie away from its newest end)."""
+    twice its length (the rows it is taken at lie away from its ends)."""
     n_fft = 1 << int(math.ceil(math.log2(2 * x.size)))
     f = np.fft.rfftfreq(n_fft, 1.0 / base.fs_hz)
     ratio = then.frequency_response(f) / base.frequency_response(f)
     return np.fft.irfft(np.fft.rfft(x, n_fft) * ratio, n_fft)[:x.size]
+
+
+def predicted_error_ratio(new: CompensatorDesign, running: CompensatorDesign, desired: Any,
+                          feedback: Any, start: int) -> float:
+    """RMS tracking error ``new`` would have given over the rows from ``start`` of a
+    record run by ``running``, over the one it gave (both band-limited).
+
+    Under ``running`` the feedback is ``y = G C_run r``; under ``new`` it would have
+    been ``(C_new / C_run) y``. The newest ``new.preview`` samples are left out: the
+    ratio looks that far ahead in ``y``, which is not known there.
+    """
+    band = running.band_hz
+    r = _band_limited(np.asarray(desired, dtype=float), running.fs_hz, band)
+    y = _band_limited(np.asarray(feedback, dtype=float), running.fs_hz, band)
+    stop = r.size - max(new.preview, int(math.ceil(running.fs_hz / band[1])))
+    if stop - start < 1:
+        return math.nan
+    y_new = _through(y, new, running)
+    rows = slice(int(start), stop)
+    was = float(np.linalg.norm(r[rows] - y[rows]))
+    return float(np.linalg.norm(r[rows] - y_new[rows])) / max(was, 1e-300)
 
 
 def fold_correction(design: CompensatorDesign, correction: Correction) -> CompensatorDesign:

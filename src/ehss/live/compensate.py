@@ -51,6 +51,7 @@ from ehss.compensation.adaptive import (
     UpdateGuard,
     fit_correction,
     free_run_fit,
+    predicted_error_ratio,
 )
 from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
@@ -270,7 +271,8 @@ class Snapshot:
     averaged θ̂ (estimator's, then tracker's; shape (1 or 2, n_params)) at one time;
     while a change is corrected, the compensator corrected and the spans of the windows
     since the change, each with the correction that ran then (``spans`` of
-    :func:`~ehss.compensation.adaptive.fit_correction`; empty: judge the model)."""
+    :func:`~ehss.compensation.adaptive.fit_correction`; empty: judge the model); while
+    a corrected compensator runs, it and the window index from which it ran alone."""
 
     drive: np.ndarray
     feedback: np.ndarray
@@ -278,6 +280,8 @@ class Snapshot:
     thetas: np.ndarray
     running: CompensatorDesign | None = None
     spans: tuple = ()
+    corrected: CompensatorDesign | None = None
+    corrected_from: int = 0
 
 
 class ChannelAdapter:
@@ -335,6 +339,8 @@ class ChannelAdapter:
         self._base: CompensatorDesign | None = None
         self._spans: list[list] = []
         self._accepted_taps: np.ndarray | None = None
+        # while a corrected compensator runs: the sample from which it runs alone
+        self._corrected_from: int | None = None
         # the compensator sent last, and the one before it (None: none yet)
         self._running: CompensatorDesign | None = None
         self._before: CompensatorDesign | None = None
@@ -432,6 +438,7 @@ class ChannelAdapter:
         """The compensator just accepted is sent: it runs alone from sample ``until``
         (the end of its shadow run and cross-fade)."""
         self.busy_until = until
+        self._corrected_from = None if self._accepted_taps is None else until
         if self._accepted_taps is not None:
             self._spans.append([until, self._accepted_taps])
         elif self._n < self._correct_until and all(
@@ -457,8 +464,13 @@ class ChannelAdapter:
         of that much more lag. Later samples do not change it."""
         u, y, r = self.window.latest()
         spans = self.spans()
+        first = self._n - self.window.fill
+        corrected = self._corrected_from is not None and not spans \
+            and self._corrected_from < self._n
         return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
-                        self._base if spans else None, spans)
+                        self._base if spans else None, spans,
+                        self.compensator.current if corrected else None,
+                        max(0, (self._corrected_from or 0) - first))
 
     def models(self, snapshot: Snapshot | None = None) -> list[ehss.ArmaxModel]:
         """The estimator's model, and the tracker's if there is one, of ``snapshot``
@@ -583,8 +595,23 @@ class Judging:
             h1 = ehss.h1_estimate(u, y, fs=self.fs, nperseg=min(nper, u.size))
         except EhssError as exc:
             return Verdict(Decision(t_s, False, f"no model or H1 estimate: {exc}"), None, "")
-        return Verdict(self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y)),
-                       model, chosen)
+        decision = self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y))
+        if decision.accepted and decision.design is not None and snap.corrected is not None:
+            decision = self._against_correction(decision, snap)
+        return Verdict(decision, model, chosen)
+
+    def _against_correction(self, decision: Decision, snap: Snapshot) -> Decision:
+        """A model's compensator replaces a corrected one only if, on the rows the
+        corrected one ran alone, it would have left no more tracking error."""
+        assert decision.design is not None and snap.corrected is not None
+        ratio = predicted_error_ratio(decision.design, snap.corrected, snap.desired,
+                                      snap.feedback, snap.corrected_from)
+        figures = {**decision.figures, "against_correction": ratio}
+        if ratio > 1.0:
+            return Decision(decision.t_s, False, f"the model's compensator would leave "
+                            f"{ratio:.2f} of the corrected one's tracking error",
+                            figures=figures)
+        return Decision(decision.t_s, True, "", decision.design, figures)
 
 
 @dataclass(frozen=True)
