@@ -9,11 +9,14 @@ from ehss.compensation.adaptive import (
     AdaptiveCompensator,
     UpdateGuard,
     design_compensator,
+    fit_correction,
+    fold_correction,
     free_run_fit,
+    predicted_error_ratio,
     run_compensator,
 )
 from ehss.compensation.checks import DriveLimits
-from ehss.errors import ParameterError
+from ehss.errors import DataError, ParameterError
 from ehss.frequency import h1_estimate
 from ehss.identification.model import ArmaxModel
 from ehss.signals import band_limited_random
@@ -167,3 +170,132 @@ def test_free_run_fit_against_its_definition():
     unstable = ArmaxModel(a=[1.0, -1.5], b=[1.0], delay=1, dt=1.0 / FS)
     assert free_run_fit(unstable, u, y, 500) == -np.inf
     assert free_run_fit(m, u, np.ones_like(y), 500) == -np.inf
+
+
+# ------------------------------------------------------------------------ correction
+def _reference(seconds=3.0, seed=5):
+    return band_limited_random(band_hz=BAND, rms=1.0, duration_s=seconds, fs=FS,
+                               seed=seed).values
+
+
+def _fit(r, y, **kw):
+    return fit_correction(r, y, fs_hz=FS, band_hz=BAND, spans=[(0, r.size, None)],
+                          n_check=250, **kw)
+
+
+@pytest.mark.parametrize(("gain", "delay"), [(0.8, 1), (1.25, 2), (1.0, 0)])
+def test_correction_recovers_a_gain_and_a_delay(gain, delay):
+    # a loop L = g q^-d: the correction is K = q^d / g, which five taps hold exactly
+    r = _reference()
+    y = gain * np.r_[np.zeros(delay), r[:r.size - delay]]
+    f = np.linspace(*BAND, 100)
+    want = np.exp(2j * np.pi * f * delay / FS) / gain
+    # without noise: exact but for the record's first samples, where the zero-phase
+    # filter's start (padded ends of r and of the delayed y, which differ) breaks
+    # r = K y: 1e-5 of it
+    k = _fit(r, y)
+    np.testing.assert_allclose(k.frequency_response(f), want, rtol=1e-4)
+    assert k.check_ratio < 1e-3 and not k.refines
+    # white sensor noise of 1 % of the reference's RMS: 0.2 % of it lies in the band
+    # (20 of 500 Hz), which biases K by its square (4e-6, errors in variables) and
+    # scatters it by about 0.2 % / sqrt(2 B T) ~ 2e-4 over 2.5 s: 1e-3 holds it
+    noisy = y + 0.01 * np.random.default_rng(3).standard_normal(y.size)
+    k = _fit(r, noisy)
+    np.testing.assert_allclose(k.frequency_response(f), want, rtol=1e-3)
+
+
+def test_folded_compensator_is_the_running_one_times_the_correction():
+    design = design_compensator(_loop(), band_hz=BAND, preview=128)
+    k = _fit(*(lambda r: (r, 0.8 * np.r_[0.0, r[:-1]]))(_reference()))
+    folded = fold_correction(design, k)
+    f = np.linspace(*BAND, 200)
+    got = folded.frequency_response(f) / (design.frequency_response(f)
+                                          * k.frequency_response(f))
+    # the 256-tap FIR refitted to C K: as close as the design's own fit to its target
+    # (``error``, 0.1 dB / 1 degree at worst at the band's edges)
+    assert np.max(np.abs(got - 1.0)) <= 1.5 * np.max(np.abs(design.error)) + 1e-3
+    assert np.max(np.abs(folded.error)) <= 1.5 * np.max(np.abs(design.error)) + 1e-3
+    np.testing.assert_array_equal(folded.sos, design.sos)
+    assert folded.preview == design.preview and folded.taps.size == design.taps.size
+    with pytest.raises(ParameterError, match="preview"):
+        fold_correction(design_compensator(_loop(), band_hz=BAND, mode="causal"), k)
+
+
+@pytest.mark.parametrize(("fault", "why"), [("none", ""), ("sign", "phase"),
+                                            ("stuck", "vary"), ("noise", "")])
+def test_correction_guard_refuses_a_fault(fault, why):
+    design = design_compensator(_loop(), band_hz=BAND, preview=128)
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    r = _reference()
+    # the loop changed: it now lags a sample more and gives 0.8 of the reference
+    y = 0.8 * np.r_[0.0, r[:-1]]
+    rng = np.random.default_rng(4)
+    if fault == "sign":
+        y = -y
+    elif fault == "stuck":
+        y = np.full_like(y, y[100])
+    elif fault == "noise":
+        # a burst of white noise 5x the reference's RMS: as large as it in the band
+        y = y + 5.0 * rng.standard_normal(y.size)
+    try:
+        k = _fit(r, y)
+    except DataError as exc:
+        assert why and why in str(exc)
+        return
+    d = comp.assess_correction(1.0, k, design, r)
+    assert d.accepted == (fault == "none"), d.reason
+    assert why in d.reason
+    if fault == "noise":
+        # fitted to noise as large as the reference in the band, K halves (0.3-0.6
+        # here, refused) and fails its check on fresh data too: it leaves 1/sqrt(2)
+        assert k.check_ratio > 0.5
+    assert comp.current is None and not comp.log     # assess changes nothing
+
+
+def test_rows_run_by_another_compensator_count_through_the_ratio():
+    # the loop G run first by its own inverse C_then (G C_then = 1 in the band), then
+    # by C_base = C_then / 1.2 (a model 20 % too strong): the whole correction of
+    # C_base is K = 1.2, and the rows under C_then, which give y = r, ask K y for
+    # (C_then / C_base) r = 1.2 r
+    import scipy.signal
+
+    g = _loop()
+    c_then = design_compensator(g, band_hz=BAND, preview=128)
+    strong = ArmaxModel(a=g.a, b=1.2 * g.b, delay=g.delay, dt=g.dt)
+    c_base = design_compensator(strong, band_hz=BAND, preview=128)
+    r = _reference(6.0)
+    half = r.size // 2
+    u = np.r_[run_compensator(c_then, r)[:half], run_compensator(c_base, r)[half:]]
+    y = scipy.signal.lfilter(np.r_[np.zeros(g.delay), g.b], g.a, u)
+    # the loop's start-up and the switch (its transient) left out
+    settle = 500
+    spans = [(settle, half, c_then), (half + settle, r.size, None)]
+    k = fit_correction(r, y, fs_hz=FS, band_hz=BAND, spans=spans, n_check=250,
+                       base=c_base)
+    f = np.linspace(*BAND, 100)
+    # the designs realise the exact inverse to 0.3-0.5 % RMS, up to 1-3 % at the
+    # band's edges (their ``error``): K within 3 % of 1.2
+    np.testing.assert_allclose(k.frequency_response(f), 1.2, rtol=0.03)
+    with pytest.raises(ParameterError, match="base"):
+        fit_correction(r, y, fs_hz=FS, band_hz=BAND, spans=spans, n_check=250)
+
+
+def test_predicted_error_of_a_compensator_on_data_run_by_another():
+    # the loop run by C_run = C / 1.2 (its own inverse C, too weak by 1.2) leaves
+    # r - y = r (1 - 1/1.2); C itself would have left only what its design misses
+    import scipy.signal
+
+    g = _loop()
+    exact = design_compensator(g, band_hz=BAND, preview=128)
+    weak = design_compensator(ArmaxModel(a=g.a, b=1.2 * g.b, delay=g.delay, dt=g.dt),
+                              band_hz=BAND, preview=128)
+    r = _reference(3.0)
+    y = scipy.signal.lfilter(np.r_[np.zeros(g.delay), g.b], g.a, run_compensator(weak, r))
+    # the same compensator: the same error, exactly
+    assert predicted_error_ratio(weak, weak, r, y, 500) == pytest.approx(1.0, rel=1e-12)
+    # the exact inverse: the design's own error (0.3-0.5 % RMS) of the 1/6 left now
+    assert predicted_error_ratio(exact, weak, r, y, 500) < 0.05
+    # and the other way round: the weak one judged on data run by the exact one, its
+    # 1/6 against the design's few tenths of a percent
+    assert predicted_error_ratio(weak, exact, r, scipy.signal.lfilter(
+        np.r_[np.zeros(g.delay), g.b], g.a, run_compensator(exact, r)), 500) > 10.0

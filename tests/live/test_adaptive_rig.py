@@ -36,10 +36,11 @@ _WINDOWS_S = [(t, t + 2.0) for t in np.arange(22.0, 40.0, 2.0)]
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("seeds", "factor", "first_bound"),
-                         [((1, 2), 1.4, 2.0), ((3, 4), 0.7, 1.5)],
-                         ids=["+40%", "-30%, other references"])
-def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
+@pytest.mark.parametrize(("seeds", "factor"),
+                         [((1, 2), 1.4), ((3, 4), 1.4), ((1, 2), 0.7), ((3, 4), 0.7)],
+                         ids=["+40%", "+40%, other references", "-30%",
+                              "-30%, other references"])
+def test_adaptation_follows_a_payload_change(seeds, factor):
     desired = _desired(40.0, seeds)
     change = (RigEvent(20.0, "load.mass_kg", factor * ehss.preset("default").load.mass_kg,
                        "1"),)
@@ -54,19 +55,23 @@ def test_adaptation_follows_a_payload_change(seeds, factor, first_bound):
     # steady state: the loop lags and attenuates its 0.5-20 Hz reference (~100 % error);
     # the online inverse brings it to a few percent, at least 20 times less
     assert np.all(before <= uncompensated / 20.0)
+    # the change is flagged on channel 1 within 0.75 s (its tracking error rises 9x after
+    # +40 %, 4x after -30 %: a few blocks of the trigger's CUSUM), and on channel 2 never
+    changes = [(e["channel"], e["t_s"]) for e in adapted.events
+               if e["kind"] == "compensator_change"]
+    first = [c for c in changes if c[1] < 30.0]
+    assert len(first) == 1 and first[0][0] == "1" and 20.0 < first[0][1] <= 20.75
+    assert all(c[0] == "1" for c in changes)
+    # once flagged, the change is followed by a correction of the running compensator
+    # fitted to the data since it (a short FIR: README, "Adaptive compensation")
+    flagged = [ld for ld in adapted.loads if ld["channel"] == "1" and ld["t_s"] > first[0][1]]
+    assert flagged[0]["model"] == "correction"
     after = [adapted.tracking_rms(*w) for w in _WINDOWS_S]
-    # channel 1 over [22, 24) s: the aim is 1.5x its level before. Reached after -30 %
-    # (0.7-0.9x); after +40 % 1.6x on these references (1.7-2.9x on others), so 2x bounds
-    # what is reached here: the heavier loop's own level is 1.2-1.7x, and the model
-    # that follows the change within its 0.3 s memory scatters at the heavier mass
-    # (README, "Adaptive compensation")
-    assert after[0][0] <= first_bound * before[0]
-    # from 4 s after the change on, every 2-s stretch within 2x: the heavier loop's own
-    # level, adapted from the start, is 1.4x the lighter one's, and a 2-s stretch of an
-    # unchanged channel scatters up to 1.6x around its mean (channel 2 here)
-    assert all(a[0] <= 2.0 * before[0] for a in after[1:])
-    # and over [22, 40) s as a whole within 1.5x
-    assert adapted.tracking_rms(22.0, 40.0)[0] <= 1.5 * before[0]
+    # channel 1 from 2 s after the change on, over [22, 24) s and every later 2-s
+    # stretch: within 1.5x its level before (the aim; the heavier loop's own level,
+    # adapted from the start, is 1.2-1.7x the lighter one's)
+    for a in after:
+        assert a[0] <= 1.5 * before[0]
     # while the inverse built before the change, not adapted, stays at least 2x worse in
     # every stretch from 2 s after the change
     for w, a in zip(_WINDOWS_S, after, strict=True):
@@ -155,3 +160,13 @@ def test_judging_anywhere_else_is_refused():
 
     with pytest.raises(ParameterError, match="judge_in"):
         CompensationSettings(band_hz=BAND, judge_in="gpu")
+
+
+def test_a_correction_needs_a_whole_span_and_time():
+    from ehss.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="correction_span"):
+        CompensationSettings(band_hz=BAND, correction_span=-1)
+    with pytest.raises(ParameterError, match="correct_s"):
+        CompensationSettings(band_hz=BAND, correct_s=-1.0)
+    assert CompensationSettings(band_hz=BAND).to_dict()["correction_span"] == 2

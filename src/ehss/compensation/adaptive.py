@@ -39,12 +39,21 @@ and fit the newest quarter-second of feedback (fresh data, the free-run fit that
 Otherwise the last good compensator stays and the reason is logged. Updates are at most
 one per ``min_interval_s``.
 
+After a change of the rig, before a full model of the new loop can be trusted, the
+running compensator can be *corrected* (preview mode): :func:`fit_correction` fits a
+short non-causal FIR ``K`` with ``L K ≈ 1`` to the data since the change (``L`` the
+loop as compensated now), :func:`fold_correction` refits the FIR part to ``C K``, and
+:meth:`AdaptiveCompensator.assess_correction` guards it (checked on fresh data, its
+gain and phase bounded, the drive checks).
+
 References: eqs (16)–(22) of the paper (the model and its recursive estimate).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -55,7 +64,7 @@ import scipy.signal
 from ehss._checks import check_int, check_real
 from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_drive
 from ehss.compensation.inverse import InverseModel, design_inverse
-from ehss.errors import EhssError, ParameterError
+from ehss.errors import DataError, EhssError, ParameterError
 from ehss.identification.model import ArmaxModel
 from ehss.validation import frf_error
 from ehss.workflow import Acceptance
@@ -69,6 +78,10 @@ __all__ = [
     "design_compensator",
     "run_compensator",
     "free_run_fit",
+    "Correction",
+    "fit_correction",
+    "fold_correction",
+    "predicted_error_ratio",
 ]
 
 #: Reference modes: known ahead (a drive file streamed) or made online.
@@ -286,25 +299,41 @@ def design_compensator(model: ArmaxModel, *, band_hz: tuple[float, float] | None
     if sos.shape[0] > max_sections:
         raise ParameterError(f"the inverse needs {sos.shape[0]} second-order sections, the "
                              f"target runs {max_sections}; identify a lower order")
-    fs = model.fs
     # the band the inverse was limited to (it was given one)
     inv_band = inv.band_hz if inv.band_hz is not None else (float(band[0]), float(band[1]))
-    lo, hi = inv_band
-    k = _grid_size(fs, inv_band, n_taps)
-    f = np.arange(k + 1) * (0.5 * fs / k)
+    return _realise(sos, inv, inv_band, fs_hz=model.fs, mode=mode, preview=preview,
+                    n_taps=n_taps)
+
+
+def _realise(sos: np.ndarray, inv: InverseModel, band: tuple[float, float], *,
+             fs_hz: float, mode: str, preview: int, n_taps: int,
+             correction: tuple[CompensatorDesign, Correction] | None = None
+             ) -> CompensatorDesign:
+    """The FIR after ``sos`` fitted to ``T = W F + (1 - W)``; with ``correction``
+    (the running design, of the same sections, and a correction ``K``) to the running
+    design's own response times ``W K + (1 - W)`` (:func:`fold_correction`)."""
+    lo, hi = band
+    k = _grid_size(fs_hz, band, n_taps)
+    f = np.arange(k + 1) * (0.5 * fs_hz / k)
     w = np.pi * np.arange(k + 1) / k
     band_w = inv.band_response(f)
-    # T = W F + (1 - W): the exact inverse in the band, the reference outside it
-    target = inv.frequency_response(f, band=True) + (1.0 - band_w)
+    s_resp = _sos_response(sos, w)
+    if correction is None:
+        # T = W F + (1 - W): the exact inverse in the band, the reference outside it
+        target = inv.frequency_response(f, band=True) + (1.0 - band_w)
+    else:
+        running, kappa = correction
+        # T = C_run (W K + (1 - W)): the correction in the band, nothing outside it
+        c_run = np.exp(1j * w * preview) * s_resp * np.fft.rfft(running.taps, 2 * k)
+        target = c_run * (band_w * kappa.frequency_response(f) + (1.0 - band_w))
     w_in, w_edge, w_out = _WEIGHTS[mode]
     weight = np.where(band_w >= 1.0, w_in, np.where(band_w > 0.0, w_edge, w_out))
-    s_resp = _sos_response(sos, w)
     taps = _fit_taps(s_resp, target, weight, preview, n_taps)
     # C = e^{jωP} S H on the grid
     got = np.exp(1j * w * preview) * s_resp * np.fft.rfft(taps, 2 * k)
     inside = (f >= lo) & (f <= hi)
     return CompensatorDesign(
-        sos=sos, taps=np.ascontiguousarray(taps), preview=int(preview), fs_hz=float(fs),
+        sos=sos, taps=np.ascontiguousarray(taps), preview=int(preview), fs_hz=float(fs_hz),
         mode=mode, band_hz=(float(lo), float(hi)), inverse=inv, freq_hz=f[inside],
         error=got[inside] / target[inside] - 1.0, peak_gain=float(np.max(np.abs(got))),
         settle_samples=_settle_samples(sos) + n_taps,
@@ -391,6 +420,233 @@ def free_run_fit(model: ArmaxModel, u: Any, y: Any, n_fit: int) -> float:
     if not (spread > 0.0 and math.isfinite(miss)):
         return -math.inf
     return 100.0 * (1.0 - miss / spread)
+
+
+# ---------------------------------------------------------------------- correction
+#: A correction must leave at most this share of the tracking error on the samples it
+#: was not fitted to: the changes it is for raise the error 4–9× (README), while noise
+#: as large as the reference in the band (a burst of sensor noise) fitted the same way
+#: leaves 1/√2 of it.
+CORRECTION_MAX_RATIO = 0.5
+#: Bounds of a correction's gain and phase over the band. ``|1 - L| = 1``, a loop whose
+#: error is as large as its reference, lies at a phase of 60° for a gain of 1 and at a
+#: gain of 1/2 or 2 in phase: a correction beyond ±60° or outside [1/3, 3] would follow a
+#: loop that no longer tracks (a feedback flipped gives ``K = -1``, a stuck sensor an
+#: unbounded one), not a change of one that does.
+CORRECTION_GAIN = (1.0 / 3.0, 3.0)
+CORRECTION_PHASE_DEG = 60.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Correction:
+    """A short non-causal FIR ``K`` that corrects the running compensator after a change.
+
+    With the running compensator ``C`` the loop from the desired reference ``r`` to the
+    feedback ``y`` is ``L = G C``; when the rig changes, ``L`` moves away from 1. The
+    correction is the least-squares ``K`` with ``r ≈ K y``,
+
+    .. math:: r[k] \\approx \\sum_{j=-m}^{m} \\kappa_j\\, y[k + j],
+
+    so that ``L K ≈ 1`` in the band, and the compensator ``C K`` takes the loop back
+    (:func:`fold_correction`). Five taps (``m = 2``) span a gain, a lead and a second
+    derivative, as the adaptive time-series compensator of Chae et al. (2013) does.
+
+    Attributes
+    ----------
+    taps : ndarray, shape (2 m + 1,)
+        ``κ_{-m} .. κ_m``.
+    fs_hz : float
+    band_hz : (float, float)
+    n_fit, n_check : int
+        Samples it was fitted on, and the newer ones it was checked on.
+    check_ratio : float
+        RMS of the band-limited ``r − K y`` over that of ``r − y`` on the check samples
+        (of ``K_then r − K y`` over ``K_then r − K_then y`` under an earlier correction
+        ``K_then``): the tracking error it leaves of the one that runs, on data it was
+        not fitted to.
+    check_residual : float
+        RMS of that error over the reference's (``r`` or ``K_then r``) there.
+    refines : bool
+        Whether it replaces an earlier correction (fitted on data under one).
+    gain_range : (float, float)
+        Least and largest ``|K|`` over the band.
+    max_phase_deg : float
+        Largest ``|arg K|`` over the band.
+    """
+
+    taps: np.ndarray = field(repr=False)
+    fs_hz: float
+    band_hz: tuple[float, float]
+    n_fit: int
+    n_check: int
+    check_ratio: float
+    check_residual: float
+    refines: bool
+    gain_range: tuple[float, float]
+    max_phase_deg: float
+
+    def frequency_response(self, freq_hz: Any) -> np.ndarray:
+        """``K(e^{jω}) = Σ κ_j e^{jωj}`` at ``freq_hz``."""
+        m = (self.taps.size - 1) // 2
+        w = 2.0 * np.pi * np.asarray(freq_hz, dtype=float) / self.fs_hz
+        return np.exp(1j * np.outer(w, np.arange(-m, m + 1))) @ self.taps
+
+    def figures(self) -> dict[str, Any]:
+        """JSON-ready: its taps and what it was judged on."""
+        return {"correction_taps": [float(v) for v in self.taps], "n_fit": self.n_fit,
+                "check_ratio": self.check_ratio, "check_residual": self.check_residual,
+                "refines": self.refines, "gain_range": list(self.gain_range),
+                "max_phase_deg": self.max_phase_deg}
+
+
+def _band_limited(x: np.ndarray, fs_hz: float, band: tuple[float, float]) -> np.ndarray:
+    """``x`` through a zero-phase 4th-order Butterworth low-pass at the band's upper edge,
+    its mean removed: the same filter on ``r`` and ``y`` keeps ``r ≈ K y``, and noise
+    above the band does not enter the fit."""
+    sos = scipy.signal.butter(4, band[1], fs=fs_hz, output="sos")
+    return scipy.signal.sosfiltfilt(sos, x - np.mean(x))
+
+
+def fit_correction(desired: Any, feedback: Any, *, fs_hz: float, band_hz: tuple[float, float],
+                   spans: Any, n_check: int, half_span: int = 2,
+                   base: CompensatorDesign | None = None) -> Correction:
+    """The correction ``K`` of a record's spans since a change.
+
+    Parameters
+    ----------
+    desired, feedback : array_like, shape (n,)
+        ``r`` and ``y`` (older samples may precede the change: only the rows of
+        ``spans`` enter the fit, the rest only feed the band limit's filter).
+    fs_hz : float
+    band_hz : (lo, hi)
+    spans : sequence of (start, stop, then)
+        Index ranges of the record, oldest first, each run by one compensator: ``base``,
+        the one ``K`` corrects (``then`` None), or ``base`` corrected by the taps
+        ``then`` of an earlier correction, or another compensator ``then`` (a
+        :class:`CompensatorDesign`), whose rows then ask ``K y`` to give
+        ``K_then r`` or ``(C_then / C_base) r`` (so that the rows of every span fit the
+        same ``K``, the whole correction of ``base``). The last span is run by ``base``
+        or a correction of it.
+    n_check : int
+        The newest rows (of the last span) ``K`` is checked on, not fitted to
+        (:attr:`Correction.check_ratio`); the samples of the last period of the band's
+        upper edge are left out (the zero-phase filter's end is not settled there).
+    half_span : int
+        ``m``: the taps run from ``-m`` to ``m``.
+    base : CompensatorDesign, optional
+        Needed when a span was run by another compensator.
+
+    Returns
+    -------
+    Correction
+
+    Raises
+    ------
+    DataError
+        Too few rows for the taps, or a feedback that does not vary.
+    """
+    r = np.asarray(desired, dtype=float)
+    y = np.asarray(feedback, dtype=float)
+    m = check_int(half_span, "half_span", lo=0)
+    edge = int(math.ceil(fs_hz / band_hz[1]))
+    rf = _band_limited(r, fs_hz, band_hz)
+    yf = _band_limited(y, fs_hz, band_hz)
+    shifts = range(-m, m + 1)
+    identity = np.zeros(2 * m + 1)
+    identity[m] = 1.0
+    parts: list[tuple[np.ndarray, np.ndarray]] = []
+    wants: list[np.ndarray] = []
+    for start, stop, then in spans:
+        rows = np.arange(max(int(start), m), min(int(stop), r.size - max(edge, m)))
+        if not rows.size:
+            continue
+        if isinstance(then, CompensatorDesign):
+            if base is None:
+                raise ParameterError("a span run by another compensator needs the base")
+            # (C_then / C_base) r, over the band
+            wants.append(_through(rf, then, base)[rows])
+            k_then = identity
+        else:
+            k_then = identity if then is None else np.asarray(then, dtype=float)
+            # r, or r through the correction that ran then
+            wants.append(np.column_stack([rf[rows + j] for j in shifts]) @ k_then)
+        parts.append((rows, k_then))
+    if not parts:
+        raise DataError("no samples to fit a correction on")
+    ymat = np.vstack([np.column_stack([yf[rows + j] for j in shifts]) for rows, _ in parts])
+    want = np.concatenate(wants)
+    n_fit = want.size - int(n_check)
+    if n_fit < 4 * (2 * m + 1) or n_check < 1:
+        raise DataError(f"{n_fit} samples to fit {2 * m + 1} taps: too few")
+    kappa, *_ = np.linalg.lstsq(ymat[:n_fit], want[:n_fit], rcond=None)
+    if not np.all(np.isfinite(kappa)) or not np.any(ymat[:n_fit]):
+        raise DataError("the feedback does not vary: no correction can be fitted")
+    miss = want[n_fit:] - ymat[n_fit:] @ kappa
+    was = want[n_fit:] - ymat[n_fit:] @ parts[-1][1]
+    level = float(np.linalg.norm(want[n_fit:]))
+    # (a loop without error leaves nothing to correct: measured against rounding then)
+    ratio = float(np.linalg.norm(miss) / max(float(np.linalg.norm(was)), 1e-12 * level,
+                                             1e-300))
+    corr = Correction(taps=kappa, fs_hz=float(fs_hz), band_hz=band_hz, n_fit=n_fit,
+                      n_check=int(n_check), check_ratio=ratio,
+                      check_residual=float(np.linalg.norm(miss) / max(level, 1e-300)),
+                      refines=any(isinstance(t, np.ndarray) for _, _, t in spans),
+                      gain_range=(0.0, 0.0), max_phase_deg=0.0)
+    k = corr.frequency_response(np.linspace(band_hz[0], band_hz[1], 64))
+    return dataclasses.replace(corr, gain_range=(float(np.min(np.abs(k))),
+                                                 float(np.max(np.abs(k)))),
+                               max_phase_deg=float(np.max(np.abs(np.degrees(np.angle(k))))))
+
+
+def _through(x: np.ndarray, then: CompensatorDesign, base: CompensatorDesign) -> np.ndarray:
+    """``x`` (band-limited) through ``C_then / C_base``, by FFT over the record padded to
+    twice its length (the rows it is taken at lie away from its ends)."""
+    n_fft = 1 << int(math.ceil(math.log2(2 * x.size)))
+    f = np.fft.rfftfreq(n_fft, 1.0 / base.fs_hz)
+    ratio = then.frequency_response(f) / base.frequency_response(f)
+    return np.fft.irfft(np.fft.rfft(x, n_fft) * ratio, n_fft)[:x.size]
+
+
+def predicted_error_ratio(new: CompensatorDesign, running: CompensatorDesign, desired: Any,
+                          feedback: Any, start: int) -> float:
+    """RMS tracking error ``new`` would have given over the rows from ``start`` of a
+    record run by ``running``, over the one it gave (both band-limited).
+
+    Under ``running`` the feedback is ``y = G C_run r``; under ``new`` it would have
+    been ``(C_new / C_run) y``. The newest ``new.preview`` samples are left out: the
+    ratio looks that far ahead in ``y``, which is not known there.
+    """
+    band = running.band_hz
+    r = _band_limited(np.asarray(desired, dtype=float), running.fs_hz, band)
+    y = _band_limited(np.asarray(feedback, dtype=float), running.fs_hz, band)
+    stop = r.size - max(new.preview, int(math.ceil(running.fs_hz / band[1])))
+    if stop - start < 1:
+        return math.nan
+    y_new = _through(y, new, running)
+    rows = slice(int(start), stop)
+    was = float(np.linalg.norm(r[rows] - y[rows]))
+    return float(np.linalg.norm(r[rows] - y_new[rows])) / max(was, 1e-300)
+
+
+def fold_correction(design: CompensatorDesign, correction: Correction) -> CompensatorDesign:
+    """The compensator ``C K``: ``design``'s sections, its FIR refitted so that the whole
+    matches ``C`` times ``K`` in the band and ``C`` outside it.
+
+    The target runs it as any other compensator (same sections, preview and sizes).
+    ``error`` of the result is against ``C K``. Preview mode only: ``K`` looks ``m``
+    samples ahead, which the FIR's preview holds.
+
+    Raises
+    ------
+    ParameterError
+        A causal design (``K`` needs the reference ahead).
+    """
+    if design.mode != "preview" or design.preview < (correction.taps.size - 1) // 2:
+        raise ParameterError("a correction looks ahead: it needs a compensator in "
+                             "preview mode")
+    return _realise(design.sos, design.inverse, design.band_hz, fs_hz=design.fs_hz,
+                    mode=design.mode, preview=design.preview, n_taps=design.taps.size,
+                    correction=(design, correction))
 
 
 # --------------------------------------------------------------------------- guard
@@ -567,6 +823,36 @@ class AdaptiveCompensator:
             self.current_model = model
             self._last_t = decision.t_s
 
+    def assess_correction(self, t_s: float, correction: Correction,
+                          running: CompensatorDesign | None, reference: np.ndarray
+                          ) -> Decision:
+        """Whether the running compensator ``running`` (the :attr:`current` of when the
+        data were taken), corrected by ``correction``, may replace it.
+
+        The correction must leave at most :data:`CORRECTION_MAX_RATIO` of the tracking
+        error on the newest samples, which it was not fitted to; its gain within
+        :data:`CORRECTION_GAIN` and its phase within :data:`CORRECTION_PHASE_DEG` over
+        the band; and the corrected compensator's drive must pass the gain checks and
+        the rig's limits as any update's. Changes nothing (see :meth:`assess`).
+        """
+        figures = correction.figures()
+        lo, hi = CORRECTION_GAIN
+        if running is None:
+            return Decision(t_s, False, "no compensator runs yet to correct", figures=figures)
+        if not (lo <= correction.gain_range[0] and correction.gain_range[1] <= hi) \
+                or correction.max_phase_deg > CORRECTION_PHASE_DEG:
+            return Decision(t_s, False, f"the correction's gain over the band is "
+                            f"{correction.gain_range[0]:.2f}-{correction.gain_range[1]:.2f}"
+                            f" and its phase up to {correction.max_phase_deg:.0f}° (bounds "
+                            f"{lo:.2f}-{hi:g}, {CORRECTION_PHASE_DEG:g}°): not a change of "
+                            "a loop that tracks (feedback sign, sensor?)", figures=figures)
+        if correction.check_ratio > CORRECTION_MAX_RATIO:
+            return Decision(t_s, False, f"the correction leaves {correction.check_ratio:.2f}"
+                            f" of the tracking error on fresh data (needs <= "
+                            f"{CORRECTION_MAX_RATIO:g})", figures=figures)
+        return self._checked_drive(t_s, lambda: fold_correction(running, correction),
+                                   np.asarray(reference, dtype=float), figures)
+
     def _judge_fit(self, decision: Decision, model: ArmaxModel, u: np.ndarray,
                    y: np.ndarray) -> Decision:
         """The model's free-run simulation over the window must fit its latest part.
@@ -612,10 +898,17 @@ class AdaptiveCompensator:
                             f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty (bounds "
                             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",
                             figures=figures)
+        return self._checked_drive(t_s, lambda: design_compensator(
+            model, band_hz=self.band_hz, mode=self.mode, preview=self.preview,
+            n_taps=self.n_taps, max_sections=self.max_sections), r, figures)
+
+    def _checked_drive(self, t_s: float, design_of: Callable[[], CompensatorDesign],
+                       r: np.ndarray, figures: dict[str, Any]) -> Decision:
+        """The design, if its drive for the recent reference passes the gain checks and
+        the rig's limits."""
+        g = self.guard
         try:
-            design = design_compensator(model, band_hz=self.band_hz, mode=self.mode,
-                                        preview=self.preview, n_taps=self.n_taps,
-                                        max_sections=self.max_sections)
+            design = design_of()
             drive = run_compensator(design, r)
             skip = min(design.settle_samples, r.size // 2)
             check = check_drive(drive[skip:], r[skip:], self.fs_hz, max_gain=g.max_gain,

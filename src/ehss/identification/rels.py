@@ -45,6 +45,7 @@ to RML as well (a reset of P also restarts the filter 1/Ĉ from rest).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Unpack
 
 import numpy as np
@@ -68,6 +69,9 @@ from ehss.identification._common import (
 from ehss.identification.model import ArmaxModel
 
 __all__ = ["rels", "RelsEstimator", "specialise_rels"]
+
+#: index of the bound of tr P among the settings at the start of an estimator's block
+_TRACE_MAX = _k.RelsSettings._fields.index("trace_max")
 
 # ---------------------------------------------------------------- validation helpers
 def _sample(name: str, value: Any) -> float:
@@ -353,6 +357,58 @@ class RelsEstimator:
     @enabled.setter
     def enabled(self, value: bool) -> None:
         _k.set_enabled(self._block, bool(value))
+
+    # ---------------------------------------------------------------- following a change
+    @property
+    def trace_bound(self) -> float:
+        """The bound of tr P as the estimator runs now (see :meth:`set_trace_bound`)."""
+        return self._settings.trace_max
+
+    def set_trace_bound(self, trace_bound: float | None) -> None:
+        """Bound tr P by ``trace_bound`` (None: tr P(0)) from the next sample on.
+
+        Under poor excitation the bound holds P in the directions the data do not
+        excite, and its scaling, every sample, also cancels the forgetting in the
+        excited ones: the estimator then follows a change slowly. A bound far above
+        tr P lets λ act (the estimator follows within about its memory, with more
+        scatter); brought back down, P is scaled to it at once. The last sample's
+        pending P update is applied first; θ̂ and the regressors are kept.
+
+        Raises
+        ------
+        TypeError, ParameterError
+            If ``trace_bound`` is not a real number > 0 (nothing changes).
+        """
+        settings = dataclasses.replace(self._settings, trace_bound=trace_bound)  # checks it
+        self._settle()
+        self._settings = settings
+        bound = settings.trace_max
+        self._block[_TRACE_MAX] = bound
+        P = self._views.P  # noqa: N806 - the paper's symbol
+        trace = float(np.trace(P))
+        if trace > bound:
+            P *= bound / trace
+
+    def set_covariance(self, P: np.ndarray) -> None:  # noqa: N803 - the paper's symbol
+        """Run on from ``P`` (scaled units, as :attr:`P` gives it), θ̂ and the
+        regressors kept: e.g. a P read earlier, to take up the gain the estimator had
+        then. ``P`` must be symmetric positive definite; it is scaled down to
+        :attr:`trace_bound` if its trace exceeds it, as each update's is.
+
+        Raises
+        ------
+        DataError
+            If ``P`` has the wrong shape, is not finite, not symmetric or not positive
+            definite (nothing changes).
+        """
+        n = self._settings.n_params
+        P = np.array(P, dtype=float)  # noqa: N806
+        if P.shape != (n, n) or not np.all(np.isfinite(P)):
+            raise DataError(f"P of shape {P.shape} must be a finite ({n}, {n}) array")
+        if not np.array_equal(P, P.T) or np.any(np.linalg.eigvalsh(P) <= 0.0):
+            raise DataError("P must be symmetric positive definite")
+        self._settle()
+        self._views.P[:] = P * min(1.0, self._settings.trace_max / float(np.trace(P)))
 
     # ---------------------------------------------------------------- updates
     def update(self, u_k: float, y_k: float) -> float:

@@ -12,7 +12,12 @@ channel that had a good compensator starts refusing, a clear when it accepts aga
 A judgement runs on a worker (:attr:`CompensationSettings.judge_in`) on a copy of the
 channel's windows and θ̂ (:class:`Snapshot`, :class:`Judging`), and its decision is
 taken up at the next channel's turn, so that the stream's samples never wait for a
-design.
+design. A change of the loop shows first in the channel's own tracking error: a quick
+sequential test on it (:class:`~ehss.live.detect.TrackingTrigger`) makes the
+channel's first estimator follow for a while (:meth:`ChannelAdapter.follow_change`)
+and, in preview mode, has the running compensator corrected from the data since the
+change (:func:`~ehss.compensation.adaptive.fit_correction`, a five-tap FIR folded into
+it) until the full model's inverse takes over again.
 
 The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
 ``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
@@ -25,6 +30,7 @@ datagrams. ``apply_index`` counts drive samples from the start of the stream.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 import re
 import time
@@ -36,16 +42,20 @@ from typing import Any, Protocol
 import numpy as np
 
 import ehss
-from ehss._checks import check_real
+from ehss._checks import check_int, check_real
 from ehss.compensation.adaptive import (
     MODES,
     AdaptiveCompensator,
+    CompensatorDesign,
     Decision,
     UpdateGuard,
+    fit_correction,
     free_run_fit,
+    predicted_error_ratio,
 )
 from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
+from ehss.live.detect import TrackingTrigger, TriggerSettings
 
 __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
            "Target", "DatagramSender", "UdpTarget", "JUDGE_IN", "Snapshot", "Verdict",
@@ -115,6 +125,34 @@ class CompensationSettings:
         estimator with the tracker's kept short lowers the scatter of the models judged
         in steady running, but the first estimator then lags a change longer, and the
         choice between the two does not pick the tracker reliably meanwhile.
+    trigger : TriggerSettings or None
+        The quick test for a change of the loop on its tracking error
+        (:class:`ehss.live.detect.TrackingTrigger`; None: none). It flags a change
+        within a few tenths of a second, before any estimate of the loop moves; each
+        trigger is logged (``"kind": "compensator_change"``) and makes the first
+        estimator follow for ``follow_s``. A false trigger only speeds that estimator
+        up for a while: the guards still decide what is sent.
+    follow_s : float
+        How long the first estimator follows after a trigger: its bound of tr P lifted
+        to ``follow_trace_bound``, so that its forgetting acts as the tracker's does,
+        and θ̂ averaged from the trigger on only; then P is set back to its value at
+        the trigger (the gain of steady running) under its own bound. About the
+        time the tracker needs to follow a change (0.75 s for a memory of 0.3 s) and
+        a little more: longer, its models take up the scatter of the tracker's.
+    follow_trace_bound : float
+        The bound of tr P while following (as ``tracker_trace_bound``).
+    correct_s : float
+        For at most this long after a trigger, in preview mode, the running compensator
+        is corrected instead of replaced: a short non-causal FIR ``K``
+        (``correction_span`` taps each side) fitted to the data since the change
+        (:func:`ehss.compensation.adaptive.fit_correction`) as soon as they suffice,
+        and fitted again once the data under each correction suffice to check the next
+        on; the full model is not judged meanwhile. The first correction refused (it
+        does not halve the error left, or a guard fails) ends it, and the full model's
+        inverse takes over as before. 0: no corrections.
+    correction_span : int
+        ``m`` of the correction: ``2 m + 1`` taps (2: a gain, a lead and a second
+        derivative, and the two next terms).
     h1_window_s : float
         Length of the sliding H1 estimate that must confirm a model (and of the recent
         reference the drive checks run on). A change of the rig shows in full in it
@@ -161,6 +199,11 @@ class CompensationSettings:
     tracker_trace_bound: float | None = 1e12
     tracker_memory_s: float | None = None
     average_s: float = 0.3
+    trigger: TriggerSettings | None = field(default_factory=TriggerSettings)
+    follow_s: float = 0.75
+    follow_trace_bound: float = 1e12
+    correct_s: float = 3.0
+    correction_span: int = 2
     h1_window_s: float = 1.5
     update_s: float = 0.25
     start_s: float = 2.0
@@ -178,6 +221,10 @@ class CompensationSettings:
             raise ParameterError(f"judge_in={self.judge_in!r} must be one of {JUDGE_IN}")
         for name in ("memory_s", "h1_window_s", "update_s"):
             check_real(getattr(self, name), name, lo=0.0, lo_open=True, unit="s")
+        check_real(self.follow_s, "follow_s", lo=0.0, unit="s")
+        check_real(self.follow_trace_bound, "follow_trace_bound", lo=0.0, lo_open=True)
+        check_real(self.correct_s, "correct_s", lo=0.0, unit="s")
+        check_int(self.correction_span, "correction_span", lo=0)
 
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
@@ -185,7 +232,10 @@ class CompensationSettings:
                 "start_s": self.start_s, "adapt_until_s": self.adapt_until_s,
                 "n_taps": self.n_taps, "estimator": [self.na, self.nb, self.nc, self.delay,
                                                      self.method],
-                "judge_in": self.judge_in, "min_interval_s": self.guard.min_interval_s,
+                "judge_in": self.judge_in, "follow_s": self.follow_s,
+                "correct_s": self.correct_s, "correction_span": self.correction_span,
+                "trigger": None if self.trigger is None else dataclasses.asdict(self.trigger),
+                "min_interval_s": self.guard.min_interval_s,
                 "crossfade_s": self.guard.crossfade_s, "max_gain": self.guard.max_gain}
 
 
@@ -218,12 +268,20 @@ class _Ring:
 @dataclass(frozen=True)
 class Snapshot:
     """A channel's windows (drive, feedback, desired reference, oldest first) and its
-    averaged θ̂ (estimator's, then tracker's; shape (1 or 2, n_params)) at one time."""
+    averaged θ̂ (estimator's, then tracker's; shape (1 or 2, n_params)) at one time;
+    while a change is corrected, the compensator corrected and the spans of the windows
+    since the change, each with the correction that ran then (``spans`` of
+    :func:`~ehss.compensation.adaptive.fit_correction`; empty: judge the model); while
+    a corrected compensator runs, it and the window index from which it ran alone."""
 
     drive: np.ndarray
     feedback: np.ndarray
     desired: np.ndarray
     thetas: np.ndarray
+    running: CompensatorDesign | None = None
+    spans: tuple = ()
+    corrected: CompensatorDesign | None = None
+    corrected_from: int = 0
 
 
 class ChannelAdapter:
@@ -271,6 +329,21 @@ class ChannelAdapter:
         self._thetas: collections.deque = collections.deque()
         self.chosen = "estimator"
         self.judging = Judging(self.fs, s, self.compensator)
+        self.trigger = None if s.trigger is None else TrackingTrigger(self.fs, s.trigger)
+        self._trace_bound = self.estimator.settings.trace_bound
+        self._follow_until: int | None = None
+        self._steady_P = self.estimator.P
+        # a change being corrected until _correct_until: the compensator corrected, and
+        # from which sample each correction ran ([from, taps], None: uncorrected)
+        self._correct_until = 0
+        self._base: CompensatorDesign | None = None
+        self._spans: list[list] = []
+        self._accepted_taps: np.ndarray | None = None
+        # while a corrected compensator runs: the sample from which it runs alone
+        self._corrected_from: int | None = None
+        # the compensator sent last, and the one before it (None: none yet)
+        self._running: CompensatorDesign | None = None
+        self._before: CompensatorDesign | None = None
 
     def _new_estimator(self, theta0: np.ndarray | None, *, trace_bound: float | None = None,
                        memory_s: float | None = None) -> ehss.RelsEstimator:
@@ -282,26 +355,122 @@ class ChannelAdapter:
             dt=1.0 / self.fs,
             u_scale=self._scale, y_scale=self._scale)
 
-    def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> None:
-        """Consecutive samples of the drive (model input), feedback and desired reference."""
+    def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> bool:
+        """Consecutive samples of the drive (model input), feedback and desired
+        reference; True if the trigger flagged a change of the loop in them."""
         self.estimator.update_many(drive, feedback)
         if self.tracker is not None:
             self.tracker.update_many(drive, feedback)
         self.window.push(np.vstack([drive, feedback, desired]))
         self._n += drive.size
+        if self._follow_until is not None and self._n >= self._follow_until:
+            self._end_follow()
         thetas = [self.estimator.theta]
         if self.tracker is not None:
             thetas.append(self.tracker.theta)
         self._thetas.append((self._n, np.array(thetas)))
         while self._thetas and self._thetas[0][0] < self._n - self._n_average:
             self._thetas.popleft()
+        changed = self.trigger is not None and self.trigger(desired - feedback)
+        if changed:
+            self.follow_change()
+        return changed
+
+    def follow_change(self) -> None:
+        """The loop changed (a trigger): the estimator follows quickly for
+        ``follow_s``, and θ̂ is averaged from here on only.
+
+        Its bound of tr P is lifted to ``follow_trace_bound`` (its forgetting then
+        acts, as the tracker's does), and at the end P is set back to the one it had
+        here, the gain of its steady running, with its own bound.
+        """
+        while len(self._thetas) > 1:  # the newest stays: a snapshot needs one
+            self._thetas.popleft()
+        est = self.estimator
+        if self._follow_until is None:
+            self._steady_P = est.P
+        est.set_trace_bound(self.settings.follow_trace_bound)
+        self._follow_until = self._n + int(round(self.settings.follow_s * self.fs))
+        if self.settings.mode == "preview":
+            # the data since the change began (the trigger's estimate of it) and no more
+            # than its blocks held
+            onset = 0.0 if self.trigger is None else self.trigger.onset_s
+            self._correct_until = self._n + int(round(self.settings.correct_s * self.fs))
+            self._base = self.compensator.current
+            since = self._n - int(round(onset * self.fs))
+            # the compensator sent last may not have run from the change on: the rows
+            # before it took over ask for the one before it
+            if self.busy_until <= since:
+                self._spans = [[since, None]]
+            else:
+                self._spans = [[self.busy_until, None]] if self._before is None \
+                    else [[since, self._before], [self.busy_until, None]]
+
+    def spans(self) -> tuple:
+        """While a change is corrected, the spans of the windows since it (window
+        indices ``start, stop`` and the correction that ran; empty otherwise). The
+        cross-fade into each correction belongs to none."""
+        if self._n >= self._correct_until or self._base is None:
+            return ()
+        first = self._n - self.window.fill
+        fade = int(round(self.settings.guard.crossfade_s * self.fs))
+        out = []
+        for k, (n_from, taps) in enumerate(self._spans):
+            n_to = self._spans[k + 1][0] - fade if k + 1 < len(self._spans) else self._n
+            a, b = max(n_from, first) - first, min(n_to, self._n) - first
+            if b > a:
+                out.append((a, b, taps))
+        return tuple(out)
+
+    def ready(self) -> bool:
+        """Whether a judgement may be made now: while a change is corrected, once
+        enough samples are in for a correction, and enough under the latest one to
+        check the next on."""
+        spans = self.spans()
+        if not spans:
+            return self._n >= self._correct_until
+        j = self.judging
+        return sum(b - a for a, b, _ in spans) >= j.correction_rows \
+            and spans[-1][1] - spans[-1][0] >= j.correction_rows - j.n_fit \
+            and self._spans[-1][0] <= self._n
+
+    def started(self, until: int) -> None:
+        """The compensator just accepted is sent: it runs alone from sample ``until``
+        (the end of its shadow run and cross-fade)."""
+        self.busy_until = until
+        self._corrected_from = None if self._accepted_taps is None else until
+        if self._accepted_taps is not None:
+            self._spans.append([until, self._accepted_taps])
+        elif self._n < self._correct_until and all(
+                not isinstance(then, np.ndarray) for _, then in self._spans):
+            # a model judged before the change was flagged: the correction corrects it,
+            # the rows before ask for the one it replaces
+            self._spans = [[n, self._base if then is None else then]
+                           for n, then in self._spans] + [[until, None]]
+            self._base = self.compensator.current
+        else:
+            self._correct_until = 0   # a full model's inverse: the correction is over
+        self._before = self._running
+        self._running = self.compensator.current
+
+    def _end_follow(self) -> None:
+        self._follow_until = None
+        self.estimator.set_trace_bound(self._trace_bound)
+        self.estimator.set_covariance(self._steady_P)
 
     def snapshot(self) -> Snapshot:
         """What a judgement needs, copied: the windows and θ̂ averaged over the last
         ``average_s`` (one estimate per block fed), which halves its scatter at the cost
         of that much more lag. Later samples do not change it."""
         u, y, r = self.window.latest()
-        return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0))
+        spans = self.spans()
+        first = self._n - self.window.fill
+        corrected = self._corrected_from is not None and not spans \
+            and self._corrected_from < self._n
+        return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
+                        self._base if spans else None, spans,
+                        self.compensator.current if corrected else None,
+                        max(0, (self._corrected_from or 0) - first))
 
     def models(self, snapshot: Snapshot | None = None) -> list[ehss.ArmaxModel]:
         """The estimator's model, and the tracker's if there is one, of ``snapshot``
@@ -326,6 +495,17 @@ class ChannelAdapter:
 
     def take(self, verdict: Verdict) -> None:
         """Record a judgement made elsewhere (:class:`Judging`) as :meth:`judge` does."""
+        self._accepted_taps = None
+        if verdict.chosen == "correction":
+            # the model stays: the compensator of its inverse runs corrected
+            self.compensator.record(verdict.decision, self.compensator.current_model)
+            self.chosen = verdict.chosen
+            if verdict.decision.accepted:
+                self._accepted_taps = np.asarray(verdict.decision.figures["correction_taps"])
+            else:
+                # nothing (more) to correct: the full model's inverse takes over
+                self._correct_until = 0
+            return
         self.compensator.record(verdict.decision, verdict.model)
         if verdict.model is not None:
             self.chosen = verdict.chosen
@@ -334,7 +514,8 @@ class ChannelAdapter:
 @dataclass(frozen=True)
 class Verdict:
     """A judgement: the decision, the model judged (None if there was none) and whose
-    model it is (``"estimator"`` or ``"tracker"``)."""
+    model it is (``"estimator"`` or ``"tracker"``; ``"correction"`` for a correction of
+    the running compensator, with no model)."""
 
     decision: Decision
     model: ehss.ArmaxModel | None
@@ -358,6 +539,15 @@ class Judging:
         self.fs = float(fs)
         self.settings = settings
         self.compensator = compensator
+        lo, hi = compensator.band_hz
+        n_taps = 2 * settings.correction_span + 1
+        # a correction's fit: four times as many independent samples as taps, a record
+        # of T s in a band of B Hz holding about 2 B T of them; then the guard's fresh
+        # stretch to check it on, and a period of the upper edge where the zero-phase
+        # filter's end is not settled
+        self.n_fit = int(math.ceil(4 * n_taps * self.fs / (2.0 * (hi - lo))))
+        self._n_check = max(1, int(round(settings.guard.fit_s * self.fs)))
+        self.correction_rows = self.n_fit + self._n_check + int(math.ceil(self.fs / hi))
 
     def models(self, thetas: np.ndarray) -> list[ehss.ArmaxModel]:
         """The models of averaged θ̂ (rows: estimator, tracker)."""
@@ -377,7 +567,24 @@ class Judging:
         best = int(np.argmax([free_run_fit(m, u, y, n_fit) for m in models]))
         return models[best], ("estimator", "tracker")[best]
 
+    def correct(self, t_s: float, snap: Snapshot) -> Verdict:
+        """The correction of the running compensator fitted to the fresh samples of
+        ``snap``, judged (:meth:`AdaptiveCompensator.assess_correction`)."""
+        comp = self.compensator
+        try:
+            corr = fit_correction(snap.desired, snap.feedback, fs_hz=self.fs,
+                                  band_hz=comp.band_hz, spans=snap.spans,
+                                  n_check=self._n_check,
+                                  half_span=self.settings.correction_span,
+                                  base=snap.running)
+        except EhssError as exc:
+            return Verdict(Decision(t_s, False, f"no correction: {exc}"), None, "correction")
+        return Verdict(comp.assess_correction(t_s, corr, snap.running, snap.desired), None,
+                       "correction")
+
     def __call__(self, t_s: float, snap: Snapshot) -> Verdict:
+        if snap.spans:
+            return self.correct(t_s, snap)
         u, y = snap.drive, snap.feedback
         try:
             model, chosen = self.model(snap.thetas, u, y)
@@ -388,8 +595,23 @@ class Judging:
             h1 = ehss.h1_estimate(u, y, fs=self.fs, nperseg=min(nper, u.size))
         except EhssError as exc:
             return Verdict(Decision(t_s, False, f"no model or H1 estimate: {exc}"), None, "")
-        return Verdict(self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y)),
-                       model, chosen)
+        decision = self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y))
+        if decision.accepted and decision.design is not None and snap.corrected is not None:
+            decision = self._against_correction(decision, snap)
+        return Verdict(decision, model, chosen)
+
+    def _against_correction(self, decision: Decision, snap: Snapshot) -> Decision:
+        """A model's compensator replaces a corrected one only if, on the rows the
+        corrected one ran alone, it would have left no more tracking error."""
+        assert decision.design is not None and snap.corrected is not None
+        ratio = predicted_error_ratio(decision.design, snap.corrected, snap.desired,
+                                      snap.feedback, snap.corrected_from)
+        figures = {**decision.figures, "against_correction": ratio}
+        if ratio > 1.0:
+            return Decision(decision.t_s, False, f"the model's compensator would leave "
+                            f"{ratio:.2f} of the corrected one's tracking error",
+                            figures=figures)
+        return Decision(decision.t_s, True, "", decision.design, figures)
 
 
 @dataclass(frozen=True)
@@ -489,7 +711,7 @@ class AdaptiveLoop:
             ad = self.adapters[k]
             # one compensator at a time: the last one sent must be in before the next
             if k in self._pending or not ad.compensator.due(t_s) \
-                    or self.target.index < ad.busy_until:
+                    or self.target.index < ad.busy_until or not ad.ready():
                 continue
             snap = ad.snapshot()
             if self._worker is None:
@@ -573,7 +795,7 @@ class AdaptiveLoop:
         apply_index = self.target.index + design.settle_samples
         crossfade = max(1, int(round(self.settings.guard.crossfade_s * self.fs)))
         ok = self.target.load(k, comp, apply_index, crossfade)
-        ad.busy_until = apply_index + crossfade
+        ad.started(apply_index + crossfade)
         load = {"kind": "compensator", "channel": ad.name, "t_s": t_s,
                 "apply_index": int(apply_index), "crossfade": crossfade,
                 "accepted": bool(ok), "model": ad.chosen, **d.figures, **design.errors()}
@@ -629,7 +851,9 @@ class AdaptiveLoop:
                 continue
             parts.append(block)
             for k, ad in enumerate(self.adapters):
-                ad.feed(block.drive[k], block.feedback[k], block.desired[k])
+                if ad.feed(block.drive[k], block.feedback[k], block.desired[k]):
+                    self._event({"kind": "compensator_change", "channel": ad.name,
+                                 "t_s": self.target.index / self.fs})
             self._collect()
             t_s = self.target.index / self.fs
             turn = [k for k in range(len(next_update)) if t_s + 1e-12 >= next_update[k]]

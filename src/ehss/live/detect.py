@@ -91,7 +91,7 @@ from ehss.live._kernels import prediction_errors
 __all__ = ["FIGURES", "GATES", "DRIFT", "CLEAR_LEVEL", "MIN_EFFECTIVE_BLOCKS", "MAX_COEFFICIENT",
            "DetectionSettings", "Calibration", "block_statistic", "calibrate",
            "cusum_threshold", "Detector", "BaselineResidual", "check_baseline",
-           "dominant_pole", "figures"]
+           "dominant_pole", "figures", "TriggerSettings", "TrackingTrigger"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -170,6 +170,12 @@ DRIFT = 0.5
 #: normal brings it down at κ per block (h/2 in 1.2 s at the default rate); under no
 #: change h/2 is reached about once per √ARL₀ blocks, rarely within ``clear_s``.
 CLEAR_LEVEL = 0.5
+#: A block this many σ above the learnt level belongs to the change (one block of an
+#: unchanged loop in 40 lies there, under the Gaussian model): the first such block
+#: since the CUSUM last was zero dates the change's start. The last zero alone (Page's
+#: estimate) dates it too early whenever blocks of the unchanged loop have lifted the
+#: sum above zero by its drift of 0.5 σ, one block in three.
+ONSET_Z = 2.0
 #: Fewest independent blocks of learning the test is calibrated from.
 MIN_EFFECTIVE_BLOCKS = 5
 #: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
@@ -489,3 +495,130 @@ def figures(h: np.ndarray, h_ref: np.ndarray, s: complex, s_ref: complex) -> np.
         gain = float(ratio_db[0])
         shift = abs(s - s_ref) / abs(s_ref) if abs(s_ref) > 0 else math.inf
     return np.array([frf, gain, shift])
+
+
+# ------------------------------------------------------------------ the quick trigger
+@dataclass(frozen=True, kw_only=True)
+class TriggerSettings:
+    """How :class:`TrackingTrigger` decides.
+
+    Attributes
+    ----------
+    block_s : float
+        Length of each block of the statistic (s).
+    learn_s : float
+        The test is calibrated on ``learn_s`` of blocks, and starts (again, after a
+        trigger) once that many are in.
+    lag_s : float
+        The blocks of the last ``lag_s`` are not yet in the calibration, so that a
+        change does not enter the statistics it is tested against while the test
+        sums it up (s).
+    false_alarm_hours : float
+        Mean running time between false triggers while the loop does not change (h),
+        under the AR(1) Gaussian model of the blocks that :func:`calibrate` sets the
+        threshold from; a stationary run measures it (README).
+    """
+
+    block_s: float = 0.1
+    learn_s: float = 5.0
+    lag_s: float = 1.0
+    false_alarm_hours: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("block_s", "learn_s", "lag_s", "false_alarm_hours"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ParameterError(f"{name}={v!r} must be a finite number > 0")
+        if self.learn_s < MIN_EFFECTIVE_BLOCKS * self.block_s:
+            raise ParameterError(f"learn_s={self.learn_s!r} must hold at least "
+                                 f"{MIN_EFFECTIVE_BLOCKS} blocks of {self.block_s} s")
+
+
+def _onset_blocks(run: list[float]) -> int:
+    """Blocks of ``run`` (the z since the CUSUM's last zero) from its first at or above
+    :data:`ONSET_Z` on (all of them if none is)."""
+    first = next((i for i, z in enumerate(run) if z >= ONSET_Z), 0)
+    return len(run) - first
+
+
+class TrackingTrigger:
+    """A quick sequential test for a change of a compensated loop, on its own errors.
+
+    Under compensation the tracking error (desired − feedback) is what the model
+    misses; a change of the loop raises it at once, before an estimate of the loop
+    can move. The statistic of each block is the module's x = ln(median e²)
+    (:func:`block_statistic`), tested by the one-sided CUSUM of :class:`Detector`
+    against the ``learn_s`` of blocks that end ``lag_s`` before it (:func:`calibrate`,
+    at the run length that ``false_alarm_hours`` asks). A trigger restarts the
+    learning: the next one can come ``learn_s + lag_s`` later at the earliest. A fall
+    of the error (a better compensator) is not a change; a rise from a worse
+    compensator is flagged like a change of the loop, which only speeds the estimator
+    up.
+
+    Parameters
+    ----------
+    fs : float
+    settings : TriggerSettings, optional
+    """
+
+    def __init__(self, fs: float, settings: TriggerSettings | None = None) -> None:
+        self.settings = settings if settings is not None else TriggerSettings()
+        s = self.settings
+        self._n_block = max(1, int(round(s.block_s * fs)))
+        self._n_learn = max(MIN_EFFECTIVE_BLOCKS, int(round(s.learn_s / s.block_s)))
+        self._n_lag = int(round(s.lag_s / s.block_s))
+        self._arl = s.false_alarm_hours * 3600.0 / s.block_s
+        self._buf = np.empty(self._n_block)
+        self._fill = 0
+        self._x: list[float] = []
+        self._cusum = 0.0
+        self._run: list[float] = []
+        self.triggers = 0
+        #: at the latest trigger, how long before it the change began (s), as near as
+        #: the blocks tell (:data:`ONSET_Z`)
+        self.onset_s = 0.0
+
+    def restart(self) -> None:
+        """Learn anew (the loop changed): the test waits ``learn_s`` of blocks."""
+        self._x = []
+        self._cusum = 0.0
+        self._run = []
+
+    def __call__(self, error: np.ndarray) -> bool:
+        """Take the next samples of the tracking error; True if a change is flagged
+        in them (the test then restarts)."""
+        flagged = False
+        i = 0
+        while i < error.size:
+            take = min(self._n_block - self._fill, error.size - i)
+            self._buf[self._fill:self._fill + take] = error[i:i + take]
+            self._fill += take
+            i += take
+            if self._fill == self._n_block:
+                self._fill = 0
+                flagged |= self._block(block_statistic(self._buf))
+        return flagged
+
+    def _block(self, x: float) -> bool:
+        """Test one block's statistic against the blocks before it, then learn it."""
+        if not math.isfinite(x):
+            return False
+        if len(self._x) >= self._n_learn + self._n_lag:
+            try:
+                cal = calibrate(np.array(self._x[:self._n_learn]), arl_blocks=self._arl)
+            except ParameterError:  # blocks that do not vary: nothing to test against
+                cal = None
+            if cal is not None:
+                # S_k = max(0, S_{k−1} + z_k − κ), alarm at S_k ≥ h
+                z = (x - cal.mean) / cal.sd
+                self._cusum = max(0.0, self._cusum + z - DRIFT)
+                # the z of the blocks since the sum last was zero
+                self._run = self._run + [z] if self._cusum > 0.0 else []
+                if self._cusum >= cal.threshold:
+                    self.triggers += 1
+                    self.onset_s = _onset_blocks(self._run) * self.settings.block_s
+                    self.restart()
+                    return True
+            self._x.pop(0)
+        self._x.append(x)
+        return False

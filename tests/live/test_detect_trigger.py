@@ -1,0 +1,93 @@
+"""The quick trigger on a compensated loop's tracking error: a rise is flagged within a
+few blocks, a fall and a steady error are not, and it learns anew after a trigger."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ehss.errors import ParameterError
+from ehss.live.detect import TrackingTrigger, TriggerSettings
+
+FS = 1000.0
+
+
+def _run(trigger, error, step=50):
+    """Feed ``error`` in steps; the times (s) of the triggers."""
+    return [(k + step) / FS for k in range(0, error.size, step)
+            if trigger(error[k:k + step])]
+
+
+def test_a_rise_is_flagged_within_a_few_blocks(rng):
+    # white noise whose RMS rises 3x at 20 s (a changed loop under compensation rose
+    # 9x on the rig): ln(median e²) rises by ln 9 = 2.2, about 7 standard deviations
+    # of a block of 100 samples (sd of ln of a χ² median: ~0.3)
+    e = rng.standard_normal(40_000)
+    e[20_000:] *= 3.0
+    times = _run(TrackingTrigger(FS), e)
+    assert len(times) == 1
+    assert 20.0 < times[0] <= 20.5
+
+
+def test_a_fall_is_not_a_change(rng):
+    e = rng.standard_normal(40_000)
+    e[20_000:] /= 3.0
+    assert _run(TrackingTrigger(FS), e) == []
+
+
+def test_a_steady_error_triggers_at_the_rate_it_is_set_for(rng):
+    # set for one false trigger in 100 h: over 10 minutes of white noise the chance of
+    # one is 1 - exp(-1/600) ~ 0.2 % (Siegmund's approximation, calibrated bounds)
+    trigger = TrackingTrigger(FS, TriggerSettings(false_alarm_hours=100.0))
+    assert _run(trigger, rng.standard_normal(600_000), step=1000) == []
+
+
+def test_after_a_trigger_it_learns_anew(rng):
+    # two rises 3 s apart: the second comes before learn_s + lag_s of new blocks
+    # are in, and is not tested; one learn_s + lag_s after the first it is
+    for gap_s, expected in ((3.0, 1), (8.0, 2)):
+        e = rng.standard_normal(40_000)
+        e[10_000:] *= 3.0
+        e[int((10.0 + gap_s) * FS):] *= 3.0
+        assert len(_run(TrackingTrigger(FS), e)) == expected, gap_s
+
+
+def test_it_takes_blocks_across_calls(rng):
+    # the same samples fed one by one or in uneven pieces give the same triggers
+    e = rng.standard_normal(30_000)
+    e[20_000:] *= 3.0
+    one = TrackingTrigger(FS)
+    by_one = [k / FS for k in range(e.size) if one(e[k:k + 1])]
+    bounds = np.cumsum(rng.integers(1, 300, size=400))
+    uneven = TrackingTrigger(FS)
+    pieces = np.split(e, bounds[bounds < e.size])
+    ends = np.cumsum([p.size for p in pieces])
+    by_piece = [end for p, end in zip(pieces, ends, strict=True) if uneven(p)]
+    assert len(by_one) == len(by_piece) == 1
+    # the trigger is in the block that ends at the same sample
+    assert int(round(by_one[0] * FS)) + 1 <= by_piece[0] < int(round(by_one[0] * FS)) + 300
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"block_s": 0.0}, "block_s"), ({"learn_s": -1.0}, "learn_s"),
+    ({"lag_s": float("inf")}, "lag_s"), ({"false_alarm_hours": 0.0}, "false_alarm_hours"),
+    ({"learn_s": 0.2}, "at least"),
+])
+def test_bad_settings(kwargs, message):
+    with pytest.raises(ParameterError, match=message):
+        TriggerSettings(**kwargs)
+
+
+@pytest.mark.parametrize("rise", [2.0, 3.0])
+def test_a_trigger_dates_the_change(rng, rise):
+    # the run of blocks before a trigger from the first one 2 sigma up: the change at
+    # 20 s lies in the block it dates (100 samples), or the next when that block holds
+    # too little of it (a rise of 2x in RMS lifts ln(median e²) by ln 4 = 1.4, about
+    # 4.6 of its standard deviations)
+    e = rng.standard_normal(40_000)
+    e[20_000:] *= rise
+    trigger = TrackingTrigger(FS)
+    times = _run(trigger, e, step=100)
+    assert len(times) == 1
+    onset = times[0] - trigger.onset_s
+    assert 19.9 <= onset <= 20.1 + 1e-9
