@@ -208,3 +208,28 @@ def test_a_rig_health_year_keeps_its_fields_as_given():
     year = RigHealthYear(days=2, duration_s=1.5, fault_day=400)  # no fault in the year
     assert (year.days, year.duration_s, year.fault_day) == (2, 1.5, 400)
     assert year == RigHealthYear(days=2, duration_s=1.5, fault_day=400)
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_ctrl_c_swallowed_by_a_destructor_still_stops_the_campaign():
+    # Dask releases futures (Future.__del__) in the loop that collects results; Python
+    # ignores an exception raised in a destructor, so a Ctrl-C landing there is lost
+    # unless it is recorded as well.
+    import os
+    import signal
+    import time
+
+    from ehss.campaign import engine
+
+    class Releases:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # the handler runs here; its KeyboardInterrupt is ignored
+
+    with engine._Interrupt() as interrupt:
+        interrupt.check()  # nothing yet
+        obj = Releases()
+        del obj  # the interrupt is swallowed by the destructor
+        with pytest.raises(KeyboardInterrupt):
+            interrupt.check()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

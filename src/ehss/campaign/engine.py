@@ -27,11 +27,14 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -350,7 +353,8 @@ def run_campaign(
                   file=sys.stderr)
         threads = sum(n for w, n in client.nthreads().items() if w in able) or 1
         size = window if window is not None else max(16, 4 * threads)
-        with _progress(len(tasks), len(tasks) - len(pending), quiet) as bar:
+        with _progress(len(tasks), len(tasks) - len(pending), quiet) as bar, \
+                _Interrupt() as interrupt:
             bar_id = bar.add_task(description, total=len(tasks),
                                   completed=len(tasks) - len(pending), failed=0)
             queue = iter(pending)
@@ -370,6 +374,7 @@ def run_campaign(
                               raise_errors=False)
             try:
                 for fut, result in ac:
+                    interrupt.check()
                     task = by_future.pop(fut)
                     status = _outcome(fut, result, task, folder)
                     fut.release()
@@ -378,12 +383,51 @@ def run_campaign(
                     bar.update(bar_id, advance=1, failed=n_failed)
                     for nxt in _take(queue, 1):
                         ac.add(submit(nxt))
+                interrupt.check()
             except BaseException:
                 client.cancel(list(by_future))
                 raise
     return CampaignRun(n_tasks=len(tasks), n_skipped=len(tasks) - len(pending),
                        n_done=n_done, n_failed=n_failed, out=out, dashboard=dashboard,
                        wall_s=time.perf_counter() - start)
+
+
+class _Interrupt:
+    """Ctrl-C that is not lost while the campaign waits for its tasks.
+
+    Python ignores an exception raised inside a destructor, and Dask's futures are
+    released (``Future.__del__``) in the loop that collects results: a SIGINT that lands
+    there would be swallowed and the campaign would run on. Within this context the
+    signal is also recorded, and :meth:`check`, called at every completion and after the
+    last, raises :class:`KeyboardInterrupt` for one that was swallowed. Outside the main
+    thread (where no signal handler can be set) it does nothing.
+    """
+
+    def __init__(self) -> None:
+        self._seen = threading.Event()
+        self._previous: Any = None
+
+    def __enter__(self) -> _Interrupt:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.getsignal(signal.SIGINT)
+            signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def _handler(self, signum: int, frame: FrameType | None) -> None:
+        self._seen.set()
+        if callable(self._previous):
+            self._previous(signum, frame)
+        else:
+            raise KeyboardInterrupt
+
+    def check(self) -> None:
+        """Raise :class:`KeyboardInterrupt` if Ctrl-C came and was swallowed."""
+        if self._seen.is_set():
+            raise KeyboardInterrupt
 
 
 def _workers_with_ehss(client: Any) -> tuple[list[str], str]:
