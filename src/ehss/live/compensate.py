@@ -165,7 +165,7 @@ class CompensationSettings:
         would refuse one in 44 models that are no worse if the ratio were Gaussian and
         its stretches independent; negative: a load must be better by that many). On
         the simulated rig that ratio on past rows does not foretell the ratio on the
-        rows that follow (correlation 0.02 over 22 loads), and every margin measured
+        rows that follow (correlation 0.09 over 44 loads), and every margin measured
         (−2, 0, 2) made the tracking after a change worse (README, "Adaptive
         compensation"): not the default.
     h1_window_s : float
