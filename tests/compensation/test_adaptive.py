@@ -8,6 +8,7 @@ import pytest
 from ehss.compensation.adaptive import (
     AdaptiveCompensator,
     UpdateGuard,
+    compare_compensators,
     design_compensator,
     fit_correction,
     fold_correction,
@@ -299,3 +300,61 @@ def test_predicted_error_of_a_compensator_on_data_run_by_another():
     # 1/6 against the design's few tenths of a percent
     assert predicted_error_ratio(weak, exact, r, scipy.signal.lfilter(
         np.r_[np.zeros(g.delay), g.b], g.a, run_compensator(exact, r)), 500) > 10.0
+
+
+def _weak_and_exact():
+    g = _loop()
+    exact = design_compensator(g, band_hz=BAND, preview=128)
+    weak = design_compensator(ArmaxModel(a=g.a, b=1.2 * g.b, delay=g.delay, dt=g.dt),
+                              band_hz=BAND, preview=128)
+    return g, exact, weak
+
+
+def test_a_comparison_replays_rows_run_by_an_earlier_compensator():
+    # the record run first by C_then = C / 1.2 (too weak), then by the exact inverse C
+    # that runs now: a candidate C_new = C_then, replayed over both spans, leaves what a
+    # record run by C_then all along gives (an independent run), against C's own error
+    import scipy.signal
+
+    g, exact, weak = _weak_and_exact()
+    r = _reference(6.0)
+    half = r.size // 2
+
+    def loop(u):
+        return scipy.signal.lfilter(np.r_[np.zeros(g.delay), g.b], g.a, u)
+
+    mixed = loop(np.r_[run_compensator(weak, r)[:half], run_compensator(exact, r)[half:]])
+    spans = [(500, half - 100, weak), (half + 500, r.size, None)]
+    got = compare_compensators(weak, exact, r, mixed, spans, chunk=100)
+    # independent: the two runs as they were, each compensator on its own
+    # errors low-passed at the band's edge as the comparison's are (zero-phase 4th-order
+    # Butterworth)
+    sos = scipy.signal.butter(4, BAND[1], fs=FS, output="sos")
+    run_weak, run_exact = loop(run_compensator(weak, r)), loop(run_compensator(exact, r))
+    e_weak, e_exact = (scipy.signal.sosfiltfilt(sos, r - y) for y in (run_weak, run_exact))
+    rows = np.r_[500:half - 100, half + 500:r.size - 128]
+    want = np.linalg.norm(e_weak[rows]) / np.linalg.norm(e_exact[rows])
+    assert got.rows == rows.size
+    # the weak one leaves 1/6 of the reference, the exact one its design's few tenths
+    # of a percent: the ratio is large, and the replay recovers it
+    assert want > 10.0
+    assert got.ratio == pytest.approx(want, rel=0.05)
+    # the same compensator against itself: exactly 1, with no spread
+    same = compare_compensators(exact, exact, r, mixed, spans[1:], chunk=100)
+    assert same.ratio == pytest.approx(1.0, rel=1e-12) and same.standard_error < 1e-9
+
+
+def test_a_comparison_of_compensators_a_gain_apart_is_that_gain():
+    # on sensor noise alone (no reference), C / 1.2 leaves the running C's error
+    # divided by 1.2 in the band, row by row: the ratio is 1 / 1.2 to the designs'
+    # accuracy, and with every stretch giving that ratio its standard error is nil
+    _, exact, weak = _weak_and_exact()
+    y = np.random.default_rng(3).standard_normal(3000)
+    got = compare_compensators(weak, exact, np.zeros(y.size), y, [(300, y.size, None)],
+                               chunk=103)
+    assert got.ratio == pytest.approx(1.0 / 1.2, rel=0.01)
+    assert got.standard_error < 0.01 * got.ratio
+    # a span of fewer than two stretches gives no standard error
+    short = compare_compensators(weak, exact, np.zeros(y.size), y,
+                                 [(300, 450, None)], chunk=103)
+    assert short.rows == 150 and short.standard_error == np.inf

@@ -170,3 +170,12 @@ def test_a_correction_needs_a_whole_span_and_time():
     with pytest.raises(ParameterError, match="correct_s"):
         CompensationSettings(band_hz=BAND, correct_s=-1.0)
     assert CompensationSettings(band_hz=BAND).to_dict()["correction_span"] == 2
+
+
+def test_every_load_compared_only_on_request():
+    from ehss.errors import ParameterError
+
+    assert CompensationSettings(band_hz=BAND).to_dict()["load_sigmas"] is None
+    assert CompensationSettings(band_hz=BAND, load_sigmas=-2.0).load_sigmas == -2.0
+    with pytest.raises(ParameterError, match="load_sigmas"):
+        CompensationSettings(band_hz=BAND, load_sigmas=float("nan"))

@@ -345,9 +345,11 @@ class Display:
     """The terminal summary (unless --quiet) and the dashboard (with --dashboard): what
     a session publishes and logs goes there."""
 
-    #: kinds of event printed as they happen
+    #: kinds of event printed as they happen (``compensator_change``: the compensator's
+    #: trigger flagged a change of the loop; a ``compensator`` with ``"model":
+    #: "correction"`` is the correction that follows it)
     LOGGED = ("alarm", "clear", "message", "compensator", "compensator_refused",
-              "compensator_alarm", "compensator_clear")
+              "compensator_alarm", "compensator_clear", "compensator_change")
 
     def __init__(self, args: argparse.Namespace) -> None:
         from ehss.live.summary import TerminalSummary

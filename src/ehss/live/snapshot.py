@@ -178,7 +178,10 @@ class SessionSnapshot:
         The source's counters.
     lag_ms : LagStats
     events : tuple of dict
-        The latest alarms, clears and messages (at most 50).
+        The latest alarms, clears and messages, and with adaptive compensation its
+        events: compensators loaded (``"compensator"``; ``"model": "correction"`` for a
+        correction after a change), refused, its alarms and clears, and the changes of
+        a loop its trigger flagged (``"compensator_change"``); at most 50.
     channels : tuple of ChannelSnapshot
     history : HistorySnapshot
     theta_names : tuple of str
