@@ -770,6 +770,11 @@ class Decision:
         The new compensator (when accepted).
     figures : dict
         The figures judged (H1 agreement, drive gains), JSON-ready.
+    fault : bool
+        Whether a refusal says the model, the data or the drive may be wrong (True,
+        the default: refusals in a row raise the compensator's alarm); False where the
+        candidate passed those guards and only what runs is better, which says
+        nothing against the loop.
     """
 
     t_s: float
@@ -777,6 +782,7 @@ class Decision:
     reason: str
     design: CompensatorDesign | None = field(default=None, repr=False)
     figures: dict = field(default_factory=dict)
+    fault: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"t_s": self.t_s, "accepted": self.accepted,

@@ -183,7 +183,9 @@ class CompensationSettings:
     alarm_after : int
         Consecutive refusals (of a channel that has a good compensator) that raise an
         alarm: one refusal is the guard doing its work on a scattered estimate; three
-        (0.75 s at the default period) are a fault.
+        (0.75 s at the default period) are a fault. A model that passes every guard
+        but is kept out because the running compensator would leave less error
+        (``Decision.fault`` False) does not count.
     n_taps, max_sections : int
         The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
     guard : UpdateGuard
@@ -669,7 +671,7 @@ class Judging:
         if cmp.ratio > limit:
             return Decision(decision.t_s, False, f"the model's compensator would leave "
                             f"{cmp.ratio:.2f} of the running one's tracking error "
-                            f"(at most {limit:.2f})", figures=figures)
+                            f"(at most {limit:.2f})", figures=figures, fault=False)
         return Decision(decision.t_s, True, "", decision.design, figures)
 
 
@@ -821,8 +823,8 @@ class AdaptiveLoop:
         if key != self._last_reason[k]:
             self._event({"kind": "compensator_refused", "channel": ad.name,
                          "t_s": t_s, "reason": d.reason})
-        ad.refusals += 1
-        if ad.compensator.current is not None and not ad.alarm \
+        ad.refusals += d.fault  # a better compensator kept says nothing against the loop
+        if d.fault and ad.compensator.current is not None and not ad.alarm \
                 and ad.refusals >= self.settings.alarm_after:
             ad.alarm = True
             self._event({"kind": "alarm", "channel": ad.name, "t_s": t_s,
