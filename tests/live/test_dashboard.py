@@ -190,3 +190,24 @@ def test_compensation_panel_in_headless_chromium(tmp_path):
         driver.save_screenshot(str(tmp_path / "compensation.png"))
     finally:
         _stop(driver, live)
+
+
+def test_compensation_panel_names_a_flagged_change_and_its_correction():
+    # the panel reads each event as a user would: a change flagged and the correction
+    # that follows it, not the raw kinds of the log
+    from ehss.live import dashboard
+    from ehss.live.snapshot import ChannelCompensation, CompensationSnapshot
+
+    ch = ChannelCompensation(name="1", t=np.zeros(0), error_rms=np.zeros(0),
+                             error_rms_without=np.zeros(0), freq_hz=np.zeros(0),
+                             inverse=None, loads=2, refusals=0, last_reason="",
+                             model="correction")
+    comp = CompensationSnapshot(mode="preview", band_hz=(0.5, 20.0), channels=(ch,))
+    events = [{"kind": "compensator", "channel": "1", "t_s": 2.0, "model": "estimator"},
+              {"kind": "compensator_change", "channel": "1", "t_s": 20.4},
+              {"kind": "compensator", "channel": "1", "t_s": 21.3, "model": "correction"}]
+    page = dashboard._compensation_html(comp, events)
+    assert "compensator_change" not in page
+    assert "t = 20.40 s &nbsp; channel 1: change flagged" in page
+    assert "t = 21.30 s &nbsp; channel 1: correction of the running compensator" in page
+    assert "t = 2.00 s &nbsp; channel 1: loaded" in page

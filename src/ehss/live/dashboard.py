@@ -187,10 +187,15 @@ def _compensation_html(comp: CompensationSnapshot, events: Sequence[dict]) -> st
         rows.append(f"channel {ch.name}: {ch.loads} loaded ({ch.model or 'none yet'}), "
                     f"{ch.refusals} refused{why}")
     for e in reversed([e for e in events if e["kind"].startswith("compensator")][-8:]):
-        what = ("loaded" if e["kind"] == "compensator" else
+        what = (_LOADED.get(e.get("model"), "loaded") if e["kind"] == "compensator" else
+                "change flagged: following it" if e["kind"] == "compensator_change" else
                 html.escape(e.get("reason") or e.get("text") or e["kind"]))
         rows.append(f"t = {e['t_s']:.2f} s &nbsp; channel {e['channel']}: {what}")
     return "<br>".join(rows)
+
+
+#: how a load reads in the panel, by the model it came from (default: "loaded")
+_LOADED = {"correction": "correction of the running compensator loaded"}
 
 
 def compensation_columns(comp: CompensationSnapshot, k: int) -> tuple[dict, dict]:

@@ -137,7 +137,8 @@ class ChannelCompensation:
     last_reason : str
         Why the latest refusal refused ("" if none yet).
     model : str
-        Whose model the current inverse inverts (``"estimator"`` or ``"tracker"``).
+        Whose model the current inverse inverts (``"estimator"`` or ``"tracker"``), or
+        ``"correction"`` while a correction of it after a change runs.
     """
 
     name: str
