@@ -81,7 +81,6 @@ __all__ = [
     "Correction",
     "fit_correction",
     "fold_correction",
-    "predicted_error_ratio",
     "ErrorComparison",
     "compare_compensators",
 ]
@@ -676,15 +675,6 @@ def compare_compensators(new: CompensatorDesign, running: CompensatorDesign, des
         return ErrorComparison(math.nan, math.inf, 0)
     ratio, se = _ratio_spread(np.concatenate(e_new), np.concatenate(e_run), chunk)
     return ErrorComparison(ratio, se, int(sum(e.size for e in e_new)))
-
-
-def predicted_error_ratio(new: CompensatorDesign, running: CompensatorDesign, desired: Any,
-                          feedback: Any, start: int) -> float:
-    """RMS tracking error ``new`` would have given over the rows from ``start`` of a
-    record run by ``running``, over the one it gave (both band-limited): the ratio of
-    :func:`compare_compensators` on that one span."""
-    return compare_compensators(new, running, desired, feedback,
-                                [(start, len(desired), None)], chunk=1).ratio
 
 
 def fold_correction(design: CompensatorDesign, correction: Correction) -> CompensatorDesign:
