@@ -187,3 +187,34 @@ def refused(ehss_cli) -> Callable[..., str]:
         return line
 
     return check
+
+
+def _creation_denied(folder: Path) -> bool:
+    """True if creating a new file in ``folder`` fails for this process."""
+    probe = folder / f".ehss-probe-{os.getpid()}"
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError:
+        return True
+    os.close(fd)
+    probe.unlink()
+    return False
+
+
+@pytest.fixture
+def unwritable_folder(tmp_path: Path) -> Iterator[Path]:
+    """A folder in which this process cannot create a file: a read-only folder of the
+    test's own, or, for root (whom file modes do not stop), Linux's ``/sys``, where the
+    kernel refuses new files to everyone. Skipped where neither is at hand."""
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        if _creation_denied(locked):
+            yield locked
+        elif Path("/sys").is_dir() and _creation_denied(Path("/sys")):
+            yield Path("/sys")
+        else:
+            pytest.skip("no folder here refuses new files to this user")
+    finally:
+        locked.chmod(0o755)
