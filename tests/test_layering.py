@@ -27,7 +27,7 @@ PACKAGE = SRC / "ehss"
 
 #: Each entry is one floor: the top-level modules or packages of ehss on it.
 FLOORS: tuple[tuple[str, ...], ...] = (
-    ("errors", "_checks", "_files", "_provenance"),
+    ("errors", "_checks", "_files", "_provenance", "_settle"),
     ("params",),
     ("linear",),
     ("plant",),

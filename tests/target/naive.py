@@ -7,6 +7,8 @@ outputs computed from each compensator's start.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.signal
 
@@ -59,3 +61,13 @@ def reference_swaps(x: np.ndarray, initial: Compensator,
             y[k] = (1 - w) * y[k] + w * new[k]
         y[k0 + n:] = new[k0 + n:]
     return y
+
+
+def reference_settle(c: Compensator) -> int:
+    """Samples ``c`` needs from rest: its taps, then 7 time constants of the slowest
+    section mode, the radius from ``np.roots`` (not the closed form the filter uses)."""
+    radius = max((float(np.max(np.abs(np.roots(row[3:])))) for row in np.array(c.sos)
+                  if np.any(row[4:] != 0.0)), default=0.0)
+    if radius == 0.0:
+        return c.n_taps
+    return c.n_taps + math.ceil(7.0 / -math.log(radius))

@@ -65,6 +65,8 @@ int ehss_comp_parse(const unsigned char *buf, size_t len, ehss_comp_update *out)
 long ehss_comp_datagram_channel(const unsigned char *buf, size_t len);
 int ehss_comp_decode(ehss_comp_state *s, const unsigned char *buf, size_t len);
 double ehss_comp_step(ehss_comp_state *s, double x);
+uint64_t ehss_comp_settle_samples(uint32_t n_sections, const double (*sos)[6],
+                                  uint32_t n_taps);
 void run_block(ehss_comp_state *s, const double *x, double *y, size_t n);
 """ + "".join(f"static const int {name};\n" for name in _C_NAMES)
 
@@ -85,7 +87,8 @@ def c(tmp_path_factory):
     ffi.set_source("_ehss_comp_under_test", '#include "ehss_compensator.h"\n' + RUN_BLOCK,
                    sources=[str(C_DIR / "ehss_compensator.c")], include_dirs=[str(C_DIR)],
                    # ISO C, and multiply and add kept apart as Python computes them
-                   extra_compile_args=["-std=c99", "-O2", "-ffp-contract=off"])
+                   extra_compile_args=["-std=c99", "-O2", "-ffp-contract=off"],
+                   libraries=["m"])
     path = ffi.compile(tmpdir=str(tmp_path_factory.mktemp("cffi")))
     spec = importlib.util.spec_from_file_location("_ehss_comp_under_test", path)
     module = importlib.util.module_from_spec(spec)
@@ -102,11 +105,11 @@ def test_the_c_code_compiles_as_strict_portable_c99(tmp_path):
         assert done.returncode == 0, done.stderr
 
 
-def test_the_c_code_includes_only_string_h_and_stdint_h():
+def test_the_c_code_includes_only_string_h_stdint_h_and_math_h():
     text = "".join((C_DIR / n).read_text() for n in ("ehss_compensator.h",
                                                     "ehss_compensator.c"))
     assert set(re.findall(r"#include\s*<([^>]+)>", text)) <= {"string.h", "stdint.h",
-                                                              "stddef.h"}
+                                                              "stddef.h", "math.h"}
     assert "malloc" not in text and "[n]" not in text
 
 
@@ -190,7 +193,8 @@ def test_the_c_parser_never_reads_beyond_the_datagram(tmp_path, rng):
     build = subprocess.run(
         [CC, "-std=c99", "-g", "-O1", "-fsanitize=address,undefined",
          "-fno-sanitize-recover=all", "-I", str(C_DIR), str(tmp_path / "harness.c"),
-         str(C_DIR / "ehss_compensator.c"), "-o", str(exe)], capture_output=True, text=True)
+         str(C_DIR / "ehss_compensator.c"), "-o", str(exe), "-lm"], capture_output=True,
+        text=True)
     if build.returncode != 0:
         pytest.skip(f"the C compiler cannot build with AddressSanitizer: {build.stderr}")
     big = encode(CompensatorUpdate(
@@ -258,7 +262,7 @@ def _scenario(rng, preview):
         (150_500, upd(6, 0, 10, channel=2)),                  # other channel
         (150_600, upd(6, 0, 10, fs_hz=5006.0)),               # 0.12 % off: refused
         (150_700, upd(7, 0, 10, fs_hz=5004.0)),               # 0.08 % off: taken
-        (300_000, upd(10, 250_000, 2_000)),                   # late: fades from now
+        (300_000, upd(10, 250_000, 2_000)),                   # late: fades once settled
         (301_000, wait_for_fade),                             # waits, then late
         (301_500, frame(sos=[[1.0, 0, 0, 1, 0, 1.0]], sequence=12)),  # unstable
         (600_000, upd(20, 600_500, 0)),                       # switch outright
@@ -284,7 +288,9 @@ def test_c_filter_equals_python_over_a_million_samples_with_swaps(c):
         "other_channel", "other_sample_rate", "ok", "ok", "ok", "unstable", "ok", "ok",
         "ok"]
     assert counters[0] == counters[1]
-    assert counters[0] == {"loads": 10, "swaps": 9, "superseded": 1, "late": 3}
+    # late: the two loaded after their apply index, the one that waited for a fade, and
+    # the one at 700 000 applying from the sample it came (no time to settle)
+    assert counters[0] == {"loads": 10, "swaps": 9, "superseded": 1, "late": 4}
     assert list(decoded[0].values()) == decoded[1]
 
 
@@ -321,3 +327,20 @@ def test_c_and_python_agree_on_any_schedule_of_loads(c, seed, loads):
     assert [py for py, _ in results] == [cc for _, cc in results]
     assert counters[0] == counters[1]
     assert list(decoded[0].values()) == decoded[1]
+
+
+def test_the_c_settling_time_is_the_pythons(c, rng):
+    ffi, lib = c
+    comps = [random_compensator(rng, n, int(rng.integers(1, MAX_TAPS + 1)))
+             for n in (0, 1, 2, 7, MAX_SECTIONS) for _ in range(20)]
+    comps += [Compensator(sos=[[1.0, 0, 0, 1.0, a1, a2]], taps=[1.0], preview=0,
+                          fs_hz=5000.0)
+              for a1, a2 in ((0.0, 0.0), (-0.5, 0.0), (-2 * 0.9999, 0.9999**2),
+                             (0.0, 0.999999), (1.5, 0.5625), (-1e-300, 0.0))]
+    for comp in comps:
+        sos = ffi.new("double[][6]", max(comp.n_sections, 1))
+        for i, row in enumerate(np.array(comp.sos)):
+            for j, v in enumerate(row):
+                sos[i][j] = v
+        assert lib.ehss_comp_settle_samples(comp.n_sections, sos, comp.n_taps) == \
+            comp.settle_samples

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
@@ -11,7 +13,7 @@ from ehss.target import MAX_PREVIEW, MAX_SECTIONS, MAX_TAPS, Compensator, Compen
 from ehss.target import filter as target_filter
 from ehss.target._kernels import crossfade_block, filter_block
 
-from .naive import random_compensator, reference_filter, reference_swaps
+from .naive import random_compensator, reference_filter, reference_settle, reference_swaps
 
 FS = 5000.0
 
@@ -122,7 +124,7 @@ def test_no_cross_fade_switches_at_the_apply_index(crossfade):
     assert_array_equal(f.process(np.ones(6)), [1, 1, 1, 2, 2, 2])
 
 
-def test_a_swap_loaded_after_its_apply_index_fades_in_from_now(rng):
+def test_a_swap_loaded_after_its_apply_index_fades_in_once_settled(rng):
     old = random_compensator(rng, 2, 5)
     new = random_compensator(rng, 2, 5)
     x = rng.standard_normal(3000)
@@ -130,9 +132,41 @@ def test_a_swap_loaded_after_its_apply_index_fades_in_from_now(rng):
     y1 = f.process(x[:1700])
     f.load(new, apply_index=1000, crossfade=500)
     y2 = f.process(x[1700:])
-    expected = reference_swaps(x, old, [(1700, new, 1700, 500)])
+    settle = reference_settle(new)
+    expected = reference_swaps(x, old, [(1700, new, 1700 + settle, 500)])
     assert_allclose(np.r_[y1, y2], expected, rtol=0, atol=_atol(expected))
     assert f.counters["late"] == 1
+
+
+@pytest.mark.parametrize("late_by", [1, 40, 10_000])
+def test_a_late_load_gives_the_drive_of_one_that_came_in_time(rng, late_by):
+    # a datagram that comes after its apply index (a slow link, a busy host) must not
+    # fade in a filter still starting up from rest: its start-up transient would be as
+    # large as the reference. It runs its settling time in shadow first, so its drive
+    # is the one a load that came just in time gives, sample for sample.
+    old = random_compensator(rng, 3, 40)
+    new = random_compensator(rng, 3, 40)
+    x = rng.standard_normal(4000)
+    settle = reference_settle(new)
+    drives = []
+    for apply_index in (1000 + settle, max(0, 1000 + settle - late_by)):
+        f = CompensatorFilter(old)
+        y = f.process(x[:1000])
+        f.load(new, apply_index=apply_index, crossfade=200)
+        drives.append(np.r_[y, f.process(x[1000:])])
+    assert_array_equal(drives[1], drives[0])
+    settled = reference_filter(new, x[1000:])
+    assert_allclose(drives[0][1000 + settle + 200:], settled[settle + 200:], rtol=0,
+                    atol=_atol(settled))
+
+
+def test_the_settling_time_is_the_slowest_modes(rng):
+    for n in (0, 1, 5, MAX_SECTIONS):
+        c = random_compensator(rng, n, int(rng.integers(1, MAX_TAPS + 1)))
+        assert c.settle_samples == reference_settle(c)
+    near = Compensator(sos=[[1.0, 0, 0, 1.0, -2 * 0.9999, 0.9999**2]], taps=[1.0],
+                       preview=0, fs_hz=FS)           # a double real pole at 0.9999
+    assert near.settle_samples == 1 + math.ceil(7.0 / -math.log(0.9999))
 
 
 def test_a_shadow_long_enough_makes_the_new_filter_start_settled(rng):
@@ -164,7 +198,9 @@ def test_a_load_during_a_cross_fade_waits_and_a_third_is_busy(rng):
     assert not f.load(c3, apply_index=0, crossfade=100)      # refused: busy
     assert f.waiting
     y.append(f.process(x[300:]))
-    expected = reference_swaps(x, c0, [(100, c1, 200, 400), (600, c2, 600, 100)])
+    # c2 taken up at 600 runs its settling time in shadow before it fades in
+    expected = reference_swaps(x, c0, [(100, c1, 200, 400),
+                                       (600, c2, 600 + reference_settle(c2), 100)])
     assert_allclose(np.concatenate(y), expected, rtol=0, atol=_atol(expected))
     assert f.counters == {"loads": 2, "swaps": 2, "refused_preview": 0,
                           "refused_sample_rate": 0, "busy": 1, "superseded": 0, "late": 1}

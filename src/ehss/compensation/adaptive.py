@@ -62,6 +62,7 @@ import scipy.linalg
 import scipy.signal
 
 from ehss._checks import check_int, check_real
+from ehss._settle import settle_samples
 from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_drive
 from ehss.compensation.inverse import InverseModel, design_inverse
 from ehss.errors import DataError, EhssError, ParameterError
@@ -130,7 +131,8 @@ class CompensatorDesign:
     peak_gain : float
         Largest ``|C|`` from 0 to fs/2 (what the compensator can amplify).
     settle_samples : int
-        Samples the filter needs to forget its start (sections' slowest mode, FIR span).
+        Samples the filter needs to forget its start (sections' slowest mode, FIR span:
+        :func:`ehss._settle.settle_samples`, the rule the target's filter applies too).
     """
 
     sos: np.ndarray = field(repr=False)
@@ -337,25 +339,8 @@ def _realise(sos: np.ndarray, inv: InverseModel, band: tuple[float, float], *,
         sos=sos, taps=np.ascontiguousarray(taps), preview=int(preview), fs_hz=float(fs_hz),
         mode=mode, band_hz=(float(lo), float(hi)), inverse=inv, freq_hz=f[inside],
         error=got[inside] / target[inside] - 1.0, peak_gain=float(np.max(np.abs(got))),
-        settle_samples=_settle_samples(sos) + n_taps,
+        settle_samples=settle_samples(sos, taps.size),
     )
-
-
-#: A filter started at rest has forgotten its start after this many time constants of
-#: its slowest mode (e^-7 < 0.1 %).
-_SETTLE_TIME_CONSTANTS = 7.0
-
-
-def _settle_samples(sos: np.ndarray) -> int:
-    """Samples for the sections' start-up transient to fall below 0.1 %."""
-    radius = 0.0
-    for a1, a2 in sos[:, 4:6]:
-        roots = np.roots([1.0, a1, a2])
-        radius = max(radius, float(np.max(np.abs(roots))) if roots.size else 0.0)
-    if radius <= 0.0:
-        return 0
-    return int(math.ceil(_SETTLE_TIME_CONSTANTS / max(-math.log(min(radius, 1.0 - 1e-12)),
-                                                       1e-12)))
 
 
 def _check_preview(mode: str, preview: Any, n_taps: int) -> int:

@@ -43,9 +43,12 @@ run from the start, and the cross-fade blends two steady outputs. Starting inste
 a state that gives the same output as the old filter is not possible in general: the
 two filters have different orders and dynamics, and matching one output sample (or a
 few) does not make the following ones match, so such a start would still leave a
-transient, of unknown size. When ``k0`` has already passed when the new filter is taken
-up, the cross-fade starts at once (counted as ``late``) and the start-up transient is
-weighted down by the rising ``w``.
+transient, of unknown size. So a compensator always runs in shadow for its settling
+time (:attr:`Compensator.settle_samples`): one taken up too late for that before
+``k0`` (the datagram came late, or waited for a cross-fade to end) starts its
+cross-fade that long after it was taken up, not at ``k0``, and is counted ``late``.
+Fading in an unsettled filter would put its start-up transient, as large as the
+reference, into the drive.
 
 A compensator with a different preview than the running one is refused and counted:
 the drive would jump by the difference of the previews. So is one designed for a sample
@@ -71,6 +74,7 @@ from typing import Any
 import numpy as np
 
 from ehss._checks import SAMPLE_RATE_RANGE_HZ, as_signal, check_int, check_real
+from ehss._settle import settle_samples
 from ehss.errors import ParameterError
 from ehss.target._kernels import crossfade_block, filter_block
 
@@ -210,6 +214,12 @@ class Compensator:
     def n_taps(self) -> int:
         return int(self.taps.shape[0])
 
+    @property
+    def settle_samples(self) -> int:
+        """Samples it runs in shadow, from rest, before its output is what it would
+        be had it run all along (:func:`ehss._settle.settle_samples`)."""
+        return settle_samples(self.sos, self.n_taps)
+
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Compensator):
             return NotImplemented
@@ -285,7 +295,8 @@ class CompensatorFilter:
         ``loads`` (taken up), ``swaps`` (cross-fades completed), ``refused_preview``,
         ``refused_sample_rate``, ``busy`` (refused while another load waited),
         ``superseded`` (replaced by a newer load while still in shadow), ``late`` (taken
-        up after their apply index: the cross-fade started late).
+        up too late to settle by their apply index: the cross-fade started their
+        settling time after they were taken up).
     """
 
     def __init__(self, initial: Compensator, *, start_index: int = 0) -> None:
@@ -382,10 +393,11 @@ class CompensatorFilter:
             self.counters["superseded"] += 1
         load, self._pending = self._pending, None
         self._next = _Slot(load.compensator)
-        self._start = max(load.apply_index, self._index)
+        settled = self._index + load.compensator.settle_samples
+        self._start = max(load.apply_index, settled)
         self._crossfade = load.crossfade
         self.counters["loads"] += 1
-        self.counters["late"] += load.apply_index < self._index
+        self.counters["late"] += load.apply_index < settled
 
     def _segment(self, room: int) -> int:
         """Samples from the current one until the next event (at most ``room``)."""

@@ -18,6 +18,7 @@
  */
 #include "ehss_compensator.h"
 
+#include <math.h>
 #include <string.h>
 
 /* doubles must be 8 bytes (IEEE-754 binary64 is assumed) */
@@ -303,21 +304,54 @@ static int fading(const ehss_comp_state *s)
     return s->has_next && s->index >= s->start;
 }
 
-/* At a sample boundary outside a cross-fade: the waiting update starts in shadow. */
+uint64_t ehss_comp_settle_samples(uint32_t n_sections, const double (*sos)[6],
+                                  uint32_t n_taps)
+{
+    double radius = 0.0;
+    double decay;
+    uint32_t i;
+    for (i = 0; i < n_sections; ++i) {
+        /* the largest |z| over the roots of z^2 + a1 z + a2 */
+        double a1 = sos[i][4];
+        double a2 = sos[i][5];
+        double disc = a1 * a1 - 4.0 * a2;
+        double r = disc < 0.0 ? sqrt(a2) : 0.5 * (absolute(a1) + sqrt(disc));
+        if (r > radius) {
+            radius = r;
+        }
+    }
+    if (radius <= 0.0) {
+        return (uint64_t)n_taps;
+    }
+    if (radius > 1.0 - 1e-12) {
+        radius = 1.0 - 1e-12;
+    }
+    decay = -log(radius);
+    if (decay < 1e-12) {
+        decay = 1e-12;
+    }
+    return (uint64_t)n_taps + (uint64_t)ceil(7.0 / decay);
+}
+
+/* At a sample boundary outside a cross-fade: the waiting update starts in shadow, and
+ * fades in no earlier than its settling time from now. */
 static void take_mailbox(ehss_comp_state *s)
 {
     const ehss_comp_update *u = &s->mailbox;
+    uint64_t settled;
     EHSS_COMP_BARRIER();   /* read the mailbox only after seeing it full */
     if (s->has_next) {
         s->counters.superseded += 1;
     }
     slot_load(&s->slot[1 - s->run], u->n_sections, (const double (*)[6])u->sos,
               u->n_taps, u->taps);
-    s->start = u->apply_index > s->index ? u->apply_index : s->index;
+    settled = s->index + ehss_comp_settle_samples(u->n_sections,
+                                                  (const double (*)[6])u->sos, u->n_taps);
+    s->start = u->apply_index > settled ? u->apply_index : settled;
     s->crossfade = u->crossfade;
     s->has_next = 1;
     s->counters.loads += 1;
-    if (u->apply_index < s->index) {
+    if (u->apply_index < settled) {
         s->counters.late += 1;
     }
     EHSS_COMP_BARRIER();   /* done with the mailbox before it is marked free */

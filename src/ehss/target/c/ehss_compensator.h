@@ -2,8 +2,9 @@
  * ehss_compensator.h - the compensator filter of a real-time target, and the decoder of
  * the datagram that carries a compensator to it (ehss, BSD-3-Clause).
  *
- * Portable C99: no allocation, no libc beyond <string.h> and <stdint.h>, fixed-size
- * state. Doubles must be IEEE-754 binary64 (checked at compile time by size).
+ * Portable C99: no allocation, no libc beyond <string.h>, <stdint.h> and <math.h>
+ * (sqrt, log and ceil, when an update is taken up: link with the maths library, -lm),
+ * fixed-size state. Doubles must be IEEE-754 binary64 (checked at compile time by size).
  * Reference: the Python package ehss.target (filter.py, datagram.py) does the same
  * arithmetic in the same order; the tests of ehss compile this file and compare both.
  *
@@ -20,6 +21,9 @@
  * takes it up at a sample boundary outside a cross-fade and runs it in shadow from its
  * zero state; from its apply index k0 the output is (1 - w) old + w new with
  * w = (k - k0 + 1) / N, and after sample k0 + N - 1 (w = 1) the old filter is dropped.
+ * An update always runs in shadow for its settling time (ehss_comp_settle_samples):
+ * one taken up too late for that before k0 starts its cross-fade that long after it
+ * was taken up instead (counted `late`), so no start-up transient reaches the drive.
  *
  * Threads: ehss_comp_decode writes only the state's scratch, mailbox and decode
  * counters; ehss_comp_step reads the mailbox only while `mailbox_full` is set and
@@ -142,6 +146,12 @@ long ehss_comp_datagram_channel(const unsigned char *buf, size_t len);
  * newer than the last one and the mailbox is free, put it in the mailbox. Counted by result in
  * s->counters.decoded; returns the result (enum ehss_comp_result). */
 int ehss_comp_decode(ehss_comp_state *s, const unsigned char *buf, size_t len);
+
+/* Samples a filter of `n_sections` sections `sos` (a0 = 1, stable) and `n_taps` FIR
+ * taps, started at rest, needs to forget its start: n_taps plus 7 / (-ln r), r the
+ * largest pole radius of the sections (rounded up). The rule of ehss._settle. */
+uint64_t ehss_comp_settle_samples(uint32_t n_sections, const double (*sos)[6],
+                                  uint32_t n_taps);
 
 /* One control period: input x = the reference `preview` samples ahead; returns the
  * drive of this sample. Takes up a waiting update first (outside a cross-fade). */
