@@ -83,7 +83,18 @@ class Target(Protocol):
 
     @property
     def finished(self) -> bool:
-        """True when the test is over."""
+        """True when the test is over.
+
+        A target that runs on its own clock (:class:`UdpTarget`) also has ``ahead()``:
+        how many samples it is estimated to be past ``index`` now; a compensator is
+        scheduled that much later, so that it still runs its settling time in shadow
+        before its apply index. A target stepped in process needs none."""
+
+
+def _ahead(target: Target) -> int:
+    """Samples ``target`` is past its ``index`` now (0 if it does not say)."""
+    ahead = getattr(target, "ahead", None)
+    return int(ahead()) if callable(ahead) else 0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -853,7 +864,7 @@ class AdaptiveLoop:
             self._event({"kind": "compensator_refused", "channel": ad.name, "t_s": t_s,
                          "reason": f"the target cannot run it: {exc}"})
             return
-        apply_index = self.target.index + design.settle_samples
+        apply_index = self.target.index + _ahead(self.target) + design.settle_samples
         crossfade = max(1, int(round(self.settings.guard.crossfade_s * self.fs)))
         ok = self.target.load(k, comp, apply_index, crossfade)
         ad.started(apply_index + crossfade)
@@ -1050,6 +1061,10 @@ class UdpTarget:
         self._last: float | None = None
         self._done = False
         self.index = 0
+        # (end index, arrival time) of the first and the latest block: the target's clock
+        self._first_arrival: tuple[int, float] | None = None
+        self._latest_arrival: tuple[int, float] | None = None
+        self._largest_block = 0
 
     @property
     def finished(self) -> bool:
@@ -1057,6 +1072,27 @@ class UdpTarget:
 
     def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
         return self.sender.send(channel, compensator, apply_index, crossfade)
+
+    def _arrived(self, first: int, n: int, arrival: float) -> None:
+        self._latest_arrival = (first + n, arrival)
+        if self._first_arrival is None:
+            self._first_arrival = (first + n, arrival)
+        self._largest_block = max(self._largest_block, n)
+
+    def ahead(self) -> int:
+        """Samples the target is estimated to be past :attr:`index` now.
+
+        The target sent the latest block that arrived when it had computed it, and has
+        gone on at its own rate since: the samples that arrived but are not yet taken,
+        those it has computed since that block's arrival (the rate measured from the
+        arrival times of the stream so far, ``fs`` until a second has come), and one
+        more block, the most it can be ahead of what it has sent."""
+        if self._latest_arrival is None or self._first_arrival is None:
+            return 0
+        (end0, t0), (end, t) = self._first_arrival, self._latest_arrival
+        rate = (end - end0) / (t - t0) if t - t0 >= 1.0 else self.fs
+        since = max(0.0, time.time() - t) * rate
+        return max(0, end - self.index) + int(math.ceil(since)) + self._largest_block
 
     def step(self, n: int) -> _UdpBlock:
         """The samples that arrived (at least one unless the stream went idle)."""
@@ -1067,6 +1103,7 @@ class UdpTarget:
             for b in blocks:
                 got.append(b.samples)
                 have += b.samples.shape[0]
+                self._arrived(b.first_index, b.samples.shape[0], b.arrival_s)
             now = time.monotonic()
             if blocks:
                 self._last = now
