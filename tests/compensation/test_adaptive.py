@@ -141,6 +141,19 @@ def test_guard_keeps_the_last_good_inverse(fault):
     assert comp.log[-1] is d
 
 
+@pytest.mark.parametrize(("gain_db", "fault"), [(1.5, False), (3.0, True)])
+def test_a_near_miss_of_the_h1_agreement_is_not_a_fault(gain_db, fault):
+    # the model off the loop the data confirm by a gain: refused either way (bound 1 dB);
+    # within twice the bound a scattered estimate of a healthy loop (no alarm), beyond
+    # it a fault (refusals in a row raise the alarm)
+    m = _loop()
+    r, h1 = _h1(m)
+    off = ArmaxModel(a=m.a, b=m.b * 10.0 ** (gain_db / 20.0), delay=1, dt=m.dt)
+    d = AdaptiveCompensator(FS, BAND, preview=128).propose(1.0, off, h1, r)
+    assert not d.accepted and "disagrees" in d.reason
+    assert d.fault is fault
+
+
 def test_updates_are_rate_limited():
     comp = AdaptiveCompensator(FS, BAND, guard=UpdateGuard(min_interval_s=1.0))
     m = _loop()
