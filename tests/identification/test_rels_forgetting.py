@@ -24,14 +24,15 @@ def _lambdas(n: int) -> np.ndarray:
 
 def _switched(u, y, **kw):
     """The streaming estimator run over u, y with λ switched as SCHEDULE says, a block
-    per λ (the first sample of each block one by one, through update())."""
+    per λ, its last sample through update(): the switch comes with that sample's (22)
+    still pending."""
     est = RelsEstimator(forgetting=SCHEDULE[0][1], **kw)
     err = []
     stops = [start for start, _ in SCHEDULE[1:]] + [u.size]
     for (start, lam), stop in zip(SCHEDULE, stops, strict=True):
         est.set_forgetting(lam)
-        err.append([est.update(u[start], y[start])])
-        err.append(est.update_many(u[start + 1:stop], y[start + 1:stop]))
+        err.append(est.update_many(u[start:stop - 1], y[start:stop - 1]))
+        err.append([est.update(u[stop - 1], y[stop - 1])])
     return est, np.concatenate(err)
 
 
