@@ -57,7 +57,8 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
     ``method`` is "rels" (eqs 19–22) or "rml" (gain and P from ψ filtered by 1/Ĉ).
     ``dtype=np.longdouble`` runs the same arithmetic in extended precision (64-bit
     mantissa on x86), a near-exact answer against which the float64 roundings of the
-    kernel and of this reference are measured.
+    kernel and of this reference are measured. ``lam`` may also be a sequence, one λ
+    per sample (a forgetting switched while the estimator runs).
     """
     rml = method == "rml" and nc > 0
     n = na + nb + 1 + nc
@@ -69,12 +70,14 @@ def naive_rels(u, y, *, na, nb, nc, delay, lam=1.0, alpha=1e6, theta0=None,
     P = P0.copy()
     tr_max = np.trace(P0) if trace_bound is None else trace_bound
     N = len(u)
+    lams = np.broadcast_to(np.asarray(lam, dtype=float), (N,))
     err = np.zeros(N, dtype)
     xi = np.zeros(N, dtype)
     resets = cproj = trscale = 0
     # RML: filt[j − 1] = ψ_f(k − j), j = 1..nc (zero before the record)
     filt = np.zeros((nc, n), dtype)
     for k in range(N):
+        lam = lams[k]
         psi = _regressor(u, y, xi, k, na, nb, nc, delay)
         # e(k) = y(k) − ψᵀ(k) θ̂(k−1), the bracket of (20)
         e = y[k] - psi @ theta

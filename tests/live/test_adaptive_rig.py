@@ -182,3 +182,33 @@ def test_every_load_compared_only_on_request():
     assert CompensationSettings(band_hz=BAND, load_sigmas=-2.0).load_sigmas == -2.0
     with pytest.raises(ParameterError, match="load_sigmas"):
         CompensationSettings(band_hz=BAND, load_sigmas=float("nan"))
+
+
+def test_following_a_change_switches_to_the_short_memory_and_back():
+    from ehss.errors import ParameterError
+    from ehss.live.compensate import ChannelAdapter
+
+    with pytest.raises(ParameterError, match="follow_memory_s"):
+        CompensationSettings(band_hz=BAND, follow_memory_s=0.0)
+    with pytest.raises(ParameterError, match="tracker_memory_s"):
+        CompensationSettings(band_hz=BAND, tracker_memory_s=-1.0)
+    settings = CompensationSettings(band_hz=BAND, memory_s=1.0, tracker_memory_s=0.3,
+                                    follow_memory_s=0.3, follow_s=0.5)
+    assert settings.to_dict()["follow_memory_s"] == 0.3
+    ad = ChannelAdapter("1", FS, BAND, 1.0, settings)
+    u = np.random.default_rng(0).standard_normal(2000)
+    ad.feed(u[:1000], 0.5 * u[:1000], u[:1000])
+    steady = 1.0 - 1.0 / (1.0 * FS)
+    short = 1.0 - 1.0 / (0.3 * FS)
+    assert ad.estimator.forgetting == steady and ad.tracker.forgetting == short
+    bound = ad.estimator.trace_bound
+    ad.follow_change()
+    # while following: the short memory, its forgetting not held by the bound
+    assert ad.estimator.forgetting == short
+    assert ad.estimator.trace_bound == settings.follow_trace_bound
+    ad.feed(u[1000:1450], 0.5 * u[1000:1450], u[1000:1450])
+    assert ad.estimator.forgetting == short
+    # follow_s after the trigger: the long memory and the bound of steady running again
+    ad.feed(u[1450:1550], 0.5 * u[1450:1550], u[1450:1550])
+    assert ad.estimator.forgetting == steady and ad.estimator.trace_bound == bound
+    assert ad.tracker.forgetting == short

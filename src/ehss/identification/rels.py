@@ -72,6 +72,8 @@ __all__ = ["rels", "RelsEstimator", "specialise_rels"]
 
 #: index of the bound of tr P among the settings at the start of an estimator's block
 _TRACE_MAX = _k.RelsSettings._fields.index("trace_max")
+#: index of λ among them
+_LAM = _k.RelsSettings._fields.index("lam")
 
 # ---------------------------------------------------------------- validation helpers
 def _sample(name: str, value: Any) -> float:
@@ -388,6 +390,33 @@ class RelsEstimator:
         trace = float(np.trace(P))
         if trace > bound:
             P *= bound / trace
+
+    @property
+    def forgetting(self) -> float:
+        """λ as the estimator runs now (see :meth:`set_forgetting`)."""
+        return self._settings.forgetting
+
+    def set_forgetting(self, forgetting: float) -> None:
+        """Run on with the forgetting factor λ = ``forgetting`` from the next sample on.
+
+        λ enters the gain (21), K(k) = P(k−1)ψ̂(k) / (λ + ψ̂ᵀ(k)P(k−1)ψ̂(k)), and the
+        update (22), P(k) = [I − K(k)ψ̂ᵀ(k)]P(k−1)/λ, so that θ̂ (20) weighs the sample
+        k − j by λʲ: a memory of about 1/(1 − λ) samples. A long memory scatters less
+        in steady running; a short one follows a change of the system faster (variable
+        forgetting: switched to the short memory when a change is detected, back once
+        it is followed). The last sample's pending P update is applied first, with the
+        λ it was computed with; θ̂, P and the regressors are kept. The running mean of
+        ξ̂² then runs over the new memory.
+
+        Raises
+        ------
+        TypeError, ParameterError
+            If ``forgetting`` is not a real number in (0, 1] (nothing changes).
+        """
+        settings = dataclasses.replace(self._settings, forgetting=forgetting)  # checks it
+        self._settle()
+        self._settings = settings
+        self._block[_LAM] = settings.forgetting
 
     def set_covariance(self, P: np.ndarray) -> None:  # noqa: N803 - the paper's symbol
         """Run on from ``P`` (scaled units, as :attr:`P` gives it), θ̂ and the
