@@ -209,8 +209,10 @@ class CompensationSettings:
         Consecutive refusals (of a channel that has a good compensator) that raise an
         alarm: one refusal is the guard doing its work on a scattered estimate; three
         (0.75 s at the default period) are a fault. A model that passes every guard
-        but is kept out because the running compensator would leave less error
-        (``Decision.fault`` False) does not count.
+        but is kept out because the running compensator would leave less error, or
+        that misses the H1 agreement only narrowly
+        (:data:`ehss.compensation.adaptive.NEAR_MISS`; ``Decision.fault`` False), does
+        not count.
     n_taps, max_sections : int
         The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
     guard : UpdateGuard
