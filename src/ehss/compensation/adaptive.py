@@ -953,9 +953,37 @@ class AdaptiveCompensator:
                             f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty (bounds "
                             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",
                             figures=figures)
-        return self._checked_drive(t_s, lambda: design_compensator(
+        return self._checked_drive(t_s, lambda: self._realisable(design_compensator(
             model, band_hz=self.band_hz, mode=self.mode, preview=self.preview,
-            n_taps=self.n_taps, max_sections=self.max_sections), r, figures)
+            n_taps=self.n_taps, max_sections=self.max_sections)), r, figures)
+
+    def _realisable(self, design: CompensatorDesign) -> CompensatorDesign:
+        """``design``, if in preview mode the target's filter realises the model's
+        inverse over the band within the bounds a model must meet against the H1
+        estimate (``acceptance.max_magnitude_db`` / ``max_phase_deg``).
+
+        The FIR's span and preview are samples, the loop's dynamics seconds: at a high
+        rate a preview that suits a slower loop holds too little of the inverse (its
+        delay's advance, the anti-causal tail of zeros outside the unit circle), and the
+        filter then runs something else than the inverse. The causal mode's FIR is a
+        prediction, whose error is the price of having no preview: not checked here.
+
+        Raises
+        ------
+        ParameterError
+            The realisation misses the bounds.
+        """
+        acc = self.guard.acceptance
+        mag, ph = design.max_amplitude_error_db, design.max_phase_error_deg
+        if design.mode == "preview" and (mag > acc.max_magnitude_db or ph > acc.max_phase_deg):
+            raise ParameterError(
+                f"the target's filter realises the model's inverse only to {mag:.2f} dB / "
+                f"{ph:.1f}° over the band (bounds {acc.max_magnitude_db:g} dB / "
+                f"{acc.max_phase_deg:g}°): its {design.taps.size} taps read "
+                f"{design.preview} samples ahead ({1e3 * design.preview / design.fs_hz:.3g}"
+                f" ms at {design.fs_hz:g} Hz), too few for this loop's inverse; give the "
+                "target more preview or narrow the band")
+        return design
 
     def _checked_drive(self, t_s: float, design_of: Callable[[], CompensatorDesign],
                        r: np.ndarray, figures: dict[str, Any]) -> Decision:
