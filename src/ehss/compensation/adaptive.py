@@ -32,9 +32,11 @@ Two reference modes:
 (:class:`UpdateGuard`): the model must be stable, pass its band in phase at the low edge
 (a closed loop that tracks does), agree with the sliding H1 estimate over the band as
 :class:`ehss.workflow.Acceptance` asks (errors beyond the estimate's own standard error
-within 1 dB and 5°), and give, for the recent reference, a drive that the gain checks and
-the rig's limits of ``ehss compensate`` accept (:func:`ehss.compensation.check_drive`),
-and fit the newest quarter-second of feedback (fresh data, the free-run fit that
+within 1 dB and 5°), be realised by the target's filter within the same bounds in
+preview mode (a preview too short for the loop at its rate is not), and give, for the
+recent reference, a drive that the gain checks and the rig's limits of ``ehss compensate``
+accept (:func:`ehss.compensation.check_drive`), and fit the newest quarter-second of
+feedback (fresh data, the free-run fit that
 :class:`~ehss.workflow.Acceptance` asks of a validated model).
 Otherwise the last good compensator stays and the reason is logged. Updates are at most
 one per ``min_interval_s``.
