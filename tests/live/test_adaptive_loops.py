@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from stepping_loops import SERVO, SPECIMEN, SteppingLoop, loop_desired
 
-from ehss.live.compensate import AdaptiveLoop, CompensationSettings
+from ehss.live.compensate import AdaptiveLoop, CompensationRecord, CompensationSettings
 
 CHANGE_S = 20.0
 DURATION_S = 30.0
@@ -34,13 +34,13 @@ CASES = {
 }
 
 
-def _run(target: SteppingLoop, adapt_until_s: float = math.inf):
+def _run(target: SteppingLoop, adapt_until_s: float = math.inf) -> CompensationRecord:
     return AdaptiveLoop(target, CompensationSettings(adapt_until_s=adapt_until_s)).run()
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
-def test_adaptation_follows_a_change_of_another_loop(case):
+def test_adaptation_follows_a_change_of_another_loop(case: str) -> None:
     spec, ref_band, factor, first_bound, later_bound = CASES[case]
     desired = loop_desired(spec, DURATION_S, (1, 2), band_hz=ref_band)
 
@@ -82,7 +82,7 @@ def test_adaptation_follows_a_change_of_another_loop(case):
     assert adapted.loads and all(load["accepted"] for load in adapted.loads)
 
 
-def test_a_preview_too_short_for_the_loop_at_its_rate_is_refused_and_said():
+def test_a_preview_too_short_for_the_loop_at_its_rate_is_refused_and_said() -> None:
     # the servo's group delay at low frequencies is 2ζ/ω summed over its valve and its
     # mode, 2.8 + 5.1 = 7.9 ms: 16 samples at 2 kHz. A target that reads 16 samples
     # ahead (8 ms) holds no more of its inverse than that delay; 128 (64 ms) hold it all
