@@ -16,6 +16,8 @@ physical parameter by ``factor`` from ``change_s`` on, the state carried over.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -23,7 +25,8 @@ from scipy.signal import StateSpace, butter, cont2discrete, sosfilt
 
 from ehss.live.rig import rig_layout
 
-__all__ = ["servo_record", "specimen_record"]
+__all__ = ["servo_record", "specimen_record", "LoopSpec", "SERVO", "SPECIMEN", "discrete",
+           "simulate_states", "reference"]
 
 
 def _servo_ss(wn_scale: float) -> StateSpace:
@@ -75,18 +78,16 @@ def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
     out[:, 0] = np.arange(n) / fs
     cut = n if change_s is None else int(round(change_s * fs))
     for k in range(1, n_channels + 1):
-        r = _reference(n, fs, band_hz, rms, seed + k)
+        r = reference(n, fs, band_hz, rms, seed + k)
         y = np.empty(n)
         state = None
         for scale, (a, b) in ((1.0, (0, cut)),
                               (factor if k == channel else 1.0, (cut, n))):
             if b <= a:
                 continue
-            ad, bd, cd, _, _ = cont2discrete((*_ss_arrays(make(scale)),), 1 / fs,
-                                             method="zoh")
+            ad, bd, cd = discrete(make, scale, fs)
             x0 = np.zeros(ad.shape[0]) if state is None else state
-            state = _simulate(np.ascontiguousarray(ad), bd[:, 0].copy(), cd[0].copy(),
-                              r[a:b], x0, y[a:b])
+            state = simulate_states(ad, bd, cd, r[a:b], x0, y[a:b])
         noise_rng = np.random.default_rng(seed + 1000 + k)
         y_rms = float(np.sqrt(np.mean(y[:cut] ** 2)))
         out[:, layout.ref_index[k - 1]] = r
@@ -95,7 +96,7 @@ def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
 
 
 @njit(cache=True)
-def _simulate(a, b, c, u, x0, y):
+def simulate_states(a, b, c, u, x0, y):
     """x(k+1) = A x(k) + B u(k), y(k) = C x(k) from x(0) = x0 into ``y``; returns the
     state after the last sample."""
     n = x0.size
@@ -115,7 +116,7 @@ def _simulate(a, b, c, u, x0, y):
     return x
 
 
-def _reference(n: int, fs: float, band_hz: tuple[float, float], rms: float,
+def reference(n: int, fs: float, band_hz: tuple[float, float], rms: float,
                seed: int) -> np.ndarray:
     """Gaussian noise through a 4th-order Butterworth band-pass, scaled to ``rms`` and
     faded in over 0.2 s (O(n): a 10-minute record at 4 kHz in milliseconds)."""
@@ -127,8 +128,38 @@ def _reference(n: int, fs: float, band_hz: tuple[float, float], rms: float,
     return r
 
 
-def _ss_arrays(ss: StateSpace):
-    return ss.A, ss.B, ss.C, ss.D
+def discrete(make: Callable[[float], StateSpace], factor: float, fs: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``make(factor)`` held over each sample (zero-order hold) at ``fs``: A (contiguous),
+    B and C as vectors, as :func:`simulate_states` takes them."""
+    ss = make(factor)
+    ad, bd, cd, _, _ = cont2discrete((ss.A, ss.B, ss.C, ss.D), 1 / fs, method="zoh")
+    return np.ascontiguousarray(ad), bd[:, 0].copy(), cd[0].copy()
+
+
+def _servo_mass(mass_factor: float) -> StateSpace:
+    """The servo with its moving mass × ``mass_factor`` (natural frequency 1/√ that)."""
+    return _servo_ss(1 / math.sqrt(mass_factor))
+
+
+@dataclass(frozen=True)
+class LoopSpec:
+    """One loop of this module: ``make(factor)``, its closed-loop state space with one
+    physical parameter (``parameter``) × ``factor``; its rate; its reference's RMS and
+    band."""
+
+    name: str
+    make: Callable[[float], StateSpace]
+    fs: float
+    rms: float
+    band_hz: tuple[float, float]
+    parameter: str
+
+
+#: The 25 Hz servo at 2 kHz; its factor scales the moving mass.
+SERVO = LoopSpec("servo", _servo_mass, 2000.0, 1e-3, (1.0, 60.0), "mass")
+#: The actuator on its specimen at 4 kHz; its factor scales the specimen's stiffness.
+SPECIMEN = LoopSpec("specimen", _specimen_ss, 4000.0, 1e-3, (1.0, 100.0), "stiffness")
 
 
 def servo_record(*, n_channels: int = 2, duration_s: float, seed: int,
@@ -136,9 +167,9 @@ def servo_record(*, n_channels: int = 2, duration_s: float, seed: int,
                  channel: int = 1):
     """The 25 Hz servo at 2 kHz; from ``change_s`` the moving mass of ``channel`` is
     ``mass_factor`` times larger (its natural frequency 1/√ that)."""
-    return _record(lambda m: _servo_ss(1 / math.sqrt(m)), 2000.0, n_channels=n_channels,
-                   duration_s=duration_s, seed=seed, rms=1e-3, band_hz=(1.0, 60.0),
-                   change_s=change_s, factor=mass_factor, channel=channel)
+    return _record(SERVO.make, SERVO.fs, n_channels=n_channels, duration_s=duration_s,
+                   seed=seed, rms=SERVO.rms, band_hz=SERVO.band_hz, change_s=change_s,
+                   factor=mass_factor, channel=channel)
 
 
 def specimen_record(*, n_channels: int = 2, duration_s: float, seed: int,
@@ -146,6 +177,7 @@ def specimen_record(*, n_channels: int = 2, duration_s: float, seed: int,
                     channel: int = 1):
     """The actuator on its specimen at 4 kHz; from ``change_s`` the specimen of
     ``channel`` is ``stiffness_factor`` times stiffer."""
-    return _record(_specimen_ss, 4000.0, n_channels=n_channels, duration_s=duration_s,
-                   seed=seed, rms=1e-3, band_hz=(1.0, 100.0), change_s=change_s,
-                   factor=stiffness_factor, channel=channel)
+    return _record(SPECIMEN.make, SPECIMEN.fs, n_channels=n_channels,
+                   duration_s=duration_s, seed=seed, rms=SPECIMEN.rms,
+                   band_hz=SPECIMEN.band_hz, change_s=change_s, factor=stiffness_factor,
+                   channel=channel)

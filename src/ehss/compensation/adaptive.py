@@ -32,9 +32,11 @@ Two reference modes:
 (:class:`UpdateGuard`): the model must be stable, pass its band in phase at the low edge
 (a closed loop that tracks does), agree with the sliding H1 estimate over the band as
 :class:`ehss.workflow.Acceptance` asks (errors beyond the estimate's own standard error
-within 1 dB and 5°), and give, for the recent reference, a drive that the gain checks and
-the rig's limits of ``ehss compensate`` accept (:func:`ehss.compensation.check_drive`),
-and fit the newest quarter-second of feedback (fresh data, the free-run fit that
+within 1 dB and 5°), be realised by the target's filter within the same bounds in
+preview mode (a preview too short for the loop at its rate is not), and give, for the
+recent reference, a drive that the gain checks and the rig's limits of ``ehss compensate``
+accept (:func:`ehss.compensation.check_drive`), and fit the newest quarter-second of
+feedback (fresh data, the free-run fit that
 :class:`~ehss.workflow.Acceptance` asks of a validated model).
 Otherwise the last good compensator stays and the reason is logged. Updates are at most
 one per ``min_interval_s``.
@@ -951,9 +953,37 @@ class AdaptiveCompensator:
                             f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty (bounds "
                             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",
                             figures=figures, fault=gross)
-        return self._checked_drive(t_s, lambda: design_compensator(
+        return self._checked_drive(t_s, lambda: self._realisable(design_compensator(
             model, band_hz=self.band_hz, mode=self.mode, preview=self.preview,
-            n_taps=self.n_taps, max_sections=self.max_sections), r, figures)
+            n_taps=self.n_taps, max_sections=self.max_sections)), r, figures)
+
+    def _realisable(self, design: CompensatorDesign) -> CompensatorDesign:
+        """``design``, if in preview mode the target's filter realises the model's
+        inverse over the band within the bounds a model must meet against the H1
+        estimate (``acceptance.max_magnitude_db`` / ``max_phase_deg``).
+
+        The FIR's span and preview are samples, the loop's dynamics seconds: at a high
+        rate a preview that suits a slower loop holds too little of the inverse (its
+        delay's advance, the anti-causal tail of zeros outside the unit circle), and the
+        filter then runs something else than the inverse. The causal mode's FIR is a
+        prediction, whose error is the price of having no preview: not checked here.
+
+        Raises
+        ------
+        ParameterError
+            The realisation misses the bounds.
+        """
+        acc = self.guard.acceptance
+        mag, ph = design.max_amplitude_error_db, design.max_phase_error_deg
+        if design.mode == "preview" and (mag > acc.max_magnitude_db or ph > acc.max_phase_deg):
+            raise ParameterError(
+                f"the target's filter realises the model's inverse only to {mag:.2f} dB / "
+                f"{ph:.1f}° over the band (bounds {acc.max_magnitude_db:g} dB / "
+                f"{acc.max_phase_deg:g}°): its {design.taps.size} taps read "
+                f"{design.preview} samples ahead ({1e3 * design.preview / design.fs_hz:.3g}"
+                f" ms at {design.fs_hz:g} Hz), too few for this loop's inverse; give the "
+                "target more preview or narrow the band")
+        return design
 
     def _checked_drive(self, t_s: float, design_of: Callable[[], CompensatorDesign],
                        r: np.ndarray, figures: dict[str, Any]) -> Decision:
