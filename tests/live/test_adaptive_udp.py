@@ -96,9 +96,9 @@ def _run(speed: float, **settings):
 @pytest.mark.slow
 @pytest.mark.realtime
 def test_a_remote_target_follows_a_payload_change():
-    # paced at 4x real time; the second run keeps the inverse built before the change
-    rec, counters, sent = _run(4.0)
-    frozen, _, _ = _run(4.0, adapt_until_s=CHANGE_S - 0.1)
+    # paced at 8x real time; the second run keeps the inverse built before the change
+    rec, counters, sent = _run(8.0)
+    frozen, _, _ = _run(8.0, adapt_until_s=CHANGE_S - 0.1)
     assert rec.desired.shape == (2, int(DURATION_S * FS))  # every sample, in order
     before = rec.tracking_rms(8.0, CHANGE_S)
     # the loop lags its 0.5-20 Hz reference by tens of degrees: compensated, its error
