@@ -165,7 +165,7 @@ return [get('compensation_log').text, get('compensation_log').visible,
 def test_compensation_panel_in_headless_chromium(tmp_path):
     driver = _browser()
     live, url = _start_live(["--rig", "position", "--duration", "30", "--band", "0.5", "20",
-                             "--rms", "0.0005", "--compensate", "preview",
+                             "--rms", "0.0005", "--compensate", "preview", "--speed", "2",
                              "--dashboard", "0", "--quiet", "--record",
                              str(tmp_path / "run.h5")])
     try:
