@@ -607,7 +607,7 @@ class TrackingTrigger:
         flagged (those since are forgotten) and their calibration, held until new
         blocks make up the learning time again; the next ``hold`` samples (the undoing
         fading in) are neither tested nor learnt. A change still there after them is
-        flagged within a block or two."""
+        flagged within a few blocks (two for a rise of 7 standard deviations)."""
         self._x = list(self._kept)
         self._held = self._flagged
         self._cusum = 0.0
@@ -675,7 +675,7 @@ class TrackingTrigger:
         # x = ln(median e²): half the mean excess of x is the log of the level's ratio
         self.rise = math.exp(0.5 * cal.sd * float(np.mean(self._run[-n_onset:])))
         # the blocks before the change (this one is not among them yet)
-        self._kept = self._x[:len(self._x) - (n_onset - 1)]
+        self._kept = self._x[:max(0, len(self._x) - (n_onset - 1))]
         self._flagged = cal
         self.restart()
         return True
