@@ -212,3 +212,69 @@ def test_following_a_change_switches_to_the_short_memory_and_back():
     ad.feed(u[1450:1550], 0.5 * u[1450:1550], u[1450:1550])
     assert ad.estimator.forgetting == steady and ad.estimator.trace_bound == bound
     assert ad.tracker.forgetting == short
+
+
+class _Spoiled:
+    """Judges as a channel does, and spoils the first design accepted at or after
+    ``at_s``: its FIR part times ``gain``, the inverse of a model whose gain is 1/``gain``
+    of the loop's (loaded as any accepted design is)."""
+
+    def __init__(self, judging, at_s: float, gain: float) -> None:
+        self.judging, self.at_s, self.gain = judging, at_s, gain
+        self.done = False
+
+    def __getattr__(self, name):
+        return getattr(self.judging, name)
+
+    def __call__(self, t_s, snap):
+        import dataclasses
+
+        from ehss.compensation.adaptive import Decision
+        from ehss.live.compensate import Verdict
+
+        verdict = self.judging(t_s, snap)
+        d = verdict.decision
+        if self.done or t_s < self.at_s or not d.accepted or d.design is None:
+            return verdict
+        self.done = True
+        design = dataclasses.replace(d.design, taps=self.gain * d.design.taps)
+        return Verdict(Decision(d.t_s, True, "", design, d.figures), verdict.model,
+                       verdict.chosen)
+
+
+def _run_spoiled(desired, *, events=(), at_s=12.0, gain=0.8):
+    rig = SteppingRig("position", desired, fs=FS, events=events, preview=128, seed=0)
+    loop = AdaptiveLoop(rig, CompensationSettings(band_hz=BAND), loop="position",
+                        params=ehss.preset("default"))
+    loop.adapters[0].judging = _Spoiled(loop.adapters[0].judging, at_s, gain)
+    return loop.run()
+
+
+def _loads(rec, channel="1"):
+    """The loads of a model's inverse on ``channel`` (rollbacks left out)."""
+    return [ld for ld in rec.loads if ld["channel"] == channel and ld["model"] != "rollback"]
+
+
+@pytest.mark.slow
+def test_a_compensator_that_raises_the_error_is_rolled_back():
+    # a model 25 % too strong, its inverse 0.8x the loop's: the compensated loop tracks
+    # 0.8 of the reference, an error of 20 % of it against a few percent
+    at_s = 12.0
+    rec = _run_spoiled(_desired(18.0), at_s=at_s)
+    spoiled = next(ld for ld in _loads(rec) if ld["t_s"] >= at_s)
+    rollbacks = [e for e in rec.events if e["kind"] == "compensator_rollback"]
+    assert len(rollbacks) == 1 and rollbacks[0]["channel"] == "1"
+    back = rollbacks[0]
+    assert back["loaded_index"] == spoiled["apply_index"]
+    # sent again as a load is: after the spoiled one has faded in, with its own fade
+    assert back["apply_index"] > spoiled["apply_index"] + spoiled["crossfade"]
+    assert back["accepted"] and back["ratio"] > 2.0
+    assert back in rec.loads
+    # not a change of the loop, and not a fault of the compensator
+    assert not [e for e in rec.events if e["kind"] in ("compensator_change", "alarm")]
+    # the error back at its level: from the rollback's fade-in on, within the scatter
+    # of 2-s stretches before the spoiled load (+-30 %)
+    end = (back["apply_index"] + back["crossfade"]) / FS
+    before = rec.tracking_rms(at_s - 4.0, at_s)
+    assert rec.tracking_rms(end, end + 2.0)[0] <= 1.3 * before[0]
+

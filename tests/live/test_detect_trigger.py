@@ -91,3 +91,38 @@ def test_a_trigger_dates_the_change(rng, rise):
     assert len(times) == 1
     onset = times[0] - trigger.onset_s
     assert 19.9 <= onset <= 20.1 + 1e-9
+
+
+def _run_rearmed(error, undone_at):
+    """Feed ``error`` in steps of 50 samples; at the first trigger, rearm until sample
+    ``undone_at``. The trigger, the times (s) of the triggers, and the trigger's onset and
+    rise at the first."""
+    trigger = TrackingTrigger(FS)
+    times, first = [], None
+    for k in range(0, error.size, 50):
+        if trigger(error[k:k + 50]):
+            times.append((k + 50) / FS)
+            if first is None:
+                first = (trigger.onset_index, trigger.rise)
+                trigger.rearm(undone_at - (k + 50))
+                assert trigger.held
+    return trigger, times, first
+
+
+def test_rearmed_it_tests_on_against_the_level_before_the_rise(rng):
+    # a rise of 3x at 20 s: dated to its first block, and its level measured (3x, within
+    # the blocks' scatter). Undone at 20.5 s, nothing more is flagged; kept, it is
+    # flagged again against the level learnt before, in the second block after 20.5 s
+    # (a rise of 3x is about 7 standard deviations of a block; the CUSUM's threshold for
+    # one false trigger an hour is 8.6)
+    for kept in (False, True):
+        e = rng.standard_normal(40_000)
+        e[20_000:None if kept else 20_500] *= 3.0
+        trigger, times, first = _run_rearmed(e, undone_at=20_500)
+        assert first is not None and first[0] == 20_000 and 2.2 < first[1] < 4.0
+        assert times[0] <= 20.5
+        if kept:
+            assert len(times) == 2 and 20.5 < times[1] <= 20.7 + 0.025
+        else:
+            assert len(times) == 1
+            assert not trigger.held     # learnt anew from the blocks after the hold

@@ -17,7 +17,10 @@ sequential test on it (:class:`~ehss.live.detect.TrackingTrigger`) makes the
 channel's first estimator follow for a while (:meth:`ChannelAdapter.follow_change`)
 and, in preview mode, has the running compensator corrected from the data since the
 change (:func:`~ehss.compensation.adaptive.fit_correction`, a five-tap FIR folded into
-it) until the full model's inverse takes over again.
+it) until the full model's inverse takes over again. A rise that the trigger dates to
+the fade-in of a load, while the model of before still matches the loop, is that
+compensator's: the one before it is sent again (``"kind": "compensator_rollback"``),
+and the trigger tests on against the level it had learnt.
 
 The target is anything with ``load(channel, compensator, apply_index, crossfade)``,
 ``step(n) -> RigBlock``, ``index``, ``finished``, ``fs``, ``channels``, ``preview`` and
@@ -55,7 +58,13 @@ from ehss.compensation.adaptive import (
 )
 from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
-from ehss.live.detect import TrackingTrigger, TriggerSettings
+from ehss.live.detect import (
+    ONSET_Z,
+    BaselineResidual,
+    TrackingTrigger,
+    TriggerSettings,
+    block_statistic,
+)
 
 __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",
            "Target", "DatagramSender", "UdpTarget", "JUDGE_IN", "Snapshot", "Verdict",
@@ -156,7 +165,10 @@ class CompensationSettings:
         within a few tenths of a second, before any estimate of the loop moves; each
         trigger is logged (``"kind": "compensator_change"``) and makes the first
         estimator follow for ``follow_s``. A false trigger only speeds that estimator
-        up for a while: the guards still decide what is sent.
+        up for a while: the guards still decide what is sent. A rise dated to a load's
+        fade-in, with the loop's model of before still matching the feedback, is
+        undone instead (``"kind": "compensator_rollback"``;
+        :meth:`ChannelAdapter.feed`).
     follow_s : float
         How long the first estimator follows after a trigger: its bound of tr P lifted
         to ``follow_trace_bound``, so that its forgetting acts as the tracker's does,
@@ -403,7 +415,18 @@ class ChannelAdapter:
         self._corrected_from: int | None = None
         # the compensator sent last, and the one before it (None: none yet)
         self._running: CompensatorDesign | None = None
+        self._running_model: ehss.ArmaxModel | None = None
         self._before: CompensatorDesign | None = None
+        # the latest loads of a model's inverse that may still be undone, oldest first
+        self._undoable: list[_Load] = []
+        # the latest load fades in from sample busy_from to busy_until
+        self.busy_from = 0
+        #: a load to undo (the trigger dated its rise to that load's fade-in), for the
+        #: loop to send the compensator before it again (:meth:`rolled_back`)
+        self.undo: _Load | None = None
+        #: at the latest change flagged, the apply index of the load it came with
+        #: (None: none), when the model's prediction errors told it from that load's
+        self.change_at_load: int | None = None
 
     def _forgetting(self, memory_s: float | None) -> float:
         """λ = 1 − 1/(memory fs) of a memory (None: ``memory_s``)."""
@@ -421,7 +444,9 @@ class ChannelAdapter:
 
     def feed(self, drive: np.ndarray, feedback: np.ndarray, desired: np.ndarray) -> bool:
         """Consecutive samples of the drive (model input), feedback and desired
-        reference; True if the trigger flagged a change of the loop in them."""
+        reference; True if the trigger flagged a change of the loop in them. A rise
+        that is the latest loads' (:meth:`_load_that_rose`) is not a change: it is left
+        in :attr:`undo` for the loop to roll back."""
         self.estimator.update_many(drive, feedback)
         if self.tracker is not None:
             self.tracker.update_many(drive, feedback)
@@ -437,8 +462,68 @@ class ChannelAdapter:
             self._thetas.popleft()
         changed = self.trigger is not None and self.trigger(desired - feedback)
         if changed:
+            self.undo = self._load_that_rose()
+            changed = self.undo is None
+        if changed:
             self.follow_change()
         return changed
+
+    def _load_that_rose(self) -> _Load | None:
+        """The load whose rise of the error the trigger just flagged, if it is one of
+        the latest: its first block 2σ above the learnt level
+        (:data:`~ehss.live.detect.ONSET_Z`; every block before it, from the CUSUM's last
+        zero, below) is the one in which that load began to fade in, or a later one up
+        to the first block after its fade-in. A rise flagged on the level held since an
+        undoing (in the blocks right after it) is a change of the loop."""
+        trigger = self.trigger
+        self.change_at_load = None
+        if trigger is None or trigger.held:
+            return None
+        block = int(round(trigger.settings.block_s * self.fs))
+        for load in reversed(self._undoable):
+            if load.apply_index - block < trigger.onset_index <= load.until + block:
+                if self._loop_unchanged(load, trigger.onset_index, block):
+                    return load
+                self.change_at_load = load.apply_index
+                return None
+        return None
+
+    def _loop_unchanged(self, load: _Load, onset: int, block: int) -> bool:
+        """Whether the model the compensator before ``load`` was designed from, run
+        on the drive, matches the feedback as well since the rise (sample ``onset``) as
+        before the load, in blocks of ``block`` samples.
+
+        Its output errors y − (q^{-d} B/A) u (:class:`~ehss.live.detect.BaselineResidual`
+        with C = A) do not depend on the compensator (the drive is measured), while a
+        change of the loop raises them about as much as the tracking error (the
+        one-step prediction errors, with the past feedback in them, barely: on the servo
+        +40 % mass raised them 1.3× in √(median ε²), the output errors 7.2×, the
+        tracking error 7.1×). They are compared
+        in the trigger's blocks (ln median ε²): the loop changed if their mean since the
+        rise is :data:`~ehss.live.detect.ONSET_Z` standard errors or more above that
+        before the load (from the standard deviation of the blocks before; one-sided, a
+        loop that did not change is taken for a changed one in about 1 rise in 25 with
+        the 5–15 blocks the window holds before a load: Student's t). With fewer than
+        three blocks before the load the timing alone decides."""
+        model = load.model
+        if model is None:
+            return True
+        u, y, _ = self.window.latest()
+        first = self._n - self.window.fill
+        eps = BaselineResidual(model.a, model.b, model.a, model.delay)(u, y)
+
+        def levels(a: int, b: int) -> np.ndarray:
+            return np.array([block_statistic(eps[i:i + block])
+                             for i in range(max(a, block), b - block + 1, block)])
+
+        # the first block of the window holds the simulation's start
+        before = levels(0, load.apply_index - first)
+        after = levels(onset - first, self._n - first)
+        before, after = before[np.isfinite(before)], after[np.isfinite(after)]
+        if before.size < 3 or not after.size:
+            return True
+        spread = float(np.std(before, ddof=1)) * math.sqrt(1 / before.size + 1 / after.size)
+        return float(np.mean(after) - np.mean(before)) < ONSET_Z * spread
 
     def follow_change(self) -> None:
         """The loop changed (a trigger): the estimator follows quickly for
@@ -500,10 +585,22 @@ class ChannelAdapter:
             and spans[-1][1] - spans[-1][0] >= j.correction_rows - j.n_fit \
             and self._spans[-1][0] <= self._n
 
-    def started(self, until: int) -> None:
-        """The compensator just accepted is sent: it runs alone from sample ``until``
-        (the end of its shadow run and cross-fade)."""
-        self.busy_until = until
+    def started(self, until: int, apply_index: int | None = None) -> None:
+        """The compensator just accepted is sent: it fades in from sample
+        ``apply_index`` (default: a cross-fade before ``until``) and runs alone from
+        sample ``until`` (the end of its shadow run and cross-fade)."""
+        if apply_index is None:
+            apply_index = until - max(1, int(round(self.settings.guard.crossfade_s * self.fs)))
+        before = self._running
+        # a model's inverse that replaced another may be undone, a correction not; the
+        # rise of the error a load causes is flagged within a second (a few blocks)
+        if self._accepted_taps is not None:
+            self._undoable = []
+        elif before is not None and before is not self.compensator.current:
+            self._undoable = self._undoable[-2:] + [
+                _Load(apply_index, until, before, self._running_model)]
+        self._running_model = self.compensator.current_model
+        self.busy_from, self.busy_until = apply_index, until
         self._corrected_from = None if self._accepted_taps is None else until
         if self.compensator.current is not None:
             self._ran.append((until, self.compensator.current))
@@ -525,6 +622,24 @@ class ChannelAdapter:
             self._correct_until = 0   # a full model's inverse: the correction is over
         self._before = self._running
         self._running = self.compensator.current
+
+    def rolled_back(self, apply_index: int, until: int) -> None:
+        """The compensator that ran before the load of :attr:`undo` is sent again and
+        fades in from sample ``apply_index`` to ``until``: it is the running one again
+        (any load sent since is superseded), no load before it can be undone any more,
+        and the trigger goes on against the level it learnt before the rise
+        (:meth:`~ehss.live.detect.TrackingTrigger.rearm`), from ``until`` on."""
+        load = self.undo
+        assert load is not None
+        self.undo = None
+        self._undoable = []
+        self.compensator.current = load.design
+        self.compensator.current_model = load.model
+        self.busy_from, self.busy_until = apply_index, until
+        self._ran.append((until, load.design))
+        self._running, self._running_model, self._before = load.design, load.model, None
+        if self.trigger is not None:
+            self.trigger.rearm(until - self._n)
 
     def _end_follow(self) -> None:
         self._follow_until = None
@@ -602,6 +717,17 @@ class ChannelAdapter:
         self.compensator.record(verdict.decision, verdict.model)
         if verdict.model is not None:
             self.chosen = verdict.chosen
+
+
+@dataclass(frozen=True)
+class _Load:
+    """A load of a model's inverse that may be undone: it faded in from sample
+    ``apply_index`` to ``until``; ``design`` (with its ``model``) ran before it."""
+
+    apply_index: int
+    until: int
+    design: CompensatorDesign
+    model: ehss.ArmaxModel | None
 
 
 @dataclass(frozen=True)
@@ -728,9 +854,11 @@ class CompensationRecord:
     loads : list of dict
         Compensators sent to the target: ``t_s``, ``channel``, ``apply_index``,
         ``crossfade``, ``accepted`` (by the target), ``model`` (``"estimator"`` or
-        ``"tracker"``: whose model it inverts).
+        ``"tracker"``: whose model it inverts; ``"correction"``; ``"rollback"``: the
+        compensator that ran before a load that raised the error, sent again, with
+        that load's ``loaded_index`` and the rise, ``ratio``).
     events : list of dict
-        Alarms and clears.
+        Loads, refusals, alarms and clears, changes flagged and rollbacks.
     settings : dict
     """
 
@@ -872,8 +1000,6 @@ class AdaptiveLoop:
 
     def _apply(self, k: int, t_s: float, d: Decision) -> None:
         """Log a refusal, or send an accepted design to the target."""
-        from ehss.target.filter import Compensator
-
         ad = self.adapters[k]
         if not d.accepted or d.design is None:
             self._refused(k, t_s, d)
@@ -884,23 +1010,59 @@ class AdaptiveLoop:
             ad.alarm = False
             self._event({"kind": "clear", "channel": ad.name, "t_s": t_s})
         design = d.design
+        sent = self._send(k, t_s, design, not_before=ad.busy_until)
+        if sent is None:
+            return
+        ad.started(sent["apply_index"] + sent["crossfade"], sent["apply_index"])
+        load = {"kind": "compensator", "channel": ad.name, "t_s": t_s, **sent,
+                "model": ad.chosen, **d.figures, **design.errors()}
+        self.loads.append(load)
+        self._event(load)
+
+    def _send(self, k: int, t_s: float, design: CompensatorDesign, *, not_before: int = 0
+              ) -> dict | None:
+        """Send a design to the target, to run in shadow for its settling time and
+        cross-fade in (bumpless): its apply index, cross-fade and whether the target
+        took it (None, logged, if the target cannot run it). A target's filter takes a
+        load up once the cross-fade under way (to sample ``not_before``) is over,
+        replacing one still in shadow, and runs it in shadow from there."""
+        from ehss.target.filter import Compensator
+
         try:
             # the target's own checks (sizes, finite, every section stable)
             comp = Compensator(sos=design.sos, taps=design.taps, preview=design.preview,
                                fs_hz=design.fs_hz)
         except EhssError as exc:
-            self._event({"kind": "compensator_refused", "channel": ad.name, "t_s": t_s,
-                         "reason": f"the target cannot run it: {exc}"})
-            return
-        apply_index = self.target.index + _ahead(self.target) + design.settle_samples
+            self._event({"kind": "compensator_refused", "channel": self.adapters[k].name,
+                         "t_s": t_s, "reason": f"the target cannot run it: {exc}"})
+            return None
+        now = self.target.index + _ahead(self.target)
+        fading = self.adapters[k].busy_from <= now < not_before
+        apply_index = (not_before if fading else now) + design.settle_samples
         crossfade = max(1, int(round(self.settings.guard.crossfade_s * self.fs)))
         ok = self.target.load(k, comp, apply_index, crossfade)
-        ad.started(apply_index + crossfade)
-        load = {"kind": "compensator", "channel": ad.name, "t_s": t_s,
-                "apply_index": int(apply_index), "crossfade": crossfade,
-                "accepted": bool(ok), "model": ad.chosen, **d.figures, **design.errors()}
-        self.loads.append(load)
-        self._event(load)
+        return {"apply_index": int(apply_index), "crossfade": crossfade, "accepted": bool(ok)}
+
+    def _roll_back(self, k: int) -> None:
+        """Undo the load the trigger dated a rise of the error to: send the compensator
+        that ran before it again, as any load is sent; not a change of the loop (no
+        following, no correction) and no refusal (no alarm)."""
+        ad = self.adapters[k]
+        load = ad.undo
+        assert load is not None
+        t_s = self.target.index / self.fs
+        sent = self._send(k, t_s, load.design, not_before=ad.busy_until)
+        if sent is None:
+            ad.undo = None
+            return
+        ad.rolled_back(sent["apply_index"], sent["apply_index"] + sent["crossfade"])
+        rise = 1.0 if ad.trigger is None else ad.trigger.rise
+        event = {"kind": "compensator_rollback", "channel": ad.name, "t_s": t_s, **sent,
+                 "model": "rollback", "loaded_index": load.apply_index, "ratio": rise,
+                 "text": f"the compensator loaded at {load.apply_index / self.fs:.2f} s "
+                         f"raised the error {rise:.1f}×: the one before it is sent again"}
+        self.loads.append(event)
+        self._event(event)
 
     def run(self, *, block_s: float = 0.05, duration_s: float | None = None,
             speed: float = math.inf, stop: Any = None) -> CompensationRecord:
@@ -953,7 +1115,10 @@ class AdaptiveLoop:
             for k, ad in enumerate(self.adapters):
                 if ad.feed(block.drive[k], block.feedback[k], block.desired[k]):
                     self._event({"kind": "compensator_change", "channel": ad.name,
-                                 "t_s": self.target.index / self.fs})
+                                 "t_s": self.target.index / self.fs,
+                                 "at_load": ad.change_at_load})
+                if ad.undo is not None:
+                    self._roll_back(k)
             self._collect()
             t_s = self.target.index / self.fs
             turn = [k for k in range(len(next_update)) if t_s + 1e-12 >= next_update[k]]

@@ -552,8 +552,9 @@ class TrackingTrigger:
     at the run length that ``false_alarm_hours`` asks). A trigger restarts the
     learning: the next one can come ``learn_s + lag_s`` later at the earliest. A fall
     of the error (a better compensator) is not a change; a rise from a worse
-    compensator is flagged like a change of the loop, which only speeds the estimator
-    up.
+    compensator is flagged like a change of the loop, and dated (:attr:`onset_index`)
+    so that the caller can tell it by its time and undo it
+    (:meth:`rearm`: the test goes on against the level learnt before the rise).
 
     Parameters
     ----------
@@ -577,12 +578,46 @@ class TrackingTrigger:
         #: at the latest trigger, how long before it the change began (s), as near as
         #: the blocks tell (:data:`ONSET_Z`)
         self.onset_s = 0.0
+        #: at the latest trigger, the samples taken before the first block of the
+        #: change (:attr:`onset_s`)
+        self.onset_index = 0
+        #: at the latest trigger, the level of the error since the change, √(median
+        #: e²) of its blocks (geometric mean), over the learnt level
+        self.rise = 1.0
+        self._seen = 0
+        # what the latest trigger was tested against: the blocks before the change it
+        # flagged and their calibration (kept for rearm); while the blocks are too few
+        # again for a calibration of their own, the one held; no block starting before
+        # sample _hold_until is tested or learnt
+        self._kept: list[float] = []
+        self._flagged: Calibration | None = None
+        self._held: Calibration | None = None
+        self._hold_until = 0
 
     def restart(self) -> None:
         """Learn anew (the loop changed): the test waits ``learn_s`` of blocks."""
         self._x = []
         self._cusum = 0.0
         self._run = []
+        self._held = None
+
+    def rearm(self, hold: int) -> None:
+        """Test on as before the latest trigger, whose rise was not a change of the
+        loop and is being undone: against the blocks learnt before the change it
+        flagged (those since are forgotten) and their calibration, held until new
+        blocks make up the learning time again; the next ``hold`` samples (the undoing
+        fading in) are neither tested nor learnt. A change still there after them is
+        flagged within a few blocks (two for a rise of 7 standard deviations)."""
+        self._x = list(self._kept)
+        self._held = self._flagged
+        self._cusum = 0.0
+        self._run = []
+        self._hold_until = self._seen + max(0, int(hold))
+
+    @property
+    def held(self) -> bool:
+        """True while the test runs on a calibration held by :meth:`rearm`."""
+        return self._held is not None
 
     def __call__(self, error: np.ndarray) -> bool:
         """Take the next samples of the tracking error; True if a change is flagged
@@ -593,32 +628,54 @@ class TrackingTrigger:
             take = min(self._n_block - self._fill, error.size - i)
             self._buf[self._fill:self._fill + take] = error[i:i + take]
             self._fill += take
+            self._seen += take
             i += take
             if self._fill == self._n_block:
                 self._fill = 0
-                flagged |= self._block(block_statistic(self._buf))
+                if self._seen - self._n_block >= self._hold_until:
+                    flagged |= self._block(block_statistic(self._buf))
         return flagged
+
+    def _calibration(self) -> Calibration | None:
+        """What a block is tested against: the ``learn_s`` of blocks ``lag_s`` before
+        it (None while they are too few, unless a calibration is held)."""
+        if len(self._x) < self._n_learn + self._n_lag:
+            return self._held
+        self._held = None
+        try:
+            return calibrate(np.array(self._x[:self._n_learn]), arl_blocks=self._arl)
+        except ParameterError:  # blocks that do not vary: nothing to test against
+            return None
 
     def _block(self, x: float) -> bool:
         """Test one block's statistic against the blocks before it, then learn it."""
         if not math.isfinite(x):
             return False
+        cal = self._calibration()
+        if cal is not None and self._test(x, cal):
+            return True
         if len(self._x) >= self._n_learn + self._n_lag:
-            try:
-                cal = calibrate(np.array(self._x[:self._n_learn]), arl_blocks=self._arl)
-            except ParameterError:  # blocks that do not vary: nothing to test against
-                cal = None
-            if cal is not None:
-                # S_k = max(0, S_{k−1} + z_k − κ), alarm at S_k ≥ h
-                z = (x - cal.mean) / cal.sd
-                self._cusum = max(0.0, self._cusum + z - DRIFT)
-                # the z of the blocks since the sum last was zero
-                self._run = self._run + [z] if self._cusum > 0.0 else []
-                if self._cusum >= cal.threshold:
-                    self.triggers += 1
-                    self.onset_s = _onset_blocks(self._run) * self.settings.block_s
-                    self.restart()
-                    return True
             self._x.pop(0)
         self._x.append(x)
         return False
+
+    def _test(self, x: float, cal: Calibration) -> bool:
+        """One step of the CUSUM; True (dated, and the test restarted) at a trigger."""
+        # S_k = max(0, S_{k−1} + z_k − κ), alarm at S_k ≥ h
+        z = (x - cal.mean) / cal.sd
+        self._cusum = max(0.0, self._cusum + z - DRIFT)
+        # the z of the blocks since the sum last was zero
+        self._run = self._run + [z] if self._cusum > 0.0 else []
+        if self._cusum < cal.threshold:
+            return False
+        self.triggers += 1
+        n_onset = _onset_blocks(self._run)
+        self.onset_s = n_onset * self.settings.block_s
+        self.onset_index = self._seen - n_onset * self._n_block
+        # x = ln(median e²): half the mean excess of x is the log of the level's ratio
+        self.rise = math.exp(0.5 * cal.sd * float(np.mean(self._run[-n_onset:])))
+        # the blocks before the change (this one is not among them yet)
+        self._kept = self._x[:max(0, len(self._x) - (n_onset - 1))]
+        self._flagged = cal
+        self.restart()
+        return True
