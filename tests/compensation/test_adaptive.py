@@ -154,6 +154,26 @@ def test_a_near_miss_of_the_h1_agreement_is_not_a_fault(gain_db, fault):
     assert d.fault is fault
 
 
+def test_a_realisation_worse_than_no_compensation_is_refused():
+    # the realisation's own error |C/T - 1| is the compensated loop's if the model is
+    # right: beyond the H1 bounds but below |G - 1| it is loaded with a note, at or
+    # above it refused (the errors set here stand for a preview too short)
+    import dataclasses
+
+    m = _loop()
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    d = design_compensator(m, band_hz=BAND, preview=128, n_taps=256)
+    without = np.sqrt(np.mean(np.abs(m.frequency_response(d.freq_hz) - 1.0) ** 2))
+    figures: dict = {}
+    short = dataclasses.replace(d, error=np.full(d.error.shape, 0.5 * without))
+    assert comp._realisable(short, m, figures) is short
+    assert "128 samples ahead" in figures["realisation"]
+    worse = dataclasses.replace(d, error=np.full(d.error.shape, 1.01 * without))
+    with pytest.raises(ParameterError, match="without compensation"):
+        comp._realisable(worse, m, {})
+    assert comp._realisable(d, m, figures := {}) is d and not figures
+
+
 def test_updates_are_rate_limited():
     comp = AdaptiveCompensator(FS, BAND, guard=UpdateGuard(min_interval_s=1.0))
     m = _loop()

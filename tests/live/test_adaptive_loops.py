@@ -82,20 +82,23 @@ def test_adaptation_follows_a_change_of_another_loop(case: str) -> None:
     assert adapted.loads and all(load["accepted"] for load in adapted.loads)
 
 
-def test_a_preview_too_short_for_the_loop_at_its_rate_is_refused_and_said() -> None:
+def test_a_preview_too_short_for_the_loop_at_its_rate_is_said() -> None:
     # the servo's group delay at low frequencies is 2ζ/ω summed over its valve and its
     # mode, 2.8 + 5.1 = 7.9 ms: 16 samples at 2 kHz. A target that reads 16 samples
-    # ahead (8 ms) holds no more of its inverse than that delay; 128 (64 ms) hold it all
+    # ahead (8 ms) holds no more of its inverse than that delay: its compensators miss
+    # the H1 bounds (2.8 dB / 7°) but still track far better than none, so they are
+    # loaded, each saying how far ahead the target reads; 128 (64 ms) hold it all
     desired = loop_desired(SERVO, 5.0, (1,), band_hz=(1.0, 50.0))
     runs = {pv: AdaptiveLoop(SteppingLoop(SERVO, desired, preview=pv, seed=0),
-                             CompensationSettings()).run()
-            for pv in (16, 128)}
-    assert runs[128].loads and not runs[16].loads
-    reasons = [d["reason"] for d in runs[16].decisions["1"]]
-    assert any("16 samples ahead (8 ms at 2000 Hz)" in r for r in reasons)
-    assert not any("samples ahead" in d["reason"] for d in runs[128].decisions["1"])
-
-
+                             CompensationSettings(adapt_until_s=adapt)).run()
+            for pv, adapt in ((16, np.inf), (128, np.inf), (0, 0.0))}
+    none = runs[0].tracking_rms(3.0, 5.0)[0]
+    assert runs[16].loads and runs[128].loads and not runs[0].loads
+    assert all("16 samples ahead (8 ms at 2000 Hz)" in ld["realisation"]
+               for ld in runs[16].loads)
+    assert not any("realisation" in ld for ld in runs[128].loads)
+    # measured: 1384 µm without, 187 µm with 16 samples ahead, 11 µm with 128
+    assert runs[128].tracking_rms(3.0, 5.0)[0] < runs[16].tracking_rms(3.0, 5.0)[0] < none / 3
 
 
 def _change_at_a_load() -> tuple[dict, float, CompensationRecord]:

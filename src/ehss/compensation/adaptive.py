@@ -32,8 +32,9 @@ Two reference modes:
 (:class:`UpdateGuard`): the model must be stable, pass its band in phase at the low edge
 (a closed loop that tracks does), agree with the sliding H1 estimate over the band as
 :class:`ehss.workflow.Acceptance` asks (errors beyond the estimate's own standard error
-within 1 dB and 5°), be realised by the target's filter within the same bounds in
-preview mode (a preview too short for the loop at its rate is not), and give, for the
+within 1 dB and 5°), be realised by the target's filter well enough in preview mode that
+the loop tracks better with it than without (a preview far too short for the loop at
+its rate is not; one short enough to miss the H1 bounds is said so), and give, for the
 recent reference, a drive that the gain checks and the rig's limits of ``ehss compensate``
 accept (:func:`ehss.compensation.check_drive`), and fit the newest quarter-second of
 feedback (fresh data, the free-run fit that
@@ -955,34 +956,51 @@ class AdaptiveCompensator:
                             figures=figures, fault=gross)
         return self._checked_drive(t_s, lambda: self._realisable(design_compensator(
             model, band_hz=self.band_hz, mode=self.mode, preview=self.preview,
-            n_taps=self.n_taps, max_sections=self.max_sections)), r, figures)
+            n_taps=self.n_taps, max_sections=self.max_sections), model, figures), r, figures)
 
-    def _realisable(self, design: CompensatorDesign) -> CompensatorDesign:
-        """``design``, if in preview mode the target's filter realises the model's
-        inverse over the band within the bounds a model must meet against the H1
-        estimate (``acceptance.max_magnitude_db`` / ``max_phase_deg``).
+    def _realisable(self, design: CompensatorDesign, model: ArmaxModel,
+                    figures: dict[str, Any]) -> CompensatorDesign:
+        """``design``, unless in preview mode the target's filter realises the model's
+        inverse so poorly that the loop would track worse with it than without.
 
         The FIR's span and preview are samples, the loop's dynamics seconds: at a high
         rate a preview that suits a slower loop holds too little of the inverse (its
         delay's advance, the anti-causal tail of zeros outside the unit circle), and the
-        filter then runs something else than the inverse. The causal mode's FIR is a
-        prediction, whose error is the price of having no preview: not checked here.
+        filter then runs something else than the inverse. If the model is right, the
+        compensated loop's relative tracking error over the band is the realisation's
+        own, ``|C/T − 1|``, against ``|G − 1|`` without compensation: a design whose
+        RMS over the band is not below that is refused. One realised beyond the bounds
+        a model must meet against the H1 estimate (``acceptance.max_magnitude_db`` /
+        ``max_phase_deg``) but still better than none is loaded, and ``figures`` says
+        so (``"realisation"``: how far ahead the target reads, and to give it more).
+        The causal mode's FIR is a prediction, whose error is the price of having no
+        preview: not checked here.
 
         Raises
         ------
         ParameterError
-            The realisation misses the bounds.
+            The realisation would leave more error than no compensation.
         """
         acc = self.guard.acceptance
         mag, ph = design.max_amplitude_error_db, design.max_phase_error_deg
-        if design.mode == "preview" and (mag > acc.max_magnitude_db or ph > acc.max_phase_deg):
+        if design.mode != "preview" or (mag <= acc.max_magnitude_db
+                                        and ph <= acc.max_phase_deg):
+            return design
+        ahead = (f"its {design.taps.size} taps read {design.preview} samples ahead "
+                 f"({1e3 * design.preview / design.fs_hz:.3g} ms at {design.fs_hz:g} Hz)")
+        left = float(np.sqrt(np.mean(np.abs(design.error) ** 2)))
+        g = model.frequency_response(design.freq_hz)
+        without = float(np.sqrt(np.mean(np.abs(g - 1.0) ** 2)))
+        if left >= without:
             raise ParameterError(
                 f"the target's filter realises the model's inverse only to {mag:.2f} dB / "
-                f"{ph:.1f}° over the band (bounds {acc.max_magnitude_db:g} dB / "
-                f"{acc.max_phase_deg:g}°): its {design.taps.size} taps read "
-                f"{design.preview} samples ahead ({1e3 * design.preview / design.fs_hz:.3g}"
-                f" ms at {design.fs_hz:g} Hz), too few for this loop's inverse; give the "
-                "target more preview or narrow the band")
+                f"{ph:.1f}° over the band, which would leave {left:.0%} of the reference "
+                f"against {without:.0%} without compensation: {ahead}, too few for this "
+                "loop's inverse; give the target more preview or narrow the band")
+        figures["realisation"] = (
+            f"realised to {mag:.2f} dB / {ph:.1f}° over the band (bounds "
+            f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°): {ahead}; more "
+            "preview would track better")
         return design
 
     def _checked_drive(self, t_s: float, design_of: Callable[[], CompensatorDesign],
