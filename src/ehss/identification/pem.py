@@ -53,6 +53,7 @@ Safeguards:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, Unpack
 
@@ -60,13 +61,15 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from ehss.errors import IdentificationError
+from ehss._checks import check_int
+from ehss.errors import DataError, IdentificationError, ParameterError
 from ehss.identification import _pem_kernels as _pk
 from ehss.identification._common import (
     ArmaxOrders,
     OrderKeywords,
     check_batch,
     check_theta0,
+    first_sample,
     regression_matrix,
     rms_scale,
     root_radius,
@@ -177,21 +180,20 @@ class _Predictor:
         n = row.size - 1
         return _pk.columns(self._signals_at(theta), row[:n], lag[:n], sign[:n], self.k0)
 
+    def gram(self, theta: np.ndarray) -> np.ndarray:
+        """[J ε]ᵀ[J ε] at θ (:func:`._pem_kernels.gram`)."""
+        row, lag, sign = self.layout
+        return _pk.gram(self._signals_at(theta), row, lag, sign, self.k0)
+
+    def stacked(self, theta: np.ndarray) -> np.ndarray:
+        """[J ε] at θ."""
+        return np.column_stack([self.jacobian(theta), self.residual(theta)])
+
     def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """([q; ρ], [R; 0]) at θ (:func:`._pem_kernels.reduce_gram`, or a QR of [J ε]
-        when J is too ill-conditioned for JᵀJ)."""
-        sig = self._signals_at(theta)
+        """([q; ρ], [R; 0]) at θ (:func:`_reduced`)."""
+        self._signals_at(theta)
         if self._reduced is None:
-            row, lag, sign = self.layout
-            G = _pk.gram(sig, row, lag, sign, self.k0)
-            r, Jr = _pk.reduce_gram(G, _COND_GRAM)
-            if r.size == 0:
-                n = G.shape[0] - 1
-                A = np.column_stack([self.jacobian(theta), self.residual(theta)])
-                Rq: np.ndarray = np.linalg.qr(A, mode="r")  # type: ignore[assignment]
-                r = np.append(Rq[:n, n], abs(Rq[n, n]))
-                Jr = np.vstack([Rq[:n, :n], np.zeros((1, n))])
-            self._reduced = (r, Jr)
+            self._reduced = _reduced(self.gram(theta), lambda: self.stacked(theta))
         return self._reduced
 
     def _reduced_residual(self, theta: np.ndarray) -> np.ndarray:
@@ -207,6 +209,69 @@ class _Predictor:
     def fit(self, x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
         """Levenberg–Marquardt from ``x0`` on the reduced problem: (θ, cost, nfev)."""
         return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
+
+
+class _Joint:
+    """Records of one model fitted together, each record's errors times its weight.
+
+    Each record runs from rest at its own start (:class:`_Predictor`); the joint
+    problem's [J ε]ᵀ[J ε] is the sum of theirs times the squared weights, reduced as
+    one record's is (:func:`_reduced`). A record that on its own determines only some
+    directions of θ (a band-limited drive) is then well conditioned with a record
+    that determines the others.
+    """
+
+    def __init__(self, problems: list[_Predictor], weights: list[float]) -> None:
+        self.problems, self.weights = problems, weights
+        self._theta: np.ndarray | None = None
+        self._reduced: tuple[np.ndarray, np.ndarray] | None = None
+
+    def residual(self, theta: np.ndarray) -> np.ndarray:
+        return np.concatenate([w * p.residual(theta)
+                               for p, w in zip(self.problems, self.weights, strict=True)])
+
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        return np.vstack([w * p.jacobian(theta)
+                          for p, w in zip(self.problems, self.weights, strict=True)])
+
+    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._theta is None or not np.array_equal(theta, self._theta):
+            pairs = list(zip(self.problems, self.weights, strict=True))
+            G = np.sum([w * w * p.gram(theta) for p, w in pairs], axis=0)
+            self._reduced = _reduced(G, lambda: np.vstack([w * p.stacked(theta)
+                                                           for p, w in pairs]))
+            self._theta = np.array(theta, dtype=float)
+        assert self._reduced is not None
+        return self._reduced
+
+    def _reduced_residual(self, theta: np.ndarray) -> np.ndarray:
+        main = self.problems[0]
+        if not _inside(main._guard(theta), main.radius):
+            out = np.zeros(theta.size + 1)
+            out[-1] = _BARRIER * np.sqrt(sum(p.ys.size - p.k0 for p in self.problems))
+            return out
+        return self._reduce(theta)[0]
+
+    def _reduced_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        return self._reduce(theta)[1]
+
+    def fit(self, x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
+        """Levenberg–Marquardt from ``x0`` on the joint reduced problem."""
+        return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
+
+
+def _reduced(G: np.ndarray, stacked: Callable[[], np.ndarray]
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """([q; ρ], [R; 0]) of a least-squares problem from its G = [J ε]ᵀ[J ε]
+    (:func:`._pem_kernels.reduce_gram`), or from a QR of [J ε] (``stacked()``) when J is
+    too ill-conditioned for JᵀJ."""
+    r, Jr = _pk.reduce_gram(G, _COND_GRAM)
+    if r.size == 0:
+        n = G.shape[0] - 1
+        Rq: np.ndarray = np.linalg.qr(stacked(), mode="r")  # type: ignore[assignment]
+        r = np.append(Rq[:n, n], abs(Rq[n, n]))
+        Jr = np.vstack([Rq[:n, :n], np.zeros((1, n))])
+    return r, Jr
 
 
 # ------------------------------------------------------------------------------ ARMAX
@@ -348,7 +413,9 @@ def _armax_starts(us: np.ndarray, ys: np.ndarray, na: int, nb: int, nc: int, del
         starts["els"] = els
     starts["arx"] = arx
     if nc >= na:
-        oe = _oe_fit(us, ys, na, nb, delay, radius, max_nfev, tol)[0]
+        oe = _oe_fit(us, ys, na, nb, delay, radius, max_nfev, tol,
+                     _oe_starts(us, ys, na, nb, delay, radius),
+                     first_sample(na, nb, 0, delay))[0]
         starts["oe"] = np.concatenate([oe, oe[:na], np.zeros(nc - na)])
     return starts, k0
 
@@ -408,15 +475,38 @@ def _steiglitz_mcbride(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: 
     return theta
 
 
-def _oe_fit(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: int, radius: float,
-            max_nfev: int, tol: float) -> tuple[np.ndarray, str, dict[str, float], int, int]:
-    """OE PEM on scaled data from the ARX and Steiglitz–McBride starts; best wins."""
-    phi, t, k0 = regression_matrix(us, ys, None, nf, nb, 0, delay)
+def _oe_starts(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: int,
+               radius: float) -> dict[str, np.ndarray]:
+    """The ARX fit and the Steiglitz–McBride iterations from it, on scaled data."""
+    phi, t, _ = regression_matrix(us, ys, None, nf, nb, 0, delay)
     arx = np.linalg.lstsq(phi, t, rcond=None)[0]
     arx[:nf] = stabilise(arx[:nf], 0.95 * radius)
-    starts = {"arx": arx, "steiglitz_mcbride": _steiglitz_mcbride(us, ys, nf, nb, delay,
-                                                                   arx.copy(), radius)}
-    problem = _Predictor(us, ys, nf, nb, 0, delay, k0, radius, oe=True)
+    return {"arx": arx, "steiglitz_mcbride": _steiglitz_mcbride(us, ys, nf, nb, delay,
+                                                                 arx.copy(), radius)}
+
+
+def _oe_problem(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: int, radius: float,
+                k0: int, records: list[tuple[np.ndarray, np.ndarray, float]]
+                ) -> _Predictor | _Joint:
+    """The OE problem of a scaled record, its loss counted from sample ``k0``, joined
+    with further scaled ``records`` (u, y, weight), each counted from its first sample
+    that has a full regressor."""
+    main = _Predictor(us, ys, nf, nb, 0, delay, k0, radius, oe=True)
+    if not records:
+        return main
+    first = first_sample(nf, nb, 0, delay)
+    return _Joint([main] + [_Predictor(u, y, nf, nb, 0, delay, first, radius, oe=True)
+                            for u, y, _ in records],
+                  [1.0] + [w for _, _, w in records])
+
+
+def _oe_fit(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: int, radius: float,
+            max_nfev: int, tol: float, starts: dict[str, np.ndarray], k0: int,
+            records: list[tuple[np.ndarray, np.ndarray, float]] | None = None
+            ) -> tuple[np.ndarray, str, dict[str, float], int, int]:
+    """OE PEM on scaled data from each start, the loss counted from sample ``k0`` (and
+    on further weighted ``records``); the lowest loss wins."""
+    problem = _oe_problem(us, ys, nf, nb, delay, radius, k0, records or [])
     best = None
     losses = {}
     nfev_total = 0
@@ -442,6 +532,9 @@ def oe_pem(
     radius: float = 0.9999,
     max_nfev: int = 200,
     tol: float = 1e-10,
+    theta0: Any = None,
+    first: int = 0,
+    records: Any = (),
 ) -> ArmaxModel:
     """Output-error model y = q^-d B/F u + e by prediction-error minimisation.
 
@@ -460,6 +553,20 @@ def oe_pem(
         the model is always stable.
     max_nfev, tol
         As in :func:`armax_pem`.
+    theta0 : array_like, optional
+        A start [f1..f_nf, b0..b_nb] in physical units (e.g. a recursive estimate to
+        refine): then the only start, instead of the ARX fit and the Steiglitz–McBride
+        iterations. Its F is stabilised first, as every start's is.
+    first : int
+        The first sample whose error counts in the loss. The model runs from rest at
+        the first sample of the record, so that a record cut out of a running test
+        (whose output is not at rest there) can leave the model's start-up out of the
+        fit; the samples before ``first`` still set its state.
+    records : sequence of (u, y, weight)
+        Further records of the same system, fitted together with ``u, y`` (several
+        experiments, or a prior model's response to a probe that says what the data do
+        not): each runs from rest at its own start, and its errors enter the loss
+        times ``weight`` (> 0).
 
     Returns
     -------
@@ -487,11 +594,31 @@ def oe_pem(
     nf, nb, delay, dt = o.na, o.nb, o.delay, o.dt
     su, sy = rms_scale(u), rms_scale(y)
     us, ys = u / su, y / sy
-    theta, name, losses, nfev_total, k0 = _oe_fit(us, ys, nf, nb, delay, radius, max_nfev, tol)
-    problem = _Predictor(us, ys, nf, nb, 0, delay, k0, radius, oe=True)
-    nv_s, cov_s = _covariance(problem.jacobian(theta), problem.residual(theta), theta.size)
-    dvec = np.ones(theta.size)
+    dvec = np.ones(nf + nb + 1)
     dvec[nf:] = sy / su
+    k0 = max(first_sample(nf, nb, 0, delay), check_int(first, "first", lo=0))
+    if y.size - k0 <= dvec.size:
+        raise DataError(f"first={first}: {y.size - k0} samples left in the loss for "
+                        f"{dvec.size} parameters")
+    if theta0 is None:
+        starts = _oe_starts(us, ys, nf, nb, delay, radius)
+    else:
+        start = check_theta0(theta0, dvec.size) / dvec
+        start[:nf] = stabilise(start[:nf], 0.95 * radius)
+        starts = {"given": start}
+    more = [(ur / su, yr / sy, w) for ur, yr, w in _check_records(records, o)]
+    theta, name, losses, nfev_total, k0 = _oe_fit(us, ys, nf, nb, delay, radius, max_nfev,
+                                                  tol, starts, k0, more)
+    problem = _oe_problem(us, ys, nf, nb, delay, radius, k0, more)
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            nv_s, cov_s = _covariance(problem.jacobian(theta), problem.residual(theta),
+                                      theta.size)
+    except np.linalg.LinAlgError:
+        nv_s, cov_s = math.nan, np.full((theta.size, theta.size), math.nan)
+    if not (np.isfinite(nv_s) and np.all(np.isfinite(cov_s))):
+        raise IdentificationError("output-error minimisation diverged (its Jacobian "
+                                  "overflows at the estimate)")
     theta = theta * dvec
     cov_s = cov_s * np.outer(dvec, dvec)
     # θ of the ARMAX form is [f, b, f]: M maps [f, b] onto it, cov = M cov Mᵀ
@@ -508,6 +635,22 @@ def oe_pem(
         "y_scale": sy,
     }
     return _finish(full, M @ cov_s @ M.T, nv_s * sy * sy, nf, nb, nf, delay, dt, meta, k0)
+
+
+def _check_records(records: Any, o: ArmaxOrders) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Further records (u, y, weight), each checked as the main one, weight > 0."""
+    out = []
+    for k, record in enumerate(records):
+        try:
+            u, y, weight = record
+        except (TypeError, ValueError):
+            raise ParameterError(f"records[{k}] must be (u, y, weight)") from None
+        u, y = check_batch(u, y, o)
+        w = float(weight)
+        if not (math.isfinite(w) and w > 0.0):
+            raise ParameterError(f"records[{k}]: weight={weight!r} must be finite and > 0")
+        out.append((u, y, w))
+    return out
 
 
 # ------------------------------------------------------------------------------ shared
