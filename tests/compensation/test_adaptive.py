@@ -174,6 +174,37 @@ def test_a_realisation_worse_than_no_compensation_is_refused():
     assert comp._realisable(d, m, figures := {}) is d and not figures
 
 
+def test_a_realisation_worse_than_the_running_compensator_is_kept_out():
+    # beyond the H1 bounds and better than no compensation, but by the same model's
+    # account the compensator that runs leaves less: refused, and not a fault
+    import dataclasses
+
+    from ehss.compensation.adaptive import KeptRunning
+
+    m = _loop()
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    d = design_compensator(m, band_hz=BAND, preview=128, n_taps=256)
+    without = np.sqrt(np.mean(np.abs(m.frequency_response(d.freq_hz) - 1.0) ** 2))
+    running = np.sqrt(np.mean(np.abs(m.frequency_response(d.freq_hz)
+                                     * d.frequency_response(d.freq_hz) - 1.0) ** 2))
+    assert running < 0.01 * without   # the running one is this model's own inverse
+    poor = dataclasses.replace(d, error=np.full(d.error.shape, 0.2 * without))  # 1.7 dB
+    with pytest.raises(KeptRunning, match="with the compensator that runs"):
+        comp._realisable(poor, m, {}, running=d)
+    # loaded with a note when what runs is worse (none, here: the reference itself)
+    none = design_compensator(ArmaxModel(a=[1.0], b=[1.0], delay=0, dt=m.dt),
+                              band_hz=BAND, preview=128, n_taps=256)
+    figures: dict = {}
+    assert comp._realisable(poor, m, figures, running=none) is poor
+    assert "realisation" in figures
+    # as a decision: refused, and no fault (no alarm counts it)
+    r, h1 = _h1(m)
+    comp.current = d
+    decision = comp._checked_drive(1.0, lambda: comp._realisable(poor, m, {}, running=d),
+                                   r, {})
+    assert not decision.accepted and decision.fault is False
+
+
 def test_updates_are_rate_limited():
     comp = AdaptiveCompensator(FS, BAND, guard=UpdateGuard(min_interval_s=1.0))
     m = _loop()

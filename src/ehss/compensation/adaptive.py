@@ -745,6 +745,11 @@ def _polarity_fault(model: ArmaxModel, band: tuple[float, float]) -> str:
     return ""
 
 
+class KeptRunning(ParameterError):
+    """A design that, by its own model's account, would track worse than the
+    compensator that runs: refused, and not a fault of the loop."""
+
+
 @dataclass(frozen=True)
 class Decision:
     """What :meth:`AdaptiveCompensator.propose` decided.
@@ -860,10 +865,14 @@ class AdaptiveCompensator:
         return decision
 
     def assess(self, t_s: float, model: ArmaxModel, h1: Any, reference: np.ndarray,
-               window: tuple[np.ndarray, np.ndarray] | None = None) -> Decision:
+               window: tuple[np.ndarray, np.ndarray] | None = None, *,
+               running: CompensatorDesign | None = None) -> Decision:
         """The decision of :meth:`propose`, without recording it: changes nothing, so
-        it may run on another thread or process than the one that records it."""
-        decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float))
+        it may run on another thread or process than the one that records it.
+        ``running``: the compensator the target runs (default :attr:`current`), which
+        a design realised beyond the bounds must beat (:meth:`_realisable`)."""
+        running = self.current if running is None else running
+        decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float), running)
         if decision.accepted and window is not None:
             decision = self._judge_fit(decision, model, *window)
         return decision
@@ -926,7 +935,8 @@ class AdaptiveCompensator:
                             figures=figures)
         return Decision(decision.t_s, True, "", decision.design, figures)
 
-    def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray) -> Decision:
+    def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray,
+               running: CompensatorDesign | None = None) -> Decision:
         g = self.guard
         if not model.is_stable():
             radius = float(np.max(np.abs(np.roots(model.a))))
@@ -956,12 +966,15 @@ class AdaptiveCompensator:
                             figures=figures, fault=gross)
         return self._checked_drive(t_s, lambda: self._realisable(design_compensator(
             model, band_hz=self.band_hz, mode=self.mode, preview=self.preview,
-            n_taps=self.n_taps, max_sections=self.max_sections), model, figures), r, figures)
+            n_taps=self.n_taps, max_sections=self.max_sections), model, figures, running),
+            r, figures)
 
     def _realisable(self, design: CompensatorDesign, model: ArmaxModel,
-                    figures: dict[str, Any]) -> CompensatorDesign:
+                    figures: dict[str, Any], running: CompensatorDesign | None = None
+                    ) -> CompensatorDesign:
         """``design``, unless in preview mode the target's filter realises the model's
-        inverse so poorly that the loop would track worse with it than without.
+        inverse so poorly that the loop would track worse with it than without, or
+        than with the compensator that runs.
 
         The FIR's span and preview are samples, the loop's dynamics seconds: at a high
         rate a preview that suits a slower loop holds too little of the inverse (its
@@ -972,7 +985,10 @@ class AdaptiveCompensator:
         RMS over the band is not below that is refused. One realised beyond the bounds
         a model must meet against the H1 estimate (``acceptance.max_magnitude_db`` /
         ``max_phase_deg``) but still better than none is loaded, and ``figures`` says
-        so (``"realisation"``: how far ahead the target reads, and to give it more).
+        so (``"realisation"``: how far ahead the target reads, and to give it more),
+        unless by the same model's account the compensator that runs (``running``)
+        leaves less, ``|G C_run − 1|``: a model whose inverse the filter cannot follow
+        (a sharp feature at the band's edge) does not replace one that it follows.
         The causal mode's FIR is a prediction, whose error is the price of having no
         preview: not checked here.
 
@@ -980,6 +996,8 @@ class AdaptiveCompensator:
         ------
         ParameterError
             The realisation would leave more error than no compensation.
+        KeptRunning
+            It would leave more than the compensator that runs.
         """
         acc = self.guard.acceptance
         mag, ph = design.max_amplitude_error_db, design.max_phase_error_deg
@@ -997,6 +1015,14 @@ class AdaptiveCompensator:
                 f"{ph:.1f}° over the band, which would leave {left:.0%} of the reference "
                 f"against {without:.0%} without compensation: {ahead}, too few for this "
                 "loop's inverse; give the target more preview or narrow the band")
+        if running is not None and running.mode == design.mode:
+            kept = float(np.sqrt(np.mean(np.abs(
+                g * running.frequency_response(design.freq_hz) - 1.0) ** 2)))
+            if left >= kept:
+                raise KeptRunning(
+                    f"the target's filter realises the model's inverse only to {mag:.2f} "
+                    f"dB / {ph:.1f}° over the band, which would leave {left:.1%} of the "
+                    f"reference against {kept:.1%} with the compensator that runs")
         figures["realisation"] = (
             f"realised to {mag:.2f} dB / {ph:.1f}° over the band (bounds "
             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°): {ahead}; more "
@@ -1014,6 +1040,8 @@ class AdaptiveCompensator:
             skip = min(design.settle_samples, r.size // 2)
             check = check_drive(drive[skip:], r[skip:], self.fs_hz, max_gain=g.max_gain,
                                 limits=g.limits, loop=self.loop, params=self.params)
+        except KeptRunning as exc:
+            return Decision(t_s, False, str(exc), figures=figures, fault=False)
         except EhssError as exc:
             return Decision(t_s, False, str(exc), figures=figures)
         figures.update(rms_gain=check.rms_gain, peak_gain=check.peak_gain)
