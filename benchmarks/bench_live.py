@@ -24,9 +24,14 @@ arrival to the end of its work. Runs with judgements on the stream's thread, on 
 worker thread and in a worker process, each with the second estimator (the tracker)
 and without it, in the same process.
 
+``--refit``: the wall time of each judgement of adaptive compensation (2 channels of the
+rig at 1, 2 and 5 kHz, judged on the stream's thread) with the models refitted to their
+output errors and without, in the same process.
+
 Usage::
 
     python benchmarks/bench_live.py [--duration 10] [--repeat 3] [--adaptive [--block 0.005]]
+    python benchmarks/bench_live.py --refit [--duration 10] [--repeat 1]
 """
 
 from __future__ import annotations
@@ -191,6 +196,55 @@ def main_adaptive(args) -> None:
                       f"{r['tracking_um']:.1f} |", flush=True)
 
 
+def judgement_times(fs: float, refine: bool, duration: float) -> np.ndarray:
+    """Wall time of every judgement (s) of a 2-channel adaptive loop on the rig at ``fs``,
+    judged on the stream's thread, with or without the models refitted."""
+    import ehss
+    from ehss.live import compensate
+    from ehss.live.rig import SteppingRig
+
+    band = (0.5, 20.0)
+    desired = np.vstack([
+        ehss.signals.band_limited_random(band_hz=band, rms=5e-4, duration_s=duration,
+                                         fs=fs, seed=seed, fade_s=0.2).values
+        for seed in (1, 2)])
+    times: list[float] = []
+    judge = compensate.Judging.__call__
+
+    def timed(self, t_s, snap):
+        t0 = time.perf_counter()
+        out = judge(self, t_s, snap)
+        times.append(time.perf_counter() - t0)
+        return out
+
+    compensate.Judging.__call__ = timed
+    try:
+        rig = SteppingRig("position", desired, fs=fs, preview=128, seed=0)
+        settings = compensate.CompensationSettings(band_hz=band, judge_in="stream",
+                                                   refine=refine)
+        compensate.AdaptiveLoop(rig, settings, loop="position",
+                                params=ehss.preset("default")).run()
+    finally:
+        compensate.Judging.__call__ = judge
+    return np.array(times[2:])   # the first ones warm the caches
+
+
+def main_refit(args) -> None:
+    print(f"Judgements with and without the models refitted, 2 channels, {args.duration:g} s "
+          f"of the rig, {args.repeat} runs each (median and 90th percentile of all)\n")
+    print("| rate | without: p50 / p90 (ms) | refitted: p50 / p90 (ms) | refitted / without "
+          "(p50) |")
+    print("|---:|---:|---:|---:|")
+    for fs in (1000.0, 2000.0, 5000.0):
+        t = {r: np.concatenate([judgement_times(fs, r, args.duration)
+                                for _ in range(args.repeat)]) for r in (False, True)}
+        p = {r: (1e3 * np.percentile(v, 50), 1e3 * np.percentile(v, 90))
+             for r, v in t.items()}
+        print(f"| {fs / 1e3:g} kHz | {p[False][0]:.1f} / {p[False][1]:.1f} | "
+              f"{p[True][0]:.1f} / {p[True][1]:.1f} | {p[True][0] / p[False][0]:.2f} |",
+              flush=True)
+
+
 def _feed_time(kind: str, order: tuple, method: str, u: np.ndarray, y: np.ndarray,
                block: int, fs: float) -> float:
     """Wall time to feed every channel's samples block by block and read every θ̂."""
@@ -249,8 +303,14 @@ def main() -> None:
                     help="adaptive compensation in process instead of the UDP receiver")
     ap.add_argument("--bank", action="store_true",
                     help="feeding 8 channels: RelsEstimator each against one RelsBank")
+    ap.add_argument("--refit", action="store_true",
+                    help="adaptive compensation's judgements with and without the refit")
     args = ap.parse_args()
     sys.path.insert(0, SRC)
+    if args.refit:
+        main_refit(args)
+        _machine(args)
+        return
     if args.bank:
         main_bank(args)
         _machine(args)
@@ -284,7 +344,8 @@ def _machine(args) -> None:
     print(f"\n- Machine: {os.cpu_count()} cores, {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}; load average during the runs "
           f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1/5/15 min).")
-    mode = " --adaptive" if args.adaptive else " --bank" if getattr(args, "bank", False) else ""
+    mode = " --adaptive" if args.adaptive else " --bank" if getattr(args, "bank", False) \
+        else " --refit" if getattr(args, "refit", False) else ""
     print(f"- Command: `python benchmarks/bench_live.py --duration {args.duration:g} "
           f"--repeat {args.repeat}{mode}`")
 
