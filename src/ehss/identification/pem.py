@@ -121,7 +121,35 @@ def _covariance(J: np.ndarray, eps: np.ndarray, n_free: int) -> tuple[float, np.
 _COND_GRAM = 1e5
 
 
-class _Predictor:
+class _Reduced:
+    """Levenberg–Marquardt on a least-squares problem given as its reduction to n + 1
+    rows (``_reduce``), with a barrier where θ is not ``feasible``."""
+
+    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def feasible(self, theta: np.ndarray) -> bool:
+        raise NotImplementedError
+
+    def n_rows(self) -> int:
+        raise NotImplementedError
+
+    def _reduced_residual(self, theta: np.ndarray) -> np.ndarray:
+        if not self.feasible(theta):
+            out = np.zeros(theta.size + 1)
+            out[-1] = _BARRIER * np.sqrt(self.n_rows())
+            return out
+        return self._reduce(theta)[0]
+
+    def _reduced_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        return self._reduce(theta)[1]
+
+    def fit(self, x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
+        """Levenberg–Marquardt from ``x0`` on the reduced problem: (θ, cost, nfev)."""
+        return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
+
+
+class _Predictor(_Reduced):
     """Residuals ε(k ≥ k0) and Jacobian of one model structure on one scaled record.
 
     The columns of the Jacobian J and the residual ε are delayed copies of a few
@@ -196,22 +224,14 @@ class _Predictor:
             self._reduced = _reduced(self.gram(theta), lambda: self.stacked(theta))
         return self._reduced
 
-    def _reduced_residual(self, theta: np.ndarray) -> np.ndarray:
-        if not _inside(self._guard(theta), self.radius):
-            out = np.zeros(theta.size + 1)
-            out[-1] = _BARRIER * np.sqrt(self.ys.size - self.k0)
-            return out
-        return self._reduce(theta)[0]
+    def feasible(self, theta: np.ndarray) -> bool:
+        return _inside(self._guard(theta), self.radius)
 
-    def _reduced_jacobian(self, theta: np.ndarray) -> np.ndarray:
-        return self._reduce(theta)[1]
-
-    def fit(self, x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
-        """Levenberg–Marquardt from ``x0`` on the reduced problem: (θ, cost, nfev)."""
-        return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
+    def n_rows(self) -> int:
+        return self.ys.size - self.k0
 
 
-class _Joint:
+class _Joint(_Reduced):
     """Records of one model fitted together, each record's errors times its weight.
 
     Each record runs from rest at its own start (:class:`_Predictor`); the joint
@@ -244,20 +264,11 @@ class _Joint:
         assert self._reduced is not None
         return self._reduced
 
-    def _reduced_residual(self, theta: np.ndarray) -> np.ndarray:
-        main = self.problems[0]
-        if not _inside(main._guard(theta), main.radius):
-            out = np.zeros(theta.size + 1)
-            out[-1] = _BARRIER * np.sqrt(sum(p.ys.size - p.k0 for p in self.problems))
-            return out
-        return self._reduce(theta)[0]
+    def feasible(self, theta: np.ndarray) -> bool:
+        return self.problems[0].feasible(theta)
 
-    def _reduced_jacobian(self, theta: np.ndarray) -> np.ndarray:
-        return self._reduce(theta)[1]
-
-    def fit(self, x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
-        """Levenberg–Marquardt from ``x0`` on the joint reduced problem."""
-        return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
+    def n_rows(self) -> int:
+        return sum(p.n_rows() for p in self.problems)
 
 
 def _reduced(G: np.ndarray, stacked: Callable[[], np.ndarray]
