@@ -87,8 +87,8 @@ REFINE_SAMPLES = 2
 REFINE_EVALUATIONS = 15
 #: Channels × sample rate (samples a second) up to which :class:`AdaptiveLoop` refits
 #: the models by default (``CompensationSettings.refine`` None). A refit's cost grows
-#: with the rows of its window: 6 ms a judgement at 1 kHz, 26 ms (up to 100) at 5 kHz
-#: on the machine of BENCHMARKS.md, every ``update_s`` per channel. Up to 16 000
+#: with the rows of its window: 7 ms a judgement at 1 kHz, 20 ms at 5 kHz on the
+#: machine of BENCHMARKS.md, every ``update_s`` per channel. Up to 16 000
 #: channel-samples a second (3 channels at 5 kHz, 8 at 2 kHz) that leaves the worker
 #: most of a core; 8 channels at 5 kHz would need more than one.
 REFINE_LOAD = 16_000.0
@@ -259,10 +259,10 @@ class CompensationSettings:
         windows (:meth:`Judging.refine`): the output error of a model on the drive is
         the tracking error its inverse will leave, which the recursive estimator does
         not minimise. On the simulated rig it lowered the steady tracking error by
-        5–18 % (15–30 % at the heavier payload), and on the 25 Hz servo it brought the
+        11–13 % (18–31 % at the heavier payload), and on the 25 Hz servo it brought the
         error back to its level 2 s after +40 % mass (1.0–1.1× over [22, 24) s against
-        1.8–3.1×; README, "Adaptive compensation"). It costs 3–20 ms a judgement (1 to
-        5 kHz). None: on while channels × fs ≤ :data:`REFINE_LOAD`.
+        1.7–3.1×; README, "Adaptive compensation"). It adds 7–20 ms to a judgement (1 to
+        5 kHz; BENCHMARKS.md). None: on while channels × fs ≤ :data:`REFINE_LOAD`.
     judge_in : {"process", "thread", "stream"}
         Where judgements run: a worker process, a worker thread or the stream's own
         thread. A judgement (the model's checks, the H1 estimate, the inverse's design:
