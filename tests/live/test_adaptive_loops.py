@@ -156,3 +156,19 @@ def test_a_change_taken_for_a_load_is_still_followed(monkeypatch: pytest.MonkeyP
     assert len(rollbacks) == 1 and rollbacks[0]["loaded_index"] == load["apply_index"]
     change = _followed(rec, change_s, 1.5)
     assert change["t_s"] > (rollbacks[0]["apply_index"] + rollbacks[0]["crossfade"]) / SERVO.fs
+
+
+def test_the_refit_follows_the_stream_it_is_for() -> None:
+    # by default the models are refitted while channels x rate leaves the worker its
+    # share of a core (REFINE_LOAD); a setting given stays; the record says which
+    from ehss.live.compensate import REFINE_LOAD
+
+    auto = CompensationSettings()
+    assert auto.refine is None
+    assert auto.for_stream(2, 1000.0).refine is True
+    assert auto.for_stream(8, 5000.0).refine is False
+    assert auto.for_stream(1, REFINE_LOAD).refine is True
+    assert auto.for_stream(1, REFINE_LOAD + 1.0).refine is False
+    forced = CompensationSettings(refine=True)
+    assert forced.for_stream(8, 5000.0) is forced
+    assert auto.for_stream(8, 5000.0).to_dict()["refine"] is False

@@ -206,7 +206,8 @@ def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, 
     from ehss.live.rig import SteppingRig
     from ehss.live.session import LiveSession
 
-    settings = CompensationSettings(mode=args.compensate, band_hz=band)
+    settings = CompensationSettings(mode=args.compensate, band_hz=band).for_stream(
+        len(target.channels), float(target.fs))
     est, det = estimation_settings(args)
     counters = getattr(getattr(target, "source", None), "counters", None)
     source = _HandedSource(tuple(target.channels), target.fs, counters)

@@ -325,6 +325,14 @@ class CompensationSettings:
         if self.load_sigmas is not None:
             check_real(self.load_sigmas, "load_sigmas")
 
+    def for_stream(self, n_channels: int, fs: float) -> CompensationSettings:
+        """These settings for a stream of ``n_channels`` at ``fs``: ``refine`` None
+        becomes whether channels × fs ≤ :data:`REFINE_LOAD` (what the worker's share of
+        a core allows)."""
+        if self.refine is not None:
+            return self
+        return dataclasses.replace(self, refine=n_channels * fs <= REFINE_LOAD)
+
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
                 "h1_window_s": self.h1_window_s, "update_s": self.update_s,
@@ -1036,10 +1044,7 @@ class AdaptiveLoop:
                  loop: str | None = None, params: Any = None,
                  log: Callable[[dict], None] | None = None) -> None:
         self.target = target
-        if settings.refine is None:
-            # refits as long as the worker's share of a core allows (REFINE_LOAD)
-            settings = dataclasses.replace(
-                settings, refine=len(target.channels) * float(target.fs) <= REFINE_LOAD)
+        settings = settings.for_stream(len(target.channels), float(target.fs))
         self.settings = settings
         self.fs = float(target.fs)
         scales, band = _scales_and_band(target, settings.band_hz, self.fs)
