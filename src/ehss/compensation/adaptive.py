@@ -87,6 +87,7 @@ __all__ = [
     "fold_correction",
     "ErrorComparison",
     "compare_compensators",
+    "KeptRunning",
 ]
 
 #: Reference modes: known ahead (a drive file streamed) or made online.
