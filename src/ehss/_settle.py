@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-__all__ = ["SETTLE_TIME_CONSTANTS", "pole_radius", "settle_samples"]
+__all__ = ["SETTLE_TIME_CONSTANTS", "decay_samples", "pole_radius", "settle_samples"]
 
 #: A filter started at rest has forgotten its start after this many time constants of
 #: its slowest mode (e^-7 < 0.1 %).
@@ -43,7 +43,19 @@ def settle_samples(sos: np.ndarray, n_taps: int = 0) -> int:
     radius = 0.0
     for a1, a2 in np.asarray(sos, dtype=float).reshape(-1, 6)[:, 4:6]:
         radius = max(radius, pole_radius(float(a1), float(a2)))
+    return int(n_taps) + decay_samples(radius)
+
+
+def decay_samples(radius: float) -> int:
+    """Samples in which a mode of pole radius ``radius`` (< 1) decays by
+    e^-:data:`SETTLE_TIME_CONSTANTS`: 0 for none (radius 0).
+
+    Examples
+    --------
+    >>> decay_samples(0.5), decay_samples(0.0)
+    (11, 0)
+    """
     if radius <= 0.0:
-        return int(n_taps)
+        return 0
     decay = max(-math.log(min(radius, 1.0 - 1e-12)), 1e-12)
-    return int(n_taps) + int(math.ceil(SETTLE_TIME_CONSTANTS / decay))
+    return int(math.ceil(SETTLE_TIME_CONSTANTS / decay))

@@ -46,7 +46,7 @@ import numpy as np
 
 import ehss
 from ehss._checks import check_int, check_real
-from ehss._settle import SETTLE_TIME_CONSTANTS
+from ehss._settle import SETTLE_TIME_CONSTANTS, decay_samples
 from ehss.compensation.adaptive import (
     MODES,
     AdaptiveCompensator,
@@ -324,6 +324,9 @@ class CompensationSettings:
         check_int(self.correction_span, "correction_span", lo=0)
         if self.load_sigmas is not None:
             check_real(self.load_sigmas, "load_sigmas")
+        if self.refine not in (None, True, False):
+            raise ParameterError(f"refine={self.refine!r} must be True, False or None "
+                                 "(refit while the stream's load allows)")
 
     def for_stream(self, n_channels: int, fs: float) -> CompensationSettings:
         """These settings for a stream of ``n_channels`` at ``fs``: ``refine`` None
@@ -1277,12 +1280,10 @@ class AdaptiveLoop:
 
 
 def _start_up(model: ehss.ArmaxModel) -> int:
-    """Samples after which ``model``, run from rest, has forgotten its start
-    (:data:`ehss._settle.SETTLE_TIME_CONSTANTS` of its slowest pole)."""
+    """Samples after which ``model``, run from rest, has forgotten its start: its
+    input's taps, and its slowest pole's decay (:func:`ehss._settle.decay_samples`)."""
     radius = float(np.max(np.abs(model.poles()), initial=0.0))
-    if radius <= 0.0:
-        return model.delay + model.b.size
-    return int(math.ceil(SETTLE_TIME_CONSTANTS / -math.log(min(radius, 1.0 - 1e-12))))
+    return max(model.delay + model.b.size, decay_samples(radius))
 
 
 def _scales_and_band(target: Target, band: tuple[float, float] | None, fs: float
