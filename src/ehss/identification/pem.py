@@ -145,8 +145,37 @@ class _Reduced:
         return self._reduce(theta)[1]
 
     def fit(self, x0: np.ndarray, max_nfev: int, tol: float) -> tuple[np.ndarray, float, int]:
-        """Levenberg–Marquardt from ``x0`` on the reduced problem: (θ, cost, nfev)."""
-        return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
+        """Levenberg–Marquardt from ``x0`` on the reduced problem: (θ, cost, nfev).
+
+        From a start whose Jacobian is too ill-conditioned for JᵀJ (``_COND_GRAM``),
+        MINPACK is given one more parameter that changes nothing (a zero last column).
+        scipy's C MINPACK (1.15 to 1.17) reads one element past the Jacobian when it
+        recomputes the norm of its last column (``qrfac``: ``enorm(m - j, ...)`` where
+        MINPACK has ``m - j - 1``), which it does only on such Jacobians: the fit then
+        depends on memory it does not own and differs from one process to the next. A
+        zero column's norm is never recomputed, and pivoting keeps it last."""
+        if not self._ill_conditioned(x0):
+            return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
+        n = x0.size
+
+        def jac(x: np.ndarray) -> np.ndarray:
+            J = self._reduced_jacobian(x[:n])
+            return np.column_stack([J, np.zeros(J.shape[0])])
+
+        x, cost, nfev = _solve(lambda x: self._reduced_residual(x[:n]), jac,
+                               np.append(x0, 0.0), max_nfev, tol)
+        return x[:n], cost, nfev
+
+    def _ill_conditioned(self, x0: np.ndarray) -> bool:
+        """Whether J at ``x0``, its columns scaled to unit norm, has a condition number
+        above ``_COND_GRAM`` (the reduction there is a QR of [J ε])."""
+        if not self.feasible(x0):
+            return False
+        R = self._reduced_jacobian(x0)[:-1]
+        norms = np.sqrt(np.sum(R * R, axis=0))   # J's column norms: R = Qᵀ J
+        if not (np.all(norms > 0.0) and np.all(np.isfinite(R))):
+            return False
+        return bool(np.linalg.cond(R / norms) > _COND_GRAM)
 
 
 class _Predictor(_Reduced):
