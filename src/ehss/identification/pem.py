@@ -151,9 +151,11 @@ class _Reduced:
         MINPACK is given one more parameter that changes nothing (a zero last column).
         scipy's C MINPACK (1.15 to 1.17) reads one element past the Jacobian when it
         recomputes the norm of its last column (``qrfac``: ``enorm(m - j, ...)`` where
-        MINPACK has ``m - j - 1``), which it does only on such Jacobians: the fit then
-        depends on memory it does not own and differs from one process to the next. A
-        zero column's norm is never recomputed, and pivoting keeps it last."""
+        MINPACK has ``m - j - 1``), which it does when that column's remaining norm falls
+        below 7·10⁻⁸ of its last one, on such Jacobians: the fit then depends on memory
+        it does not own and differs from one process to the next. A zero column's norm
+        is never recomputed, and pivoting keeps it last. (A start below ``_COND_GRAM``
+        whose iterates reach κ ≈ 10⁷ is not covered.)"""
         if not self._ill_conditioned(x0):
             return _solve(self._reduced_residual, self._reduced_jacobian, x0, max_nfev, tol)
         n = x0.size
