@@ -125,7 +125,7 @@ class _Reduced:
     """Levenberg–Marquardt on a least-squares problem given as its reduction to n + 1
     rows (``_reduce``), with a barrier where θ is not ``feasible``."""
 
-    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         raise NotImplementedError
 
     def feasible(self, theta: np.ndarray) -> bool:
@@ -169,15 +169,9 @@ class _Reduced:
         return x[:n], cost, nfev
 
     def _ill_conditioned(self, x0: np.ndarray) -> bool:
-        """Whether J at ``x0``, its columns scaled to unit norm, has a condition number
-        above ``_COND_GRAM`` (the reduction there is a QR of [J ε])."""
-        if not self.feasible(x0):
-            return False
-        R = self._reduced_jacobian(x0)[:-1]
-        norms = np.sqrt(np.sum(R * R, axis=0))   # J's column norms: R = Qᵀ J
-        if not (np.all(norms > 0.0) and np.all(np.isfinite(R))):
-            return False
-        return bool(np.linalg.cond(R / norms) > _COND_GRAM)
+        """Whether the reduction at ``x0`` is a QR of [J ε] (J, its columns scaled to
+        unit norm, has a condition number above ``_COND_GRAM``)."""
+        return self.feasible(x0) and self._reduce(x0)[2]
 
 
 class _Predictor(_Reduced):
@@ -210,7 +204,7 @@ class _Predictor(_Reduced):
         self.layout: tuple[np.ndarray, np.ndarray, np.ndarray] = layout
         self._theta: np.ndarray | None = None
         self._signals = np.empty((0, 0))
-        self._reduced: tuple[np.ndarray, np.ndarray] | None = None
+        self._reduced: tuple[np.ndarray, np.ndarray, bool] | None = None
 
     def _guard(self, theta: np.ndarray) -> np.ndarray:
         return theta[: self.na] if self.oe else theta[self.na + self.nb + 1 :]
@@ -248,7 +242,7 @@ class _Predictor(_Reduced):
         """[J ε] at θ."""
         return np.column_stack([self.jacobian(theta), self.residual(theta)])
 
-    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """([q; ρ], [R; 0]) at θ (:func:`_reduced`)."""
         self._signals_at(theta)
         if self._reduced is None:
@@ -275,7 +269,7 @@ class _Joint(_Reduced):
     def __init__(self, problems: list[_Predictor], weights: list[float]) -> None:
         self.problems, self.weights = problems, weights
         self._theta: np.ndarray | None = None
-        self._reduced: tuple[np.ndarray, np.ndarray] | None = None
+        self._reduced: tuple[np.ndarray, np.ndarray, bool] | None = None
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
         return np.concatenate([w * p.residual(theta)
@@ -285,7 +279,7 @@ class _Joint(_Reduced):
         return np.vstack([w * p.jacobian(theta)
                           for p, w in zip(self.problems, self.weights, strict=True)])
 
-    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _reduce(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         if self._theta is None or not np.array_equal(theta, self._theta):
             pairs = list(zip(self.problems, self.weights, strict=True))
             G = np.sum([w * w * p.gram(theta) for p, w in pairs], axis=0)
@@ -303,17 +297,17 @@ class _Joint(_Reduced):
 
 
 def _reduced(G: np.ndarray, stacked: Callable[[], np.ndarray]
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """([q; ρ], [R; 0]) of a least-squares problem from its G = [J ε]ᵀ[J ε]
+             ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """([q; ρ], [R; 0], by QR) of a least-squares problem from its G = [J ε]ᵀ[J ε]
     (:func:`._pem_kernels.reduce_gram`), or from a QR of [J ε] (``stacked()``) when J is
-    too ill-conditioned for JᵀJ."""
+    too ill-conditioned for JᵀJ (then ``by QR`` is True)."""
     r, Jr = _pk.reduce_gram(G, _COND_GRAM)
-    if r.size == 0:
-        n = G.shape[0] - 1
-        Rq: np.ndarray = np.linalg.qr(stacked(), mode="r")  # type: ignore[assignment]
-        r = np.append(Rq[:n, n], abs(Rq[n, n]))
-        Jr = np.vstack([Rq[:n, :n], np.zeros((1, n))])
-    return r, Jr
+    if r.size:
+        return r, Jr, False
+    n = G.shape[0] - 1
+    Rq: np.ndarray = np.linalg.qr(stacked(), mode="r")  # type: ignore[assignment]
+    return (np.append(Rq[:n, n], abs(Rq[n, n])),
+            np.vstack([Rq[:n, :n], np.zeros((1, n))]), True)
 
 
 # ------------------------------------------------------------------------------ ARMAX
