@@ -18,7 +18,7 @@ compensation (:mod:`ehss.live.compensate`) runs inside the session.
 
 from __future__ import annotations
 
-from ehss.live.channel import ChannelProcessor, EstimatorSettings
+from ehss.live.channel import ChannelProcessor, EstimatorSettings, reference_band
 from ehss.live.detect import FIGURES, DetectionSettings, Detector
 from ehss.live.layout import RecordLayout, parse_fields
 from ehss.live.monitor import CompensationMonitor
@@ -64,6 +64,7 @@ __all__ = [
     "parse_event",
     "parse_fields",
     "read_recording",
+    "reference_band",
     "replay_record",
     "rig_record",
     "stream_record",

@@ -111,9 +111,34 @@ class EstimatorSettings:
         return asdict(self)
 
 
+#: Fewest Welch segments (half overlapping) of a spectrum :func:`reference_band` reads a
+#: band's lower edge from: the spectrum of each frequency then has about 2 × 8 degrees of
+#: freedom (fewer for the overlap), within about −3 / +2 dB of the true level nine times
+#: in ten.
+BAND_SEGMENTS = 8
+
+
+def _segments(n: int, nper: int) -> int:
+    """Half-overlapping segments of ``nper`` samples in ``n``."""
+    return 0 if nper > n else 1 + (n - nper) // (nper // 2)
+
+
 def reference_band(u: np.ndarray, fs: float, *, resolution_hz: float = 0.5
                    ) -> tuple[float, float]:
     """Band where the spectrum of ``u`` is within 20 dB of its peak (Welch, Hann).
+
+    Bins of about ``resolution_hz``. Each segment's mean is removed (a position
+    reference has an offset), and what the 0-Hz bin then holds is that removal's and
+    the window's leakage from the bins next to it (a reference flat from 1 Hz on gives
+    18 dB below its peak there in 0.5-Hz bins, which would start its band at 0 Hz): a
+    band that reaches the lowest two bins has its lower edge read again in bins four
+    times finer, as long as the record holds :data:`BAND_SEGMENTS` segments of them, and
+    starts at the first bin above 0 Hz at the lowest. The upper edge stays that of the
+    coarser bins, whose leakage puts it up to a bin above the reference's last
+    frequency: a compensator's fit is weighed by the band, and ends sharper at its edge
+    than the target's FIR can follow (on the 4 kHz specimen loop of the tests, the band
+    ended 0.04 Hz above a reference that stops at 40 Hz, not 0.53 Hz, left 6 % more
+    tracking error).
 
     Raises
     ------
@@ -122,11 +147,19 @@ def reference_band(u: np.ndarray, fs: float, *, resolution_hz: float = 0.5
     """
     # a power of two near fs / resolution
     nper = int(min(u.size, 2 ** max(4, round(math.log2(fs / resolution_hz)))))
-    f, p = welch(u, fs=fs, nperseg=nper)
-    if not np.any(p > 0):
-        raise ParameterError("the reference has no power: no band to analyse")
-    keep = np.flatnonzero(p >= p.max() / 100.0)
-    lo, hi = float(f[keep[0]]), float(f[keep[-1]])
+    hi = None
+    while True:
+        f, p = welch(u, fs=fs, nperseg=nper)
+        if not np.any(p > 0):
+            raise ParameterError("the reference has no power: no band to analyse")
+        keep = np.flatnonzero(p >= p.max() / 100.0)
+        if hi is None:
+            hi = float(f[keep[-1]])
+        # Hann's main lobe spans two bins each side: an edge there is not resolved
+        if keep[0] > 2 or _segments(u.size, 4 * nper) < BAND_SEGMENTS:
+            break
+        nper *= 4
+    lo = float(f[max(keep[0], 1) if f.size > 1 else 0])
     if hi <= lo:
         hi = lo + fs / nper
     return lo, hi
