@@ -82,3 +82,40 @@ def test_a_change_flagged_and_its_correction_are_printed(capsys):
     # and the loop, healthy, raises no compensator alarm while its change is followed:
     # a model kept out only because the running compensator is better is no fault
     assert not [e for e in lines if e["kind"] == "compensator_alarm"]
+
+
+def test_a_channel_that_never_loads_says_why(capsys):
+    # 10 mm RMS over 0.5-20 Hz asks the rig for velocities far beyond its 0.2 m/s: every
+    # judgement is refused, and the summary says what refused the latest
+    argv = ["live", "--rig", "position", "--channels", "1", "--duration", "5", "--band",
+            "0.5", "20", "--rms", "0.01", "--compensate", "preview", "--speed", "inf",
+            "--quiet"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    line = next(x for x in err.splitlines() if "no compensator was loaded" in x)
+    assert "exceeds limits.max_velocity_m_s" in line and "--band" not in line
+
+
+def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
+    from types import SimpleNamespace
+
+    from ehss.cli._live_compensate import _compare
+
+    n, fs = 2000, 1000.0
+    desired = np.ones((2, n))
+    miss = "the model disagrees with the H1 estimate by 1.13 dB / 22.9° beyond its uncertainty"
+    others = ["no H1 estimate to confirm the model yet",
+              "the model is unstable (pole radius 1.01)"]
+    rec = SimpleNamespace(
+        desired=desired, feedback=np.zeros((2, n)), fs=fs, channels=("1", "2"), loads=[],
+        decisions={"1": [{"accepted": False, "reason": miss}] * 3,
+                   "2": [{"accepted": False, "reason": r} for r in [miss, *others]]},
+        tracking_rms=lambda t0, t1: np.ones(2))
+    out = _compare(rec, [])
+    assert out["1"]["latest_refusal"] == miss and out["2"]["refusals"] == 3
+    lines = {x.split(":")[1].strip(): x for x in capsys.readouterr().err.splitlines()
+             if "no compensator was loaded" in x}
+    # most of channel 1's refusals are the H1 estimate's: the band is the thing to try;
+    # on channel 2 they are not
+    assert "--band" in lines["channel 1"]
+    assert "--band" not in lines["channel 2"] and "unstable" in lines["channel 2"]

@@ -282,4 +282,22 @@ def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
               f"{without[k] / with_[k] if with_[k] > 0 else math.inf:.1f}x), "
               f"{channels[name]['loads']} compensators loaded, "
               f"{channels[name]['refusals']} refused", file=sys.stderr)
+        refused = [d["reason"] for d in rec.decisions[name] if not d["accepted"]]
+        if not channels[name]["loads"] and refused:
+            channels[name]["latest_refusal"] = refused[-1]
+            print(f"ehss live: channel {name}: no compensator was loaded; the latest "
+                  f"refusal: {refused[-1]}{_hint(refused)}", file=sys.stderr)
     return channels
+
+
+def _hint(refused: list[str]) -> str:
+    """What to try when every judgement of a channel was refused, if the reasons say."""
+    h1 = sum(r.startswith("the model disagrees with the H1 estimate") for r in refused)
+    if 2 * h1 < len(refused):
+        return ""
+    # most refusals: models that miss the loop somewhere in the band, often where the
+    # reference's skirt reaches a resonance it hardly excites (README, "Where the
+    # defaults stop")
+    return (". Most models disagreed with the H1 estimate: a --band where the reference "
+            "holds its power (not where its spectrum only rolls off) lets them be "
+            "validated")
