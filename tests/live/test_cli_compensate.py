@@ -119,3 +119,15 @@ def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
     # on channel 2 they are not
     assert "--band" in lines["channel 1"]
     assert "--band" not in lines["channel 2"] and "unstable" in lines["channel 2"]
+
+
+def test_the_position_rig_compensated_with_its_defaults_loads(tmp_path, capsys):
+    # without --band and --rms the position loop is compensated over 0.5-20 Hz at 0.5 mm:
+    # the 1 mm over 1-50 Hz played for detection asks for drives every guard refuses
+    report = tmp_path / "run.json"
+    argv = ["live", "--rig", "position", "--channels", "1", "--duration", "6",
+            "--compensate", "preview", "--speed", "inf", "--quiet", "--report", str(report)]
+    assert main(argv) == 0
+    assert "compensating (preview), band 0.5-20 Hz" in capsys.readouterr().err
+    ch = json.loads(report.read_text())["channels"]["1"]
+    assert ch["loads"] > 0 and ch["tracking_rms"] < ch["tracking_rms_without"] / 10

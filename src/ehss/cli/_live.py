@@ -215,8 +215,9 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
             "the figures go to stderr and --report"))),
         ("--rms", dict(type=float, metavar="X", help=(
             "--compensate: RMS of the rig's reference in the loop's unit (default the "
-            "rig's, e.g. 0.001 m; a compensated drive must stay within the rig's limits, "
-            "which 0.0005 m over 0.5-20 Hz does); with --udp the RMS of the target's "
+            "rig's, with --band: 0.0005 m over 0.5-20 Hz for the position loop, whose "
+            "compensated drive must stay within the rig's limits; 0.5 m/s^2 or 1000 N "
+            "over 1-50 Hz for the others); with --udp the RMS of the target's "
             "reference"))),
         ("--target", dict(metavar="HOST:PORT", help=(
             "--compensate with --udp: where the compensator datagrams go "

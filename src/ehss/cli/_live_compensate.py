@@ -32,13 +32,13 @@ PREVIEW_SAMPLES = 128
 
 def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, Any]:
     from ehss.cli._params import warn_if_unstable
-    from ehss.live.rig import RIG_SIGNAL, SteppingRig, parse_event, rig_reference
+    from ehss.live.rig import RIG_COMPENSATE_SIGNAL, SteppingRig, parse_event, rig_reference
 
     params = ehss.load_params(args.params) if args.params else ehss.preset(args.preset)
     warn_if_unstable("live", params, args.rig,
                      f"--params {args.params}" if args.params else f"--preset {args.preset}")
     fs = params.timing.control_rate_hz if args.fs is None else float(args.fs)
-    rms, band = RIG_SIGNAL[args.rig]
+    rms, band = RIG_COMPENSATE_SIGNAL[args.rig]
     band = band if args.band is None else tuple(args.band)
     if args.rms is not None:
         rms = check_real(args.rms, "--rms", lo=0.0, lo_open=True)

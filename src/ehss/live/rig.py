@@ -31,6 +31,7 @@ from ehss.errors import ParameterError
 from ehss.live.layout import RecordLayout
 
 __all__ = ["RigEvent", "parse_event", "rig_record", "rig_reference", "rig_layout", "RIG_SIGNAL",
+           "RIG_COMPENSATE_SIGNAL",
            "FAULT_KINDS",
            "RigFault", "RigBlock", "SteppingRig"]
 
@@ -41,6 +42,11 @@ RIG_SIGNAL = {
     "acceleration": (0.5, (1.0, 50.0)),
     "force": (1000.0, (1.0, 50.0)),
 }
+#: The reference of each loop when ``ehss live --rig`` compensates it (``--compensate``):
+#: the position loop's 1 mm over 1–50 Hz asks for drives 3.9× the reference's RMS and
+#: beyond the rig's 0.2 m/s, so that every update would be refused; over 0.5–20 Hz at
+#: 0.5 mm its inverse is loaded and tracks 64× better (12 s, seed 0).
+RIG_COMPENSATE_SIGNAL = {**RIG_SIGNAL, "position": (5.0e-4, (0.5, 20.0))}
 #: Fade in and out of the rig's reference at each end (s): it starts and ends at rest.
 RIG_FADE_S = 0.2
 
