@@ -100,10 +100,11 @@ def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
     from types import SimpleNamespace
 
     from ehss.cli._live_compensate import _compare
+    from ehss.compensation.adaptive import H1_DISAGREES
 
     n, fs = 2000, 1000.0
     desired = np.ones((2, n))
-    miss = "the model disagrees with the H1 estimate by 1.13 dB / 22.9° beyond its uncertainty"
+    miss = f"{H1_DISAGREES} by 1.13 dB / 22.9° beyond its uncertainty"
     others = ["no H1 estimate to confirm the model yet",
               "the model is unstable (pole radius 1.01)"]
     rec = SimpleNamespace(

@@ -292,7 +292,9 @@ def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
 
 def _hint(refused: list[str]) -> str:
     """What to try when every judgement of a channel was refused, if the reasons say."""
-    h1 = sum(r.startswith("the model disagrees with the H1 estimate") for r in refused)
+    from ehss.compensation.adaptive import H1_DISAGREES
+
+    h1 = sum(r.startswith(H1_DISAGREES) for r in refused)
     if 2 * h1 < len(refused):
         return ""
     # most refusals: models that miss the loop somewhere in the band, often where the

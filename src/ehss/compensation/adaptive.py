@@ -75,6 +75,7 @@ from ehss.workflow import Acceptance
 
 __all__ = [
     "MODES",
+    "H1_DISAGREES",
     "CompensatorDesign",
     "UpdateGuard",
     "Decision",
@@ -92,6 +93,8 @@ __all__ = [
 
 #: Reference modes: known ahead (a drive file streamed) or made online.
 MODES = ("preview", "causal")
+#: How a refusal for the model's disagreement with the H1 estimate begins.
+H1_DISAGREES = "the model disagrees with the H1 estimate"
 
 #: Weights of the fit (inside the band, in the band limit's transitions, outside its
 #: support), per mode: the squared error at each frequency counts by the reference's
@@ -961,7 +964,7 @@ class AdaptiveCompensator:
         if mag_db > acc.max_magnitude_db or ph_deg > acc.max_phase_deg:
             gross = (mag_db > NEAR_MISS * acc.max_magnitude_db
                      or ph_deg > NEAR_MISS * acc.max_phase_deg)
-            return Decision(t_s, False, f"the model disagrees with the H1 estimate by "
+            return Decision(t_s, False, f"{H1_DISAGREES} by "
                             f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty (bounds "
                             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",
                             figures=figures, fault=gross)
