@@ -201,7 +201,9 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
             "anew (default: %(default)s s)"))),
         ("--band", dict(nargs=2, type=float, metavar=("LO", "HI"), help=(
             "analysis band, Hz (default: the baseline's, else where the reference's "
-            "spectrum is within 20 dB of its peak)"))),
+            "spectrum is within 20 dB of its peak); with --rig --compensate also the "
+            "band of the rig's reference and of its compensation (default 0.5-20 Hz "
+            "for the position loop, 1-50 Hz for the others)"))),
         ("--update", dict(type=float, default=0.1, metavar="S", help=(
             "evaluation period, s of stream time (default: %(default)s)"))),
     ),
