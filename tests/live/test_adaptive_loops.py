@@ -223,3 +223,41 @@ def test_a_model_is_refitted_to_the_errors_its_inverse_will_leave() -> None:
     assert judging.refine(unstable, u, y) == (unstable, 0)
     fit2, rows2 = judging.refine(unstable, u, y, also=start)
     assert rows2 == rows and miss(fit2) < miss(start) / 5.0
+
+
+def _rolled_off(spec, duration_s: float, seeds: tuple[int, ...]) -> np.ndarray:
+    """White noise through a second-order Butterworth band-pass over 1-40 Hz, at
+    ``spec``'s RMS, faded in over 0.2 s: a reference whose spectrum rolls off gently."""
+    from scipy import signal
+
+    sos = signal.butter(2, (1.0, 40.0), "bandpass", fs=spec.fs, output="sos")
+    out = []
+    for seed in seeds:
+        x = signal.sosfiltfilt(sos, np.random.default_rng(seed).standard_normal(
+            int(duration_s * spec.fs)))
+        x *= spec.rms / np.sqrt(np.mean(x**2))
+        m = int(0.2 * spec.fs)
+        x[:m] *= 0.5 - 0.5 * np.cos(np.pi * np.arange(m) / m)
+        out.append(x)
+    return np.vstack(out)
+
+
+@pytest.mark.slow
+def test_a_loop_whose_first_models_all_miss_is_compensated_in_the_end() -> None:
+    # the specimen under a reference rolled off gently: its 20-dB band reaches over the
+    # specimen's resonance (57 Hz), which the reference hardly excites, and the
+    # recursive estimate misses the loop there by 2-3 dB / 20-35 deg; refits held to it
+    # above the band by their record of it were refused for as long as the run lasted
+    # (550-790 um, uncompensated). Refitted without that record once three judgements
+    # in a row have failed, a model passes and its inverse is loaded (README, "Where
+    # the defaults stop": every channel of four pairs of references, 3.5-9.9 s)
+    desired = _rolled_off(SPECIMEN, 20.0, (1, 2))
+    rec = _run(SteppingLoop(SPECIMEN, desired, preview=128, seed=0))
+    for name in rec.channels:
+        assert [ld for ld in rec.loads if ld["channel"] == name]
+    # its first judgements fail (with the record), as they did before
+    assert not any(d["accepted"] for d in rec.decisions["1"][:3])
+    # before any compensator (the drive is the reference) against the last 5 s:
+    # measured 11x and 17x (11-29x on the last 5 s of 30-s runs, README)
+    early, late = rec.tracking_rms(0.5, 2.0), rec.tracking_rms(15.0, 20.0)
+    assert np.all(late <= early / 8.0)

@@ -250,7 +250,8 @@ class CompensationSettings:
         but is kept out because the running compensator would leave less error, or
         that misses the H1 agreement only narrowly
         (:data:`ehss.compensation.adaptive.NEAR_MISS`; ``Decision.fault`` False), does
-        not count.
+        not count. As many in a row before any compensator is loaded make the refits
+        go without their record above the band until one is (:meth:`Judging.refine`).
     n_taps, max_sections : int
         The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
     guard : UpdateGuard
@@ -389,7 +390,8 @@ class Snapshot:
     compensator that runs, and the spans of the windows that each compensator ran
     alone since the latest change (``spans`` of
     :func:`~ehss.compensation.adaptive.compare_compensators`); the first sample of the
-    windows since the latest change of the loop (0: it came before them)."""
+    windows since the latest change of the loop (0: it came before them); whether the
+    refits go without their record above the band (:meth:`Judging.refine`)."""
 
     drive: np.ndarray
     feedback: np.ndarray
@@ -401,6 +403,7 @@ class Snapshot:
     ran: tuple = ()
     fresh: int = 0
     running_model: ehss.ArmaxModel | None = None
+    unanchored: bool = False
 
 
 class ChannelAdapter:
@@ -725,7 +728,9 @@ class ChannelAdapter:
         fresh = max(0, self._changed_at - (self._n - self.window.fill))
         return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
                         self._base if spans else None, spans, self.compensator.current,
-                        self._ran_spans(), fresh, self.compensator.current_model)
+                        self._ran_spans(), fresh, self.compensator.current_model,
+                        self.compensator.current is None
+                        and self.refusals >= self.settings.alarm_after)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator
@@ -861,7 +866,8 @@ class Judging:
         return models[best], ("estimator", "tracker")[best]
 
     def refine(self, model: ehss.ArmaxModel, u: np.ndarray, y: np.ndarray, fresh: int = 0,
-               also: ehss.ArmaxModel | None = None) -> tuple[ehss.ArmaxModel, int]:
+               also: ehss.ArmaxModel | None = None, *, prior: bool = True
+               ) -> tuple[ehss.ArmaxModel, int]:
         """``model``'s dynamics refitted to the windows' output errors, and the rows
         it was refitted on (0: not refitted).
 
@@ -875,13 +881,23 @@ class Judging:
         change (``fresh``, the rows before only run it from rest) or since the model's
         own start-up from rest has died out (:func:`_start_up`), whichever is later,
         if they hold :data:`REFINE_SAMPLES` independent samples of the band per
-        parameter, with a record of the start above the band (:meth:`_prior`). It
-        starts from ``model`` and from ``also`` (the model of the compensator that
-        runs): of the starts and their refits, the one that fits those rows best in
-        free run is returned; ``model`` if none does better or the fit fails. An
+        parameter, with a record of the start above the band (:meth:`_prior`; not with
+        ``prior`` False, below). It starts from ``model`` and from ``also`` (the model
+        of the compensator that runs): of the starts and their refits, the one that fits
+        those rows best in free run is returned; ``model`` if none does better or the fit fails. An
         unstable start is none (its start-up never dies out). The refit's poles stay
         within the radius whose modes die out (e⁻⁷) within half the rows: slower ones
-        are not determined by them."""
+        are not determined by them.
+
+        The record holds a refit to its start above the band, and near the band's top
+        (whose response the start's structure ties to the one above it). A channel on
+        which no compensator runs yet and whose latest judgements were all refused as
+        faults (``alarm_after`` of them: :attr:`Snapshot.unanchored`) has no start that
+        an H1 estimate has confirmed, and where the recursive estimate misses the loop
+        the record holds every refit to that miss: the 4 kHz specimen under a
+        reference rolled off by a second-order filter, whose 20-dB band reaches over
+        its resonance, had models 2–3 dB / 20–35° off there and was never compensated
+        (550–790 µm). There the refits go without it until a compensator is loaded."""
         s = self.settings
         starts = [m for m in (model, also) if m is not None and m.is_stable()
                   and m.a.size == s.na + 1 and m.b.size == s.nb + 1]
@@ -897,7 +913,7 @@ class Judging:
             try:
                 fit = oe_pem(u, y, nf=s.na, nb=s.nb, delay=s.delay, dt=1.0 / self.fs,
                              theta0=np.r_[m.a[1:], m.b], first=start,
-                             records=[self._prior(m, n, u[start:])],
+                             records=[self._prior(m, n, u[start:])] if prior else [],
                              max_nfev=REFINE_EVALUATIONS, radius=radius)
             except EhssError:
                 continue
@@ -954,7 +970,8 @@ class Judging:
                                     fault=False), None, "")
         try:
             model, chosen = self.model(snap.thetas, u, y)
-            model, rows = self.refine(model, u, y, fresh, also=snap.running_model)
+            model, rows = self.refine(model, u, y, fresh, also=snap.running_model,
+                                      prior=not snap.unanchored)
             # the H1 estimate of the loop as it is now: segments of a third of its rows
             # (a power of two): 4 averages with half overlap, and as long as the loop's
             # memory asks (short ones leak and lose their coherence)
