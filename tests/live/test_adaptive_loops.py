@@ -249,15 +249,17 @@ def test_a_loop_whose_first_models_all_miss_is_compensated_in_the_end() -> None:
     # recursive estimate misses the loop there by 2-3 dB / 20-35 deg; refits held to it
     # above the band by their record of it were refused for as long as the run lasted
     # (550-790 um, uncompensated). Refitted without that record once three judgements
-    # in a row have failed, a model passes and its inverse is loaded (README, "Where
-    # the defaults stop": every channel of four pairs of references, 3.5-9.9 s)
+    # in a row have failed, each refit going on from the last, a model passes and its
+    # inverse is loaded (README, "Where the defaults stop": every channel of four pairs
+    # of references and two noise realisations, first at 2.9-3.75 s)
     desired = _rolled_off(SPECIMEN, 20.0, (1, 2))
     rec = _run(SteppingLoop(SPECIMEN, desired, preview=128, seed=0))
-    for name in rec.channels:
-        assert [ld for ld in rec.loads if ld["channel"] == name]
     # its first judgements fail (with the record), as they did before
     assert not any(d["accepted"] for d in rec.decisions["1"][:3])
+    for name in rec.channels:
+        loads = [ld["t_s"] for ld in rec.loads if ld["channel"] == name]
+        assert min(loads, default=math.inf) <= 5.0
     # before any compensator (the drive is the reference) against the last 5 s:
-    # measured 11x and 17x (11-29x on the last 5 s of 30-s runs, README)
+    # measured 21x and 25x (14-29x on the last 5 s of 30-s runs, README)
     early, late = rec.tracking_rms(0.5, 2.0), rec.tracking_rms(15.0, 20.0)
-    assert np.all(late <= early / 8.0)
+    assert np.all(late <= early / 12.0)
