@@ -892,11 +892,11 @@ class Judging:
         if they hold :data:`REFINE_SAMPLES` independent samples of the band per
         parameter, with a record of the start above the band (:meth:`_prior`; not with
         ``prior`` False, below). It starts from ``model`` and from ``also`` (the model
-        of the compensator that runs): of the starts and their refits, the one that fits
-        those rows best in free run is returned; ``model`` if none does better or the fit fails. An
-        unstable start is none (its start-up never dies out). The refit's poles stay
-        within the radius whose modes die out (e⁻⁷) within half the rows: slower ones
-        are not determined by them.
+        of the compensator that runs): of the starts and their refits, the one that
+        fits those rows best in free run is returned; ``model`` if none does better or
+        the fit fails. An unstable start is none (its start-up never dies out). The
+        refit's poles stay within the radius whose modes die out (e⁻⁷) within half the
+        rows: slower ones are not determined by them.
 
         The record holds a refit to its start above the band, and near the band's top
         (whose response the start's structure ties to the one above it). A channel on
