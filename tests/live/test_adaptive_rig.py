@@ -80,7 +80,11 @@ def test_adaptation_follows_a_payload_change(seeds, factor):
     # some references (1.1-1.6x measured on 16 pairs after +40 %: README, "Adaptive
     # compensation"): the heavier loop's own level, adapted from the start, is 1.2-1.4x
     # the lighter one's, and a 2-s stretch of the unchanged loop scatters by +-40 %
-    # about its 10-s level with the reference's content
+    # about its 10-s level with the reference's content. The later stretches' bound is
+    # met here on this realisation of the sensor noise (seeds 3, 4: 1.46x at most after
+    # +40 %), not on every one (1.52x and 1.66x with the rig's noise seeds 1 and 2, the
+    # same code): a change that alters the course of a run can cross it while it is
+    # within the scatter over many, and is to be judged on those (README)
     assert after[0][0] <= 2.0 * before[0]
     for a in after[1:]:
         assert a[0] <= 1.5 * before[0]
