@@ -426,3 +426,63 @@ def test_a_comparison_of_compensators_a_gain_apart_is_that_gain():
     short = compare_compensators(weak, exact, np.zeros(y.size), y,
                                  [(300, 450, None)], chunk=103)
     assert short.rows == 150 and short.standard_error == np.inf
+
+
+def _behind_a_slow_lead() -> ArmaxModel:
+    """``_loop`` behind a lead at low frequency: a zero at 0.998 (0.32 Hz) over a pole at
+    0.99 (1.6 Hz), as a high-pass near a band's lower edge gives a fitted model. Its
+    inverse has a mode of 0.5 s, whose effect reaches up into a band from 0.5 Hz."""
+    m = _loop()
+    return ArmaxModel(a=np.convolve(m.a, [1.0, -0.99]), b=np.convolve(m.b, [1.0, -0.998]),
+                      delay=1, dt=1.0 / FS)
+
+
+def test_a_slow_mode_of_the_inverse_in_the_band_runs_as_a_section():
+    m = _behind_a_slow_lead()
+    f = np.linspace(*BAND, 400)
+    d = design_compensator(m, band_hz=BAND)
+    # G·C = 1 over the band to the fit of the band limit's taper (measured 1.5 %), with
+    # the mode of 0.998 as a section: seven of its time constants (3497 samples) to
+    # settle
+    assert np.abs(m.frequency_response(f) * d.frequency_response(f) - 1.0).max() < 0.03
+    assert d.settle_samples >= 7.0 / -np.log(0.998)
+    # the FIR alone (asked to realise it to no bound) cannot: 0.26 s of taps resolve
+    # 4 Hz, and the inverse varies by 3x between 0.5 and 2 Hz (measured 92 % off)
+    fir = design_compensator(m, band_hz=BAND, within=(np.inf, np.inf))
+    assert np.abs(m.frequency_response(f) * fir.frequency_response(f) - 1.0).max() > 0.5
+    assert fir.settle_samples < 300
+    # a band from 5 Hz, where the FIR realises the same inverse within 1 dB / 5°
+    # (0.8 dB), keeps the mode in the FIR and its short settling
+    high = design_compensator(m, band_hz=(5.0, 20.0))
+    assert high.settle_samples == fir.settle_samples
+    assert high.max_amplitude_error_db < 1.0 and high.max_phase_error_deg < 5.0
+
+
+def test_a_mode_far_below_the_band_stays_with_the_fir():
+    # a zero at 0.9999 (0.016 Hz), slower than a quarter of the band's lower edge: as a
+    # section it would hold every update 70 s in shadow
+    m = _loop()
+    slow = ArmaxModel(a=np.convolve(m.a, [1.0, -0.99]), b=np.convolve(m.b, [1.0, -0.9999]),
+                      delay=1, dt=1.0 / FS)
+    d = design_compensator(slow, band_hz=BAND)
+    assert d.settle_samples < 300
+
+
+def test_the_guard_takes_slow_sections_only_where_the_fir_cannot_be_loaded():
+    m = _behind_a_slow_lead()
+    r, h1 = _h1(m)
+    # with nothing running, the FIR's approximation (26 % RMS off the inverse over the
+    # band) is still better than no compensation: loaded, with a note on its realisation
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    first = comp.propose(1.0, m, h1, r)
+    assert first.accepted, first.reason
+    assert first.design.settle_samples < 300 and "realisation" in first.figures
+    # with a compensator running that leaves less, the FIR's design would be kept out;
+    # the one with the slow mode as a section is loaded instead
+    comp.current = design_compensator(m, band_hz=BAND)
+    assert comp.current.settle_samples >= 7.0 / -np.log(0.998)
+    comp.current_model = m
+    d = comp.propose(2.0, m, h1, r)
+    assert d.accepted, d.reason
+    assert d.design.settle_samples >= 7.0 / -np.log(0.998)
+    assert d.design.max_amplitude_error_db < 1.0 and d.design.max_phase_error_deg < 5.0

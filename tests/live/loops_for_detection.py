@@ -6,7 +6,9 @@ change-detection tests: each returns a live record ``(layout, samples, fs)`` lik
   mode (25 Hz, ζ = 0.4) behind a valve (80 Hz, ζ = 0.7), at 2 kHz;
 * :func:`specimen_record`: a servo-hydraulic actuator pushing a specimen spring, at
   4 kHz: valve lag, piston and specimen mass on the oil column's stiffness and the
-  spring, proportional position control.
+  spring, proportional position control;
+* :data:`HIGH_PASS` (adaptive compensation only): a 30 Hz mode behind a 0.5 Hz
+  high-pass, at 1 kHz.
 
 Each channel's reference is band-pass filtered random noise and its feedback carries white
 sensor noise of 1 % of the feedback's RMS (seeds per channel). A change multiplies one
@@ -21,12 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.signal import StateSpace, butter, cont2discrete, sosfilt
+from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
 
 from ehss.live.rig import rig_layout
 
-__all__ = ["servo_record", "specimen_record", "LoopSpec", "SERVO", "SPECIMEN", "discrete",
-           "simulate_states", "reference"]
+__all__ = ["servo_record", "specimen_record", "LoopSpec", "SERVO", "SPECIMEN", "HIGH_PASS",
+           "discrete", "simulate_states", "reference"]
 
 
 def _servo_ss(wn_scale: float) -> StateSpace:
@@ -67,6 +69,16 @@ def _specimen_ss(stiffness_scale: float) -> StateSpace:
     b = np.array([[k_p / tau_v], [0.0], [0.0], [0.0]])
     c = np.array([[0.0, 0.0, 1.0, 0.0]])
     return StateSpace(a, b, c, np.zeros((1, 1)))
+
+
+def _high_pass_ss(mass_factor: float) -> StateSpace:
+    """An acceleration-like loop: a 30 Hz, ζ 0.7 mode (natural frequency 1/√
+    ``mass_factor``) behind a second-order high-pass at 0.5 Hz (ζ 0.7), as an
+    AC-coupled sensor or a shaking table's acceleration generator puts one in the loop."""
+    wn, wh = 2 * math.pi * 30.0 / math.sqrt(mass_factor), 2 * math.pi * 0.5
+    num = np.polymul([wn**2], [1.0, 0.0, 0.0])
+    den = np.polymul([1.0, 1.4 * wn, wn**2], [1.0, 1.4 * wh, wh**2])
+    return StateSpace(*tf2ss(num, den))
 
 
 def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
@@ -160,6 +172,8 @@ class LoopSpec:
 SERVO = LoopSpec("servo", _servo_mass, 2000.0, 1e-3, (1.0, 60.0), "mass")
 #: The actuator on its specimen at 4 kHz; its factor scales the specimen's stiffness.
 SPECIMEN = LoopSpec("specimen", _specimen_ss, 4000.0, 1e-3, (1.0, 100.0), "stiffness")
+#: The loop behind a 0.5 Hz high-pass at 1 kHz; its factor scales the moving mass.
+HIGH_PASS = LoopSpec("high-pass", _high_pass_ss, 1000.0, 1e-3, (1.0, 40.0), "mass")
 
 
 def servo_record(*, n_channels: int = 2, duration_s: float, seed: int,

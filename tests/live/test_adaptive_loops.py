@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from stepping_loops import SERVO, SPECIMEN, SteppingLoop, loop_desired
+from stepping_loops import HIGH_PASS, SERVO, SPECIMEN, SteppingLoop, loop_desired
 
 from ehss.live.compensate import AdaptiveLoop, CompensationRecord, CompensationSettings
 
@@ -263,3 +263,27 @@ def test_a_loop_whose_first_models_all_miss_is_compensated_in_the_end() -> None:
     # measured 21x and 25x (14-29x on the last 5 s of 30-s runs, README)
     early, late = rec.tracking_rms(0.5, 2.0), rec.tracking_rms(15.0, 20.0)
     assert np.all(late <= early / 12.0)
+
+
+def test_a_loop_behind_a_high_pass_near_the_band_is_compensated() -> None:
+    """A 0.5 Hz high-pass in the loop (an AC-coupled sensor, an acceleration generator)
+    gives the inverse a mode of about a second whose effect reaches into a band from
+    0.5 Hz; the 256-tap FIR, which resolves 4 Hz at 1 kHz, cannot realise it, and its
+    designs are refused as realised 13-30 dB off. Run as a section when that happens,
+    it is: measured 12.5-24.1x less error than without compensation over [15, 30) s
+    on 12 channels (references of seeds 1-6, sensor noise seeds 0 and 1; 12.5x and
+    14.3x here), against 6.8-8.6x with the FIR alone."""
+    desired = loop_desired(HIGH_PASS, DURATION_S, (1, 2))
+
+    def target() -> SteppingLoop:
+        return SteppingLoop(HIGH_PASS, desired, preview=128, seed=0)
+
+    adapted = _run(target())
+    plain = target().step(desired.shape[1])
+    fs = HIGH_PASS.fs
+    err = (plain.desired - plain.feedback)[:, int(15 * fs):]
+    uncompensated = np.sqrt(np.mean(err**2, axis=1))
+    assert np.all(uncompensated / adapted.tracking_rms(15.0, DURATION_S) >= 10.0)
+    sections = [e for e in adapted.events if e["kind"] == "compensator"
+                and e.get("settle_samples", 0) > 1000]
+    assert sections

@@ -1196,7 +1196,8 @@ class AdaptiveLoop:
             return
         ad.started(sent["apply_index"] + sent["crossfade"], sent["apply_index"])
         load = {"kind": "compensator", "channel": ad.name, "t_s": t_s, **sent,
-                "model": ad.chosen, **d.figures, **design.errors()}
+                "model": ad.chosen, "settle_samples": design.settle_samples, **d.figures,
+                **design.errors()}
         self.loads.append(load)
         self._event(load)
 
