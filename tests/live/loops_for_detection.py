@@ -7,8 +7,8 @@ change-detection tests: each returns a live record ``(layout, samples, fs)`` lik
 * :func:`specimen_record`: a servo-hydraulic actuator pushing a specimen spring, at
   4 kHz: valve lag, piston and specimen mass on the oil column's stiffness and the
   spring, proportional position control;
-* :data:`HIGH_PASS` (adaptive compensation only): a 30 Hz mode behind a 0.5 Hz
-  high-pass, at 1 kHz.
+* :func:`high_pass_record` (:data:`HIGH_PASS`): a 30 Hz mode behind a 0.5 Hz
+  second-order high-pass (an AC-coupled sensor, an acceleration generator), at 1 kHz.
 
 Each channel's reference is band-pass filtered random noise and its feedback carries white
 sensor noise of 1 % of the feedback's RMS (seeds per channel). A change multiplies one
@@ -27,7 +27,7 @@ from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
 
 from ehss.live.rig import rig_layout
 
-__all__ = ["servo_record", "specimen_record", "LoopSpec", "SERVO", "SPECIMEN", "HIGH_PASS",
+__all__ = ["servo_record", "specimen_record", "high_pass_record", "LoopSpec", "SERVO", "SPECIMEN", "HIGH_PASS",
            "discrete", "simulate_states", "reference"]
 
 
@@ -194,4 +194,15 @@ def specimen_record(*, n_channels: int = 2, duration_s: float, seed: int,
     return _record(SPECIMEN.make, SPECIMEN.fs, n_channels=n_channels,
                    duration_s=duration_s, seed=seed, rms=SPECIMEN.rms,
                    band_hz=SPECIMEN.band_hz, change_s=change_s, factor=stiffness_factor,
+                   channel=channel)
+
+
+def high_pass_record(*, n_channels: int = 2, duration_s: float, seed: int,
+                     change_s: float | None = None, mass_factor: float = 1.0,
+                     channel: int = 1):
+    """The loop behind a 0.5 Hz high-pass at 1 kHz; from ``change_s`` the moving mass of
+    ``channel`` is ``mass_factor`` times larger."""
+    return _record(HIGH_PASS.make, HIGH_PASS.fs, n_channels=n_channels,
+                   duration_s=duration_s, seed=seed, rms=HIGH_PASS.rms,
+                   band_hz=HIGH_PASS.band_hz, change_s=change_s, factor=mass_factor,
                    channel=channel)
