@@ -7,6 +7,7 @@ import pytest
 
 from ehss.compensation.adaptive import (
     AdaptiveCompensator,
+    Decision,
     UpdateGuard,
     compare_compensators,
     design_compensator,
@@ -486,3 +487,36 @@ def test_the_guard_takes_slow_sections_only_where_the_fir_cannot_be_loaded():
     assert d.accepted, d.reason
     assert d.design.settle_samples >= 7.0 / -np.log(0.998)
     assert d.design.max_amplitude_error_db < 1.0 and d.design.max_phase_error_deg < 5.0
+
+
+def test_a_quiet_feedback_is_not_a_fault_a_stuck_one_is():
+    # the loop's output at 1/30 of its level plus sensor noise of the level the channel's
+    # loads left as residual: the model fits it by about 70 %, below the 90 % asked, yet
+    # its residual is the usual one (a reference dying away, not a failing sensor)
+    import scipy.signal
+
+    m = _loop()
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    rng = np.random.default_rng(3)
+    u = band_limited_random(band_hz=BAND, rms=1.0 / 30.0, duration_s=1.5, fs=FS, seed=6,
+                            fade_s=0.1).values
+    clean = scipy.signal.lfilter(np.concatenate([np.zeros(m.delay), m.b]), m.a, u)
+    noise = 0.01
+    y = clean + noise * rng.standard_normal(u.size)
+    accepted = Decision(1.0, True, "", None, {})
+    refused = comp._judge_fit(accepted, m, u, y)
+    assert not refused.accepted and "misbehaves" in refused.reason
+    assert refused.figures["fresh_fit_pct"] < 90.0
+    # the residual is the noise: within the bound of the usual one (1 + 3.09/sqrt(2*9.75)
+    # = 1.70 times it over 0.5-20 Hz and 0.25 s)
+    assert refused.figures["fresh_residual_rms"] == pytest.approx(noise, rel=0.15)
+    quiet = comp._judge_fit(accepted, m, u, y, residual_floor=noise)
+    assert quiet.accepted and "quiet" in quiet.figures
+    assert comp._quiet(250) == pytest.approx(1.0 + 3.09 / np.sqrt(2 * 2 * 19.5 * 0.25))
+    # a stuck sensor at the same moment: its residual is the feedback's own swing, above
+    # that bound
+    stuck = y.copy()
+    stuck[-250:] = stuck[-251]
+    assert not comp._judge_fit(accepted, m, u, stuck, residual_floor=noise).accepted
+    # a floor that the residual exceeds by more than the bound: a fault
+    assert not comp._judge_fit(accepted, m, u, y, residual_floor=noise / 2.0).accepted

@@ -27,8 +27,8 @@ from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
 
 from ehss.live.rig import rig_layout
 
-__all__ = ["servo_record", "specimen_record", "high_pass_record", "LoopSpec", "SERVO", "SPECIMEN", "HIGH_PASS",
-           "discrete", "simulate_states", "reference"]
+__all__ = ["servo_record", "specimen_record", "high_pass_record", "LoopSpec", "SERVO",
+           "SPECIMEN", "HIGH_PASS", "discrete", "simulate_states", "reference"]
 
 
 def _servo_ss(wn_scale: float) -> StateSpace:

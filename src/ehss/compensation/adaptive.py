@@ -777,6 +777,10 @@ class UpdateGuard:
 #: change. A fault puts the model far off (a feedback sign flipped: 14 dB / 167°) or
 #: fails another guard (unstable, too few coherent points, a poor fit to fresh data).
 NEAR_MISS = 2.0
+#: One-sided standard normal quantile of 1e-3: a fresh stretch whose residual is the
+#: channel's usual one exceeds the bound :meth:`AdaptiveCompensator._judge_fit` sets
+#: from it once in a thousand judgements.
+QUIET_Z = 3.09
 
 
 def _polarity_fault(model: ArmaxModel, band: tuple[float, float]) -> str:
@@ -911,15 +915,18 @@ class AdaptiveCompensator:
 
     def assess(self, t_s: float, model: ArmaxModel, h1: Any, reference: np.ndarray,
                window: tuple[np.ndarray, np.ndarray] | None = None, *,
-               running: CompensatorDesign | None = None) -> Decision:
+               running: CompensatorDesign | None = None,
+               residual_floor: float | None = None) -> Decision:
         """The decision of :meth:`propose`, without recording it: changes nothing, so
         it may run on another thread or process than the one that records it.
         ``running``: the compensator the target runs (default :attr:`current`), which
-        a design realised beyond the bounds must beat (:meth:`_realisable`)."""
+        a design realised beyond the bounds must beat (:meth:`_realisable`);
+        ``residual_floor``: the channel's usual residual on fresh data
+        (:meth:`_judge_fit`)."""
         running = self.current if running is None else running
         decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float), running)
         if decision.accepted and window is not None:
-            decision = self._judge_fit(decision, model, *window)
+            decision = self._judge_fit(decision, model, *window, residual_floor=residual_floor)
         return decision
 
     def record(self, decision: Decision, model: ArmaxModel | None) -> None:
@@ -962,23 +969,47 @@ class AdaptiveCompensator:
                                    np.asarray(reference, dtype=float), figures)
 
     def _judge_fit(self, decision: Decision, model: ArmaxModel, u: np.ndarray,
-                   y: np.ndarray) -> Decision:
+                   y: np.ndarray, residual_floor: float | None = None) -> Decision:
         """The model's free-run simulation over the window must fit its latest part.
 
         The H1 estimate weighs the whole window; a sensor that fails (sticks, flips,
         bursts) shows first in the newest samples, which the model's simulation on the
-        drive no longer fits.
+        drive no longer fits. A fit below ``acceptance.min_fit_pct`` is a fault, unless
+        the residual ``y − ŷ`` of those samples is no larger than the channel's usual
+        one (``residual_floor``: the median over its recent loads, from
+        :class:`ehss.live.compensate.ChannelAdapter`) can be by chance: then the
+        feedback is quiet, not wrong. A reference that dies away (the end of an
+        earthquake record) leaves the sensor's noise to be fitted, and the fit falls
+        below 90 % while the loop and the sensor are as they were: on the simulated
+        rig, an earthquake-like record of 40 s alarmed on both channels in its last
+        5 s. A stuck, flipped or drowned sensor leaves a residual as large as the
+        feedback, tens of times the usual one. The bound is the floor times
+        ``1 + z / √(2ν)`` (the RMS of ν independent samples scatters by about
+        ``1/√(2ν)``, ν = 2 B T in a band of B Hz over the stretch of T s; z =
+        :data:`QUIET_Z`): 1.70 over 0.5–20 Hz and 0.25 s.
         """
         acc = self.guard.acceptance
         n_fit = max(1, min(int(round(self.guard.fit_s * self.fs_hz)), u.size // 2))
         fit = free_run_fit(model, u, y, n_fit)
-        figures = {**decision.figures, "fresh_fit_pct": fit}
+        spread = float(np.std(y[-n_fit:]))
+        residual = (1.0 - fit / 100.0) * spread if math.isfinite(fit) else math.inf
+        figures = {**decision.figures, "fresh_fit_pct": fit, "fresh_residual_rms": residual}
         if fit < acc.min_fit_pct:
-            return Decision(decision.t_s, False, f"the model fits the latest "
-                            f"{n_fit / self.fs_hz:g} s of feedback by {fit:.1f} % (needs "
-                            f"{acc.min_fit_pct:g} %): the sensor or the loop misbehaves",
-                            figures=figures)
+            if residual_floor is None or not residual <= self._quiet(n_fit) * residual_floor:
+                return Decision(decision.t_s, False, f"the model fits the latest "
+                                f"{n_fit / self.fs_hz:g} s of feedback by {fit:.1f} % "
+                                f"(needs {acc.min_fit_pct:g} %): the sensor or the loop "
+                                "misbehaves", figures=figures)
+            figures["quiet"] = (f"fits the latest {n_fit / self.fs_hz:g} s by {fit:.1f} % "
+                                f"with a residual of {residual:.3g}, within the channel's "
+                                f"usual {residual_floor:.3g}: a quiet feedback")
         return Decision(decision.t_s, True, "", decision.design, figures)
+
+    def _quiet(self, n_fit: int) -> float:
+        """The residual bound's factor over the floor (:meth:`_judge_fit`)."""
+        lo, hi = self.band_hz
+        nu = max(1.0, 2.0 * (hi - lo) * n_fit / self.fs_hz)
+        return 1.0 + QUIET_Z / math.sqrt(2.0 * nu)
 
     def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray,
                running: CompensatorDesign | None = None) -> Decision:

@@ -82,6 +82,10 @@ __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "Compensati
 #: simulated rig (0.81 s against 1.23 s of data), which left −30 % payload on one pair
 #: of references at 2.6× over the first 2 s (README, "Adaptive compensation").
 REFINE_SAMPLES = 2
+#: Loads whose residual on fresh data make a channel's usual one (their median, the
+#: floor of :meth:`ehss.compensation.AdaptiveCompensator._judge_fit`): at least the
+#: first, at most the last.
+RESIDUAL_LOADS = (3, 20)
 #: Evaluations of each of a refit's Levenberg–Marquardt runs (from a nearby start it
 #: converges in 4–8; 30 changed no figure of the README's rig tables)
 REFINE_EVALUATIONS = 15
@@ -392,7 +396,9 @@ class Snapshot:
     :func:`~ehss.compensation.adaptive.compare_compensators`); the first sample of the
     windows since the latest change of the loop (0: it came before them); whether the
     refits go without their record above the band, and then the latest model refitted
-    and not loaded, where the next refit goes on from (:meth:`Judging.refine`)."""
+    and not loaded, where the next refit goes on from (:meth:`Judging.refine`); the
+    channel's usual residual on fresh data (the median over its recent loads; None
+    before :data:`RESIDUAL_LOADS` of them: :meth:`AdaptiveCompensator._judge_fit`)."""
 
     drive: np.ndarray
     feedback: np.ndarray
@@ -406,6 +412,7 @@ class Snapshot:
     running_model: ehss.ArmaxModel | None = None
     unanchored: bool = False
     refitted: ehss.ArmaxModel | None = None
+    residual_floor: float | None = None
 
 
 class ChannelAdapter:
@@ -447,6 +454,8 @@ class ChannelAdapter:
             params=params)
         self.alarm = False
         self.refusals = 0
+        # the fresh residuals of loads that fitted as the guard asks (Snapshot)
+        self._residuals: collections.deque[float] = collections.deque(maxlen=RESIDUAL_LOADS[1])
         self.busy_until = 0
         self._n = 0
         self._n_average = int(round(s.average_s * self.fs))
@@ -735,7 +744,9 @@ class ChannelAdapter:
         return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
                         self._base if spans else None, spans, self.compensator.current,
                         self._ran_spans(), fresh, self.compensator.current_model,
-                        unanchored, self._refitted if unanchored else None)
+                        unanchored, self._refitted if unanchored else None,
+                        float(np.median(self._residuals))
+                        if len(self._residuals) >= RESIDUAL_LOADS[0] else None)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator
@@ -797,9 +808,13 @@ class ChannelAdapter:
         self.compensator.record(verdict.decision, verdict.model)
         if verdict.model is not None:
             self.chosen = verdict.chosen
+        figures = verdict.decision.figures
         if verdict.decision.accepted:
             self._refitted = None
-        elif "refit_rows" in verdict.decision.figures and self.compensator.current is None:
+            if "quiet" not in figures and math.isfinite(figures.get("fresh_residual_rms",
+                                                                    math.inf)):
+                self._residuals.append(float(figures["fresh_residual_rms"]))
+        elif "refit_rows" in figures and self.compensator.current is None:
             self._refitted = verdict.model     # Snapshot.refitted
 
 
@@ -994,7 +1009,8 @@ class Judging:
         except EhssError as exc:
             return Verdict(Decision(t_s, False, f"no model or H1 estimate: {exc}"), None, "")
         decision = self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y),
-                                           running=snap.current)
+                                           running=snap.current,
+                                           residual_floor=snap.residual_floor)
         if rows:
             decision.figures["refit_rows"] = rows
         if decision.accepted and decision.design is not None and snap.current is not None \
