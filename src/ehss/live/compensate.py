@@ -988,6 +988,9 @@ class Judging:
                        "correction")
 
     def __call__(self, t_s: float, snap: Snapshot) -> Verdict:
+        quiet = self._quiet(snap)
+        if quiet:
+            return Verdict(Decision(t_s, False, quiet, fault=False), None, "")
         if snap.spans:
             return self.correct(t_s, snap)
         u, y = snap.drive, snap.feedback
@@ -1017,6 +1020,34 @@ class Judging:
                 and snap.ran:
             decision = self._against_running(decision, snap)
         return Verdict(decision, model, chosen)
+
+    def _quiet(self, snap: Snapshot) -> str:
+        """Why the windows of ``snap`` cannot judge a model (empty if they can): a
+        reference so quiet that even a model that leaves the channel's usual residual
+        (``snap.residual_floor``) would fit the feedback by less than the guard's
+        ``min_fit_pct``, its RMS over a third of the window below
+        ``floor / (1 − min_fit_pct / 100)``.
+
+        Between tests, or once a record has died away, the stream goes on with next to
+        nothing in the band: the H1 estimate confirms no point, the estimator drifts
+        where nothing excites it, and every judgement failed as a fault. On the
+        simulated rig, a record stopped at 25 s alarmed on both channels 3–4 s later.
+        Refused as no fault, such windows keep the last good compensator and raise no
+        alarm. A failing sensor is judged as before: it does not quieten the reference.
+        """
+        floor = snap.residual_floor
+        if floor is None or snap.desired.size < 3:
+            return ""
+        min_fit = self.compensator.guard.acceptance.min_fit_pct
+        need = floor / (1.0 - min_fit / 100.0)
+        # in each third of the window (the H1 estimate's segments): a window that a
+        # pause ended or began in is no more use than a quiet one
+        level = min(float(np.std(part)) for part in np.array_split(snap.desired, 3))
+        if level >= need:
+            return ""
+        return (f"the reference is quiet ({level:.3g} RMS over a third of the window, "
+                f"below the {need:.3g} at which a model leaving the usual residual fits "
+                f"the feedback by {min_fit:g} %): nothing to judge")
 
     def _against_running(self, decision: Decision, snap: Snapshot) -> Decision:
         """A model's compensator replaces the running one only if, replayed on the
