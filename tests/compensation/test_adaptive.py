@@ -520,3 +520,44 @@ def test_a_quiet_feedback_is_not_a_fault_a_stuck_one_is():
     assert not comp._judge_fit(accepted, m, u, stuck, residual_floor=noise).accepted
     # a floor that the residual exceeds by more than the bound: a fault
     assert not comp._judge_fit(accepted, m, u, y, residual_floor=noise / 2.0).accepted
+
+
+def _h1_of(u, model, seed=2):
+    import scipy.signal
+
+    y = scipy.signal.lfilter(np.concatenate([np.zeros(model.delay), model.b]), model.a, u)
+    y = y + 1e-3 * np.random.default_rng(seed).standard_normal(u.size)
+    return h1_estimate(u, y, fs=FS, nperseg=512)
+
+
+@pytest.mark.parametrize("f_hz", [1.3, 5.0, 12.2, 19.0])
+def test_a_sine_cannot_validate_a_model_over_the_band(f_hz):
+    # one sine through the Hann window fills 2.0-2.16 of the H1 estimate's points, its
+    # neighbours holding its leakage: no judgement, and no fault
+    m = _loop()
+    t = np.arange(1500) / FS
+    u = np.sin(2 * np.pi * f_hz * t)
+    h1 = _h1_of(u, m)
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    wrong = ArmaxModel(a=m.a, b=1.3 * m.b, delay=1, dt=1.0 / FS)
+    d = comp.assess(1.0, wrong, h1, u)
+    assert not d.accepted and not d.fault and "single sine" in d.reason
+
+
+def test_a_broadband_reference_judges_as_before_and_a_partial_one_raises_no_fault():
+    m = _loop()
+    wrong = ArmaxModel(a=m.a, b=1.3 * m.b, delay=1, dt=1.0 / FS)
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    r = band_limited_random(band_hz=BAND, rms=1.0, duration_s=1.5, fs=FS, seed=1,
+                            fade_s=0.1).values
+    # random over the band: a model 2.3 dB off is a fault, the right one passes
+    d = comp.assess(1.0, wrong, _h1_of(r, m), r)
+    assert not d.accepted and d.fault and "disagrees" in d.reason
+    assert comp.assess(1.0, m, _h1_of(r, m), r).accepted
+    # the same reference, judged over a band 2.5 times as wide (less than half of its
+    # points excited): a model refused there says nothing against the loop
+    wide = AdaptiveCompensator(FS, (0.5, 50.0), preview=128)
+    d = wide.assess(1.0, wrong, _h1_of(r, m), r)
+    assert not d.accepted and not d.fault
+    excited, n_band = d.figures["excited_points"]
+    assert 2 * excited < n_band
