@@ -561,3 +561,19 @@ def test_a_broadband_reference_judges_as_before_and_a_partial_one_raises_no_faul
     assert not d.accepted and not d.fault
     excited, n_band = d.figures["excited_points"]
     assert 2 * excited < n_band
+
+
+def test_a_drive_just_past_the_gain_bound_is_refused_but_no_fault():
+    m = _loop()
+    r, h1 = _h1(m)
+    ok = AdaptiveCompensator(FS, BAND, preview=128).propose(1.0, m, h1, r)
+    assert ok.accepted
+    gain = max(ok.figures["rms_gain"], ok.figures["peak_gain"])
+    # a bound 10 % below what the right model's inverse asks: refused, no fault (the
+    # band reaches where the inverse must amplify); a bound at 40 %, which it exceeds
+    # 2.5 times (beyond NEAR_MISS): a fault
+    for bound, fault in ((0.9 * gain, False), (0.4 * gain, True)):
+        comp = AdaptiveCompensator(FS, BAND, preview=128, guard=UpdateGuard(max_gain=bound))
+        d = comp.propose(1.0, m, h1, r)
+        assert not d.accepted and "bound" in d.reason
+        assert d.fault is fault

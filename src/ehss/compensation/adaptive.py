@@ -801,6 +801,16 @@ def _polarity_fault(model: ArmaxModel, band: tuple[float, float]) -> str:
     return ""
 
 
+def _gain_over(drive: np.ndarray, r: np.ndarray) -> float:
+    """The larger of the drive's RMS and peak over the reference's, as
+    :func:`ehss.compensation.check_drive` bounds them (inf for a reference of zeros)."""
+    rms_r, peak_r = float(np.sqrt(np.mean(r * r))), float(np.max(np.abs(r), initial=0.0))
+    if rms_r <= 0.0 or peak_r <= 0.0:
+        return math.inf
+    return max(float(np.sqrt(np.mean(drive * drive))) / rms_r,
+               float(np.max(np.abs(drive))) / peak_r)
+
+
 def _excitation(h1: Any, band: tuple[float, float]) -> tuple[int, int, float]:
     """Points of ``band`` in the H1 estimate that its input excites
     (:meth:`ehss.FrequencyResponse.valid`), all its points there, and how many its
@@ -1191,8 +1201,17 @@ class AdaptiveCompensator:
     def _checked_drive(self, t_s: float, design_of: Callable[[], CompensatorDesign],
                        r: np.ndarray, figures: dict[str, Any]) -> Decision:
         """The design, if its drive for the recent reference passes the gain checks and
-        the rig's limits."""
+        the rig's limits.
+
+        A drive whose gain over the reference exceeds the bound by no more than
+        :data:`NEAR_MISS` is refused but is no fault: the inverse of a right model asks
+        that much where the band reaches past the loop's bandwidth, and the ratio of
+        peaks scatters with the reference's content (the 25 Hz servo under a 1–60 Hz
+        reference: peaks of 3.12–3.14× against 3×, refused now and then amid loads,
+        alarmed twice in 30 s). A model gone wrong asks many times more; a drive beyond
+        the rig's own limits stays a fault."""
         g = self.guard
+        drive, skip = None, 0
         try:
             design = design_of()
             drive = run_compensator(design, r)
@@ -1202,6 +1221,8 @@ class AdaptiveCompensator:
         except KeptRunning as exc:
             return Decision(t_s, False, str(exc), figures=figures, fault=False)
         except EhssError as exc:
-            return Decision(t_s, False, str(exc), figures=figures)
+            gain = _gain_over(drive[skip:], r[skip:]) if drive is not None else math.inf
+            near = g.max_gain is not None and g.max_gain < gain <= NEAR_MISS * g.max_gain
+            return Decision(t_s, False, str(exc), figures=figures, fault=not near)
         figures.update(rms_gain=check.rms_gain, peak_gain=check.peak_gain)
         return Decision(t_s, True, "", design, figures)
