@@ -490,9 +490,9 @@ def test_the_guard_takes_slow_sections_only_where_the_fir_cannot_be_loaded():
 
 
 def test_a_quiet_feedback_is_not_a_fault_a_stuck_one_is():
-    # the loop's output at 1/30 of its level plus sensor noise of the level the channel's
-    # loads left as residual: the model fits it by about 70 %, below the 90 % asked, yet
-    # its residual is the usual one (a reference dying away, not a failing sensor)
+    # the loop's output at 1/30 of its level plus sensor noise: the model fits it by
+    # about 70 %, below the 90 % asked, yet its residual is the usual one (a reference
+    # dying away, or a noisy sensor; not a failing one)
     import scipy.signal
 
     m = _loop()
@@ -504,22 +504,28 @@ def test_a_quiet_feedback_is_not_a_fault_a_stuck_one_is():
     noise = 0.01
     y = clean + noise * rng.standard_normal(u.size)
     accepted = Decision(1.0, True, "", None, {})
-    refused = comp._judge_fit(accepted, m, u, y)
-    assert not refused.accepted and "misbehaves" in refused.reason
-    assert refused.figures["fresh_fit_pct"] < 90.0
+    d = comp._judge_fit(accepted, m, u, y, residual_floor=noise)
+    assert d.figures["fresh_fit_pct"] < 90.0
     # the residual is the noise: within the bound of the usual one (1 + 3.09/sqrt(2*9.75)
-    # = 1.70 times it over 0.5-20 Hz and 0.25 s)
-    assert refused.figures["fresh_residual_rms"] == pytest.approx(noise, rel=0.15)
-    quiet = comp._judge_fit(accepted, m, u, y, residual_floor=noise)
-    assert quiet.accepted and "quiet" in quiet.figures
+    # = 1.70 times it over 0.5-20 Hz and 0.25 s, a floor from loads)
+    assert d.figures["fresh_residual_rms"] == pytest.approx(noise, rel=0.15)
+    assert d.accepted and "its loads" in d.figures["quiet"]
     assert comp._quiet(250) == pytest.approx(1.0 + 3.09 / np.sqrt(2 * 2 * 19.5 * 0.25))
-    # a stuck sensor at the same moment: its residual is the feedback's own swing, above
-    # that bound
+    # before any load, against the model's own residual over the window's 0.5 s before
+    # (the bound 1 + 3.09 sqrt(1/19.5 + 1/39) = 1.86 times it)
+    d = comp._judge_fit(accepted, m, u, y)
+    assert d.accepted and "the window" in d.figures["quiet"]
+    assert comp._quiet(250, 500) == pytest.approx(
+        1.0 + 3.09 * np.sqrt(1 / (2 * 2 * 19.5 * 0.25) + 1 / (2 * 2 * 19.5 * 0.5)))
+    # a sensor stuck over the newest 0.25 s: its residual is the feedback's own swing,
+    # above either bound
     stuck = y.copy()
     stuck[-250:] = stuck[-251]
     assert not comp._judge_fit(accepted, m, u, stuck, residual_floor=noise).accepted
+    assert not comp._judge_fit(accepted, m, u, stuck).accepted
     # a floor that the residual exceeds by more than the bound: a fault
-    assert not comp._judge_fit(accepted, m, u, y, residual_floor=noise / 2.0).accepted
+    refused = comp._judge_fit(accepted, m, u, y, residual_floor=noise / 2.0)
+    assert not refused.accepted and "misbehaves" in refused.reason
 
 
 def _h1_of(u, model, seed=2):

@@ -801,6 +801,20 @@ def _polarity_fault(model: ArmaxModel, band: tuple[float, float]) -> str:
     return ""
 
 
+def _window_residual(model: ArmaxModel, u: np.ndarray, y: np.ndarray, n_fit: int,
+                     n_usual: int) -> float:
+    """RMS of ``y − ŷ`` (``ŷ``: ``model`` run free on ``u`` from the window's start) over
+    the ``n_usual`` samples before the newest ``n_fit``; inf when there are none or the
+    model cannot be run."""
+    if n_usual <= 0 or not model.is_stable():
+        return math.inf
+    b = np.concatenate([np.zeros(model.delay), model.b])
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = (y - scipy.signal.lfilter(b, model.a, u))[-n_fit - n_usual:-n_fit]
+        value = float(np.sqrt(np.mean(e * e)))
+    return value if math.isfinite(value) else math.inf
+
+
 def _gain_over(drive: np.ndarray, r: np.ndarray) -> float:
     """The larger of the drive's RMS and peak over the reference's, as
     :func:`ehss.compensation.check_drive` bounds them (inf for a reference of zeros)."""
@@ -1039,17 +1053,27 @@ class AdaptiveCompensator:
         bursts) shows first in the newest samples, which the model's simulation on the
         drive no longer fits. A fit below ``acceptance.min_fit_pct`` is a fault, unless
         the residual ``y − ŷ`` of those samples is no larger than the channel's usual
-        one (``residual_floor``: the median over its recent loads, from
-        :class:`ehss.live.compensate.ChannelAdapter`) can be by chance: then the
-        feedback is quiet, not wrong. A reference that dies away (the end of an
-        earthquake record) leaves the sensor's noise to be fitted, and the fit falls
-        below 90 % while the loop and the sensor are as they were: on the simulated
-        rig, an earthquake-like record of 40 s alarmed on both channels in its last
-        5 s. A stuck, flipped or drowned sensor leaves a residual as large as the
-        feedback, tens of times the usual one. The bound is the floor times
-        ``1 + z / √(2ν)`` (the RMS of ν independent samples scatters by about
-        ``1/√(2ν)``, ν = 2 B T in a band of B Hz over the stretch of T s; z =
-        :data:`QUIET_Z`): 1.70 over 0.5–20 Hz and 0.25 s.
+        one can be by chance: then the feedback is quiet or noisy, not wrong.
+
+        The usual residual is ``residual_floor`` (the median over the channel's recent
+        loads that fitted by ``min_fit_pct``, from
+        :class:`ehss.live.compensate.ChannelAdapter`) or, before there is one, the
+        model's own residual over the window's second half before those samples.
+
+        * A reference that dies away (the end of an earthquake record) leaves the
+          sensor's noise to be fitted, and the fit falls below 90 % while the loop and
+          the sensor are as they were: on the simulated rig, an earthquake-like record
+          of 40 s alarmed on both channels in its last 5 s.
+        * A sensor whose noise is 10 % of the feedback allows no model a fit of 90 %:
+          the 25 Hz servo was compensated only when a fit happened to reach it.
+        * A stuck, flipped or drowned sensor leaves a residual as large as the
+          feedback, many times the usual one.
+
+        The bound is the usual residual times ``1 + z s``, with ``s`` the relative
+        scatter of the ratio of the two RMS values (``1/√(2ν)`` for ν independent
+        samples, ν = 2 B T in a band of B Hz over a stretch of T s; a floor from loads
+        counts as exact) and z = :data:`QUIET_Z`: 1.70 over 0.5–20 Hz and 0.25 s
+        against loads, 1.86 against the window's 0.5 s before.
         """
         acc = self.guard.acceptance
         n_fit = max(1, min(int(round(self.guard.fit_s * self.fs_hz)), u.size // 2))
@@ -1057,22 +1081,35 @@ class AdaptiveCompensator:
         spread = float(np.std(y[-n_fit:]))
         residual = (1.0 - fit / 100.0) * spread if math.isfinite(fit) else math.inf
         figures = {**decision.figures, "fresh_fit_pct": fit, "fresh_residual_rms": residual}
-        if fit < acc.min_fit_pct:
-            if residual_floor is None or not residual <= self._quiet(n_fit) * residual_floor:
-                return Decision(decision.t_s, False, f"the model fits the latest "
-                                f"{n_fit / self.fs_hz:g} s of feedback by {fit:.1f} % "
-                                f"(needs {acc.min_fit_pct:g} %): the sensor or the loop "
-                                "misbehaves", figures=figures)
-            figures["quiet"] = (f"fits the latest {n_fit / self.fs_hz:g} s by {fit:.1f} % "
-                                f"with a residual of {residual:.3g}, within the channel's "
-                                f"usual {residual_floor:.3g}: a quiet feedback")
+        if fit >= acc.min_fit_pct:
+            return Decision(decision.t_s, True, "", decision.design, figures)
+        usual, n_usual = residual_floor, None
+        if usual is None:
+            n_usual = u.size // 2 - n_fit
+            usual = _window_residual(model, u, y, n_fit, n_usual)
+        if not residual <= self._quiet(n_fit, n_usual) * usual:
+            return Decision(decision.t_s, False, f"the model fits the latest "
+                            f"{n_fit / self.fs_hz:g} s of feedback by {fit:.1f} % "
+                            f"(needs {acc.min_fit_pct:g} %): the sensor or the loop "
+                            "misbehaves", figures=figures)
+        figures["quiet"] = (f"fits the latest {n_fit / self.fs_hz:g} s by {fit:.1f} % "
+                            f"with a residual of {residual:.3g}, within the usual "
+                            f"{usual:.3g} ({'its loads' if n_usual is None else 'the window'}"
+                            "): a quiet or noisy feedback")
         return Decision(decision.t_s, True, "", decision.design, figures)
 
-    def _quiet(self, n_fit: int) -> float:
-        """The residual bound's factor over the floor (:meth:`_judge_fit`)."""
+    def _quiet(self, n_fit: int, n_usual: int | None = None) -> float:
+        """The residual bound's factor over the usual residual (:meth:`_judge_fit`),
+        that of ``n_usual`` samples (None: of loads, exact)."""
         lo, hi = self.band_hz
-        nu = max(1.0, 2.0 * (hi - lo) * n_fit / self.fs_hz)
-        return 1.0 + QUIET_Z / math.sqrt(2.0 * nu)
+
+        def nu(n: int) -> float:
+            return max(1.0, 2.0 * (hi - lo) * n / self.fs_hz)
+
+        var = 1.0 / (2.0 * nu(n_fit))
+        if n_usual is not None:
+            var += 1.0 / (2.0 * nu(max(1, n_usual)))
+        return 1.0 + QUIET_Z * math.sqrt(var)
 
     def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray,
                running: CompensatorDesign | None = None) -> Decision:

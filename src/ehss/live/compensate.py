@@ -82,6 +82,8 @@ __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "Compensati
 #: simulated rig (0.81 s against 1.23 s of data), which left −30 % payload on one pair
 #: of references at 2.6× over the first 2 s (README, "Adaptive compensation").
 REFINE_SAMPLES = 2
+#: A reference this far below its usual RMS (20 dB) is quiet (:meth:`Judging._quiet`).
+QUIET_REFERENCE = 0.1
 #: The H1 window's length where the band is wide enough (s), and how many of the
 #: estimate's points a narrower band must hold in it
 #: (:meth:`CompensationSettings.h1_window_for`): its segments are a third of the window,
@@ -428,8 +430,9 @@ class Snapshot:
     windows since the latest change of the loop (0: it came before them); whether the
     refits go without their record above the band, and then the latest model refitted
     and not loaded, where the next refit goes on from (:meth:`Judging.refine`); the
-    channel's usual residual on fresh data (the median over its recent loads; None
-    before :data:`RESIDUAL_LOADS` of them: :meth:`AdaptiveCompensator._judge_fit`)."""
+    channel's usual residual on fresh data and the reference's usual RMS over the
+    window (the medians over its recent loads; None before :data:`RESIDUAL_LOADS` of
+    them: :meth:`AdaptiveCompensator._judge_fit`, :meth:`Judging._quiet`)."""
 
     drive: np.ndarray
     feedback: np.ndarray
@@ -444,6 +447,7 @@ class Snapshot:
     unanchored: bool = False
     refitted: ehss.ArmaxModel | None = None
     residual_floor: float | None = None
+    reference_level: float | None = None
 
 
 class ChannelAdapter:
@@ -485,8 +489,10 @@ class ChannelAdapter:
             params=params)
         self.alarm = False
         self.refusals = 0
-        # the fresh residuals of loads that fitted as the guard asks (Snapshot)
+        # the fresh residuals of loads that fitted as the guard asks, and the
+        # reference's RMS over their windows (Snapshot)
         self._residuals: collections.deque[float] = collections.deque(maxlen=RESIDUAL_LOADS[1])
+        self._levels: collections.deque[float] = collections.deque(maxlen=RESIDUAL_LOADS[1])
         self.busy_until = 0
         self._n = 0
         self._n_average = int(round(s.average_s * self.fs))
@@ -776,8 +782,8 @@ class ChannelAdapter:
                         self._base if spans else None, spans, self.compensator.current,
                         self._ran_spans(), fresh, self.compensator.current_model,
                         unanchored, self._refitted if unanchored else None,
-                        float(np.median(self._residuals))
-                        if len(self._residuals) >= RESIDUAL_LOADS[0] else None)
+                        *((float(np.median(self._residuals)), float(np.median(self._levels)))
+                          if len(self._residuals) >= RESIDUAL_LOADS[0] else (None, None)))
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator
@@ -843,8 +849,10 @@ class ChannelAdapter:
         if verdict.decision.accepted:
             self._refitted = None
             if "quiet" not in figures and math.isfinite(figures.get("fresh_residual_rms",
-                                                                    math.inf)):
+                                                                    math.inf)) \
+                    and "reference_rms" in figures:
                 self._residuals.append(float(figures["fresh_residual_rms"]))
+                self._levels.append(float(figures["reference_rms"]))
         elif "refit_rows" in figures and self.compensator.current is None:
             self._refitted = verdict.model     # Snapshot.refitted
 
@@ -1047,6 +1055,7 @@ class Judging:
                                            residual_floor=snap.residual_floor)
         if rows:
             decision.figures["refit_rows"] = rows
+        decision.figures["reference_rms"] = float(np.std(snap.desired))
         if decision.accepted and decision.design is not None and snap.current is not None \
                 and snap.ran:
             decision = self._against_running(decision, snap)
@@ -1054,31 +1063,38 @@ class Judging:
 
     def _quiet(self, snap: Snapshot) -> str:
         """Why the windows of ``snap`` cannot judge a model (empty if they can): a
-        reference so quiet that even a model that leaves the channel's usual residual
-        (``snap.residual_floor``) would fit the feedback by less than the guard's
-        ``min_fit_pct``, its RMS over a third of the window below
+        reference, over a third of the window, both 20 dB below its usual level (its
+        RMS over the windows of the channel's recent loads, ``snap.reference_level``:
+        the 20 dB within which the band is taken from its spectrum) and so quiet that
+        even a model that leaves the channel's usual residual (``snap.residual_floor``)
+        would fit the feedback by less than the guard's ``min_fit_pct``: its RMS below
         ``floor / (1 − min_fit_pct / 100)``.
 
         Between tests, or once a record has died away, the stream goes on with next to
         nothing in the band: the H1 estimate confirms no point, the estimator drifts
         where nothing excites it, and every judgement failed as a fault. On the
-        simulated rig, a record stopped at 25 s alarmed on both channels 3–4 s later.
+        simulated rig, a record stopped at 20 s for 10 s alarmed 1.4 s into the pause.
         Refused as no fault, such windows keep the last good compensator and raise no
         alarm. A failing sensor is judged as before: it does not quieten the reference.
+        Both conditions: the first alone would skip a coda's last seconds, where a
+        stuck sensor is still told by its residual (:meth:`AdaptiveCompensator.
+        _judge_fit`); the second alone every judgement of a loop whose sensor noise is
+        10 % of its feedback, where no model fits by 90 %.
         """
-        floor = snap.residual_floor
-        if floor is None or snap.desired.size < 3:
+        floor, usual = snap.residual_floor, snap.reference_level
+        if floor is None or usual is None or snap.desired.size < 3:
             return ""
         min_fit = self.compensator.guard.acceptance.min_fit_pct
-        need = floor / (1.0 - min_fit / 100.0)
+        need = min(floor / (1.0 - min_fit / 100.0), QUIET_REFERENCE * usual)
         # in each third of the window (the H1 estimate's segments): a window that a
         # pause ended or began in is no more use than a quiet one
         level = min(float(np.std(part)) for part in np.array_split(snap.desired, 3))
         if level >= need:
             return ""
         return (f"the reference is quiet ({level:.3g} RMS over a third of the window, "
-                f"below the {need:.3g} at which a model leaving the usual residual fits "
-                f"the feedback by {min_fit:g} %): nothing to judge")
+                f"below {need:.3g}: 20 dB under its usual {usual:.3g}, and too little for "
+                f"a model leaving the usual residual to fit the feedback by {min_fit:g} "
+                "%): nothing to judge")
 
     def _against_running(self, decision: Decision, snap: Snapshot) -> Decision:
         """A model's compensator replaces the running one only if, replayed on the
