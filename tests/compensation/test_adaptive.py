@@ -583,3 +583,19 @@ def test_a_drive_just_past_the_gain_bound_is_refused_but_no_fault():
         d = comp.propose(1.0, m, h1, r)
         assert not d.accepted and "bound" in d.reason
         assert d.fault is fault
+
+
+def test_a_drive_just_past_a_rate_limit_is_refused_but_no_fault():
+    # the same for the limits a drive must respect: a peak rate 10 % over its bound is
+    # no fault, one 2.5 times it is
+    m = _loop()
+    r, h1 = _h1(m)
+    ok = AdaptiveCompensator(FS, BAND, preview=128).propose(1.0, m, h1, r)
+    drive = run_compensator(ok.design, r)[ok.design.settle_samples:]
+    rate = float(np.max(np.abs(np.diff(drive)))) * FS
+    for bound, fault in ((0.9 * rate, False), (0.4 * rate, True)):
+        comp = AdaptiveCompensator(FS, BAND, preview=128,
+                                   guard=UpdateGuard(limits=DriveLimits(max_rate=bound)))
+        d = comp.propose(1.0, m, h1, r)
+        assert not d.accepted and "peak rate" in d.reason
+        assert d.fault is fault
