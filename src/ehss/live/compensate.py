@@ -87,7 +87,7 @@ QUIET_REFERENCE = 0.1
 #: The H1 window's length where the band is wide enough (s), and how many of the
 #: estimate's points a narrower band must hold in it
 #: (:meth:`CompensationSettings.h1_window_for`): its segments are a third of the window,
-#: and the narrowband test needs more than 8 (:func:`ehss.compensation.adaptive`).
+#: and the narrowband test needs more than 8 (:mod:`ehss.compensation.adaptive`).
 H1_WINDOW_S = 1.5
 H1_BAND_POINTS = 8
 #: Loads whose residual on fresh data make a channel's usual one (their median, the
@@ -778,12 +778,13 @@ class ChannelAdapter:
         fresh = max(0, self._changed_at - (self._n - self.window.fill))
         unanchored = self.compensator.current is None \
             and self.refusals >= self.settings.alarm_after
+        floor = level = None
+        if len(self._residuals) >= RESIDUAL_LOADS[0]:
+            floor, level = float(np.median(self._residuals)), float(np.median(self._levels))
         return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
                         self._base if spans else None, spans, self.compensator.current,
                         self._ran_spans(), fresh, self.compensator.current_model,
-                        unanchored, self._refitted if unanchored else None,
-                        *((float(np.median(self._residuals)), float(np.median(self._levels)))
-                          if len(self._residuals) >= RESIDUAL_LOADS[0] else (None, None)))
+                        unanchored, self._refitted if unanchored else None, floor, level)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator
