@@ -7,7 +7,7 @@ change-detection tests: each returns a live record ``(layout, samples, fs)`` lik
 * :func:`specimen_record`: a servo-hydraulic actuator pushing a specimen spring, at
   4 kHz: valve lag, piston and specimen mass on the oil column's stiffness and the
   spring, proportional position control;
-* :func:`high_pass_record` (:data:`HIGH_PASS`): a 30 Hz mode behind a 0.5 Hz
+* :data:`HIGH_PASS` (:func:`loop_record`): a 30 Hz mode behind a 0.5 Hz
   second-order high-pass (an AC-coupled sensor, an acceleration generator), at 1 kHz.
 
 Each channel's reference is band-pass filtered random noise and its feedback carries white
@@ -27,7 +27,7 @@ from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
 
 from ehss.live.rig import rig_layout
 
-__all__ = ["servo_record", "specimen_record", "high_pass_record", "LoopSpec", "SERVO",
+__all__ = ["servo_record", "specimen_record", "loop_record", "LoopSpec", "SERVO",
            "SPECIMEN", "HIGH_PASS", "discrete", "simulate_states", "reference"]
 
 
@@ -197,12 +197,10 @@ def specimen_record(*, n_channels: int = 2, duration_s: float, seed: int,
                    channel=channel)
 
 
-def high_pass_record(*, n_channels: int = 2, duration_s: float, seed: int,
-                     change_s: float | None = None, mass_factor: float = 1.0,
-                     channel: int = 1):
-    """The loop behind a 0.5 Hz high-pass at 1 kHz; from ``change_s`` the moving mass of
-    ``channel`` is ``mass_factor`` times larger."""
-    return _record(HIGH_PASS.make, HIGH_PASS.fs, n_channels=n_channels,
-                   duration_s=duration_s, seed=seed, rms=HIGH_PASS.rms,
-                   band_hz=HIGH_PASS.band_hz, change_s=change_s, factor=mass_factor,
-                   channel=channel)
+def loop_record(spec: LoopSpec, *, n_channels: int = 2, duration_s: float, seed: int,
+                change_s: float | None = None, factor: float = 1.0, channel: int = 1):
+    """Any loop of this module (``spec``) with its reference; from ``change_s`` the
+    parameter of ``channel`` is ``factor`` times what it was."""
+    return _record(spec.make, spec.fs, n_channels=n_channels, duration_s=duration_s,
+                   seed=seed, rms=spec.rms, band_hz=spec.band_hz, change_s=change_s,
+                   factor=factor, channel=channel)

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from loops_for_detection import high_pass_record, servo_record, specimen_record
+from loops_for_detection import HIGH_PASS, loop_record, servo_record, specimen_record
 
 from ehss.live import (
     Block,
@@ -41,8 +41,8 @@ def _specimen(duration_s, seed, change_s=None):
 def _high_pass(duration_s, seed, change_s=None):
     # +40 % moving mass behind the 0.5 Hz high-pass: the 30 Hz mode falls to 25 Hz
     # (10 stationary minutes on seeds 1 and 3 raised no alarm either; README)
-    return high_pass_record(duration_s=duration_s, seed=seed, change_s=change_s,
-                            mass_factor=1.4)
+    return loop_record(HIGH_PASS, duration_s=duration_s, seed=seed, change_s=change_s,
+                       factor=1.4)
 
 
 def _rig(duration_s, seed, change_s=None):
