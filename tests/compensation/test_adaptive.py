@@ -599,3 +599,19 @@ def test_a_drive_just_past_a_rate_limit_is_refused_but_no_fault():
         d = comp.propose(1.0, m, h1, r)
         assert not d.accepted and "peak rate" in d.reason
         assert d.fault is fault
+
+
+def test_a_disagreement_within_twice_the_channels_usual_one_is_a_near_miss():
+    # the model two samples late: 14 deg off at the band's top, beyond twice the 5 deg
+    # bound (a fault), but within twice the 8 deg a channel's models usually miss by
+    m = _loop()
+    late = ArmaxModel(a=m.a, b=m.b, delay=m.delay + 2, dt=m.dt)
+    r, h1 = _h1(m)
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    d = comp.assess(1.0, late, h1, r)
+    assert not d.accepted and "disagrees" in d.reason
+    assert 10.0 < d.figures["h1_phase_deg"] < 16.0
+    assert d.fault
+    assert not comp.assess(1.0, late, h1, r, usual_disagreement=(0.5, 8.0)).fault
+    # usual disagreements within the bounds change nothing
+    assert comp.assess(1.0, late, h1, r, usual_disagreement=(0.2, 3.0)).fault

@@ -973,15 +973,20 @@ class AdaptiveCompensator:
     def assess(self, t_s: float, model: ArmaxModel, h1: Any, reference: np.ndarray,
                window: tuple[np.ndarray, np.ndarray] | None = None, *,
                running: CompensatorDesign | None = None,
-               residual_floor: float | None = None) -> Decision:
+               residual_floor: float | None = None,
+               usual_disagreement: tuple[float, float] | None = None) -> Decision:
         """The decision of :meth:`propose`, without recording it: changes nothing, so
         it may run on another thread or process than the one that records it.
         ``running``: the compensator the target runs (default :attr:`current`), which
         a design realised beyond the bounds must beat (:meth:`_realisable`);
         ``residual_floor``: the channel's usual residual on fresh data
-        (:meth:`_judge_fit`)."""
+        (:meth:`_judge_fit`); ``usual_disagreement``: how far (dB, degrees beyond the
+        estimate's uncertainty) the channel's models usually miss the H1 estimate
+        when they are no fault (:data:`NEAR_MISS`: a refusal within twice the larger
+        of that and the bounds is a near miss)."""
         running = self.current if running is None else running
-        decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float), running)
+        decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float), running,
+                               usual_disagreement)
         if decision.accepted and window is not None:
             decision = self._judge_fit(decision, model, *window, residual_floor=residual_floor)
         excited, n_band, _ = _excitation(h1, self.band_hz)
@@ -1102,7 +1107,8 @@ class AdaptiveCompensator:
         return 1.0 + QUIET_Z * math.sqrt(var)
 
     def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray,
-               running: CompensatorDesign | None = None) -> Decision:
+               running: CompensatorDesign | None = None,
+               usual: tuple[float, float] | None = None) -> Decision:
         g = self.guard
         if not model.is_stable():
             radius = float(np.max(np.abs(np.roots(model.a))))
@@ -1127,8 +1133,11 @@ class AdaptiveCompensator:
         mag_db, ph_deg = err.beyond_uncertainty(acc.uncertainty_sigmas)
         figures.update(h1_magnitude_db=mag_db, h1_phase_deg=ph_deg)
         if mag_db > acc.max_magnitude_db or ph_deg > acc.max_phase_deg:
-            gross = (mag_db > NEAR_MISS * acc.max_magnitude_db
-                     or ph_deg > NEAR_MISS * acc.max_phase_deg)
+            # a near miss is within NEAR_MISS of the bounds, or of the disagreements the
+            # channel's own models usually show, if larger (``usual``)
+            usual_db, usual_deg = (0.0, 0.0) if usual is None else usual
+            gross = (mag_db > NEAR_MISS * max(acc.max_magnitude_db, usual_db)
+                     or ph_deg > NEAR_MISS * max(acc.max_phase_deg, usual_deg))
             return Decision(t_s, False, f"{H1_DISAGREES} by "
                             f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty (bounds "
                             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",

@@ -94,6 +94,17 @@ H1_BAND_POINTS = 8
 #: floor of :meth:`ehss.compensation.AdaptiveCompensator._judge_fit`): at least the
 #: first, at most the last.
 RESIDUAL_LOADS = (3, 20)
+#: How far a channel's models usually miss the H1 estimate: this quantile, over its last
+#: judgements that were no fault (loads and near misses), of the magnitude and phase
+#: disagreements beyond the estimate's uncertainty, once there are enough of them;
+#: a refusal within :data:`ehss.compensation.adaptive.NEAR_MISS` times the larger of
+#: that and the bounds is a near miss. On the simulated rig its models' 90th percentile
+#: stays within the bounds (1 dB / 5°) and nothing changes; on a loop behind a 0.5 Hz
+#: high-pass, whose models miss the band's low end by 5–10° half of the time, three
+#: refusals of 12° in a row alarmed once in 10 stationary channel-minutes.
+USUAL_DISAGREEMENT = 0.9
+#: The fewest and the most judgements :data:`USUAL_DISAGREEMENT` is taken over.
+USUAL_JUDGEMENTS = (10, 40)
 #: Evaluations of each of a refit's Levenberg–Marquardt runs (from a nearby start it
 #: converges in 4–8; 30 changed no figure of the README's rig tables)
 REFINE_EVALUATIONS = 15
@@ -432,7 +443,8 @@ class Snapshot:
     and not loaded, where the next refit goes on from (:meth:`Judging.refine`); the
     channel's usual residual on fresh data and the reference's usual RMS over the
     window (the medians over its recent loads; None before :data:`RESIDUAL_LOADS` of
-    them: :meth:`AdaptiveCompensator._judge_fit`, :meth:`Judging._quiet`)."""
+    them: :meth:`AdaptiveCompensator._judge_fit`, :meth:`Judging._quiet`); how far its
+    models usually miss the H1 estimate (:data:`USUAL_DISAGREEMENT`)."""
 
     drive: np.ndarray
     feedback: np.ndarray
@@ -448,6 +460,7 @@ class Snapshot:
     refitted: ehss.ArmaxModel | None = None
     residual_floor: float | None = None
     reference_level: float | None = None
+    disagreement: tuple[float, float] | None = None
 
 
 class ChannelAdapter:
@@ -493,6 +506,9 @@ class ChannelAdapter:
         # reference's RMS over their windows (Snapshot)
         self._residuals: collections.deque[float] = collections.deque(maxlen=RESIDUAL_LOADS[1])
         self._levels: collections.deque[float] = collections.deque(maxlen=RESIDUAL_LOADS[1])
+        # the H1 disagreements of judgements that were no fault (Snapshot)
+        self._misses: collections.deque[tuple[float, float]] = collections.deque(
+            maxlen=USUAL_JUDGEMENTS[1])
         self.busy_until = 0
         self._n = 0
         self._n_average = int(round(s.average_s * self.fs))
@@ -781,10 +797,15 @@ class ChannelAdapter:
         floor = level = None
         if len(self._residuals) >= RESIDUAL_LOADS[0]:
             floor, level = float(np.median(self._residuals)), float(np.median(self._levels))
+        usual = None
+        if len(self._misses) >= USUAL_JUDGEMENTS[0]:
+            q = np.quantile(np.array(self._misses), USUAL_DISAGREEMENT, axis=0)
+            usual = (float(q[0]), float(q[1]))
         return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
                         self._base if spans else None, spans, self.compensator.current,
                         self._ran_spans(), fresh, self.compensator.current_model,
-                        unanchored, self._refitted if unanchored else None, floor, level)
+                        unanchored, self._refitted if unanchored else None, floor, level,
+                        usual)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator
@@ -847,6 +868,10 @@ class ChannelAdapter:
         if verdict.model is not None:
             self.chosen = verdict.chosen
         figures = verdict.decision.figures
+        if "h1_phase_deg" in figures and not (verdict.decision.fault
+                                              and not verdict.decision.accepted):
+            self._misses.append((float(figures["h1_magnitude_db"]),
+                                 float(figures["h1_phase_deg"])))
         if verdict.decision.accepted:
             self._refitted = None
             if "quiet" not in figures and math.isfinite(figures.get("fresh_residual_rms",
@@ -1053,7 +1078,8 @@ class Judging:
             return Verdict(Decision(t_s, False, f"no model or H1 estimate: {exc}"), None, "")
         decision = self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y),
                                            running=snap.current,
-                                           residual_floor=snap.residual_floor)
+                                           residual_floor=snap.residual_floor,
+                                           usual_disagreement=snap.disagreement)
         if rows:
             decision.figures["refit_rows"] = rows
         decision.figures["reference_rms"] = float(np.std(snap.desired))
