@@ -441,19 +441,26 @@ def free_run_fit(model: ArmaxModel, u: Any, y: Any, n_fit: int) -> float:
     -------
     float
     """
-    u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
-    if not model.is_stable():
+    y_run = _free_run(model, u)
+    if y_run is None:
         return -math.inf
-    b = np.concatenate([np.zeros(model.delay), model.b])
     with np.errstate(over="ignore", invalid="ignore"):
-        y_hat = scipy.signal.lfilter(b, model.a, u)[-n_fit:]
         y_new = y[-n_fit:]
         spread = float(np.linalg.norm(y_new - np.mean(y_new)))
-        miss = float(np.linalg.norm(y_new - y_hat))
+        miss = float(np.linalg.norm(y_new - y_run[-n_fit:]))
     if not (spread > 0.0 and math.isfinite(miss)):
         return -math.inf
     return 100.0 * (1.0 - miss / spread)
+
+
+def _free_run(model: ArmaxModel, u: Any) -> np.ndarray | None:
+    """``model``'s deterministic part run from rest on ``u`` (None if it is unstable)."""
+    if not model.is_stable():
+        return None
+    b = np.concatenate([np.zeros(model.delay), model.b])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.asarray(scipy.signal.lfilter(b, model.a, np.asarray(u, dtype=float)))
 
 
 # ---------------------------------------------------------------------- correction
@@ -806,11 +813,11 @@ def _window_residual(model: ArmaxModel, u: np.ndarray, y: np.ndarray, n_fit: int
     """RMS of ``y − ŷ`` (``ŷ``: ``model`` run free on ``u`` from the window's start) over
     the ``n_usual`` samples before the newest ``n_fit``; inf when there are none or the
     model cannot be run."""
-    if n_usual <= 0 or not model.is_stable():
+    y_run = _free_run(model, u)
+    if n_usual <= 0 or y_run is None:
         return math.inf
-    b = np.concatenate([np.zeros(model.delay), model.b])
     with np.errstate(over="ignore", invalid="ignore"):
-        e = (y - scipy.signal.lfilter(b, model.a, u))[-n_fit - n_usual:-n_fit]
+        e = (y - y_run)[-n_fit - n_usual:-n_fit]
         value = float(np.sqrt(np.mean(e * e)))
     return value if math.isfinite(value) else math.inf
 
