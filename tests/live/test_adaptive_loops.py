@@ -172,6 +172,11 @@ def test_the_refit_follows_the_stream_it_is_for() -> None:
     forced = CompensationSettings(refine=True)
     assert forced.for_stream(8, 5000.0) is forced
     assert auto.for_stream(8, 5000.0).to_dict()["refine"] is False
+    # a window twice as long (a narrow band) has twice the rows to refit
+    long = auto.for_band((0.5, 8.5))
+    assert long.h1_window_s == pytest.approx(3.0)
+    assert long.for_stream(1, REFINE_LOAD / 2).refine is True
+    assert long.for_stream(1, REFINE_LOAD / 2 + 1.0).refine is False
 
 
 def test_a_bad_refit_setting_is_refused() -> None:

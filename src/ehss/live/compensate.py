@@ -380,10 +380,14 @@ class CompensationSettings:
     def for_stream(self, n_channels: int, fs: float) -> CompensationSettings:
         """These settings for a stream of ``n_channels`` at ``fs``: ``refine`` None
         becomes whether channels × fs ≤ :data:`REFINE_LOAD` (what the worker's share of
-        a core allows)."""
+        a core allows), counted in windows of :data:`H1_WINDOW_S`: a refit's cost grows
+        with its rows, and a longer window (``h1_window_s``, :meth:`for_band`) has
+        more."""
         if self.refine is not None:
             return self
-        return dataclasses.replace(self, refine=n_channels * fs <= REFINE_LOAD)
+        window = H1_WINDOW_S if self.h1_window_s is None else self.h1_window_s
+        return dataclasses.replace(
+            self, refine=n_channels * fs * window / H1_WINDOW_S <= REFINE_LOAD)
 
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
@@ -1198,12 +1202,11 @@ class AdaptiveLoop:
                  loop: str | None = None, params: Any = None,
                  log: Callable[[dict], None] | None = None) -> None:
         self.target = target
-        settings = settings.for_stream(len(target.channels), float(target.fs))
-        self.settings = settings
         self.fs = float(target.fs)
         scales, band = _scales_and_band(target, settings.band_hz, self.fs)
         self.band_hz = (float(band[0]), float(band[1]))
-        settings = self.settings = settings.for_band(self.band_hz)
+        settings = settings.for_band(self.band_hz).for_stream(len(target.channels), self.fs)
+        self.settings = settings
         self.adapters = [
             ChannelAdapter(name, self.fs, self.band_hz, float(scales[k]) or 1.0, settings,
                            loop=loop, params=params, preview=target.preview)
