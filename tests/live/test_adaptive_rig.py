@@ -337,11 +337,11 @@ def test_a_pause_in_the_reference_keeps_the_compensator_and_raises_no_alarm():
     # the reference stops from 20 to 30 s (faded out and in over 0.2 s), as between two
     # tests while the stream goes on: nothing in the band to judge a model on, and the
     # estimator drifts where nothing excites it. Judged as before, the H1 and polarity
-    # guards failed as faults: an alarm 1.4 s after the stop (channel 2), and with
+    # guards failed as faults: alarms 1.25 and 1.4 s after the stop (measured); with
     # quiet windows skipped only as a whole, on both channels as the reference came
-    # back (30.4-30.5 s, measured); judgements on windows a third of which is quiet
-    # are skipped instead
-    desired = _desired(50.0)
+    # back (30.4-30.5 s); judgements on windows a third of which is quiet are skipped
+    # instead
+    desired = _desired(33.0)
     t = np.arange(desired.shape[1]) / FS
     gain = np.clip(np.maximum(20.0 - t, t - 30.0) / 0.2, 0.0, 1.0)
     desired = desired * gain
@@ -350,7 +350,7 @@ def test_a_pause_in_the_reference_keeps_the_compensator_and_raises_no_alarm():
     for name in rec.channels:
         paused = [d for d in rec.decisions[name] if 20.5 < d["t_s"] < 30.0]
         assert paused and all(not d["accepted"] and "quiet" in d["reason"] for d in paused)
-    # the compensator of before the pause runs on after it (measured 1.16x and 1.17x the
+    # the compensator of before the pause runs on after it (measured 1.18x and 1.31x the
     # level before over the first 1.5 s, with no load in between)
     before, after = rec.tracking_rms(10.0, 20.0), rec.tracking_rms(30.2, 31.7)
     assert np.all(after <= 1.5 * before)
@@ -359,17 +359,17 @@ def test_a_pause_in_the_reference_keeps_the_compensator_and_raises_no_alarm():
 @pytest.mark.slow
 def test_a_sine_dwell_after_a_random_reference_raises_no_alarm():
     # random for 20 s, then a sine dwell (5 Hz on channel 1, 12 Hz on channel 2) from
-    # 20.5 s: the compensator of the random part tracks the sines (measured 3.7-4.0 um,
-    # against 300 and 572 um without), but the models of a sine, compared with the H1
+    # 20.5 s: the compensator of the random part tracks the sines (measured 3.5-4.1 um,
+    # against 299 and 572 um without), but the models of a sine, compared with the H1
     # estimate's points beside it, were refused as faults and both channels alarmed at
     # 22.15-22.25 s (measured)
-    desired = _desired(40.0)
+    desired = _desired(30.0)
     t = np.arange(desired.shape[1]) / FS
     w = np.clip((t - 20.0) / 0.5, 0.0, 1.0)
     sines = RMS_M * np.sqrt(2.0) * np.sin(2 * np.pi * np.array([[5.0], [12.0]]) * t)
     desired = desired * (1.0 - w) + sines * w
     rec = _run(desired)
     assert [e for e in rec.events if e["kind"] == "alarm"] == []
-    assert np.all(rec.tracking_rms(22.0, 40.0) <= 2.0 * rec.tracking_rms(10.0, 20.0))
+    assert np.all(rec.tracking_rms(22.0, 30.0) <= 2.0 * rec.tracking_rms(10.0, 20.0))
     for name in rec.channels:
         assert any("single sine" in d["reason"] for d in rec.decisions[name] if d["t_s"] > 22)
