@@ -203,7 +203,8 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
             "analysis band, Hz (default: the baseline's, else where the reference's "
             "spectrum is within 20 dB of its peak); with --rig --compensate also the "
             "band of the rig's reference and of its compensation (default 0.5-20 Hz "
-            "for the position loop, 1-50 Hz for the others)"))),
+            "for the position loop, 3-50 Hz for the acceleration loop, 1-50 Hz for "
+            "the force loop)"))),
         ("--update", dict(type=float, default=0.1, metavar="S", help=(
             "evaluation period, s of stream time (default: %(default)s)"))),
     ),
@@ -218,9 +219,10 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
         ("--rms", dict(type=float, metavar="X", help=(
             "--compensate: RMS of the rig's reference in the loop's unit (default the "
             "rig's, with --band: 0.0005 m over 0.5-20 Hz for the position loop, whose "
-            "compensated drive must stay within the rig's limits; 0.5 m/s^2 or 1000 N "
-            "over 1-50 Hz for the others); with --udp the RMS of the target's "
-            "reference"))),
+            "compensated drive must stay within the rig's limits; 0.5 m/s^2 over "
+            "3-50 Hz for the acceleration loop, whose online model misses its 0.5 Hz "
+            "high-passes below; 1000 N over 1-50 Hz for the force loop); with --udp "
+            "the RMS of the target's reference"))),
         ("--target", dict(metavar="HOST:PORT", help=(
             "--compensate with --udp: where the compensator datagrams go "
             "(ehss.target.datagram); the stream must carry des<k>, each channel's "
