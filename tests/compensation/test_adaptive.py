@@ -510,12 +510,12 @@ def test_a_quiet_feedback_is_not_a_fault_a_stuck_one_is():
     # = 1.70 times it over 0.5-20 Hz and 0.25 s, a floor from loads)
     assert d.figures["fresh_residual_rms"] == pytest.approx(noise, rel=0.15)
     assert d.accepted and "its loads" in d.figures["quiet"]
-    assert comp._quiet(250) == pytest.approx(1.0 + 3.09 / np.sqrt(2 * 2 * 19.5 * 0.25))
+    assert comp._residual_bound(250) == pytest.approx(1.0 + 3.09 / np.sqrt(2 * 2 * 19.5 * 0.25))
     # before any load, against the model's own residual over the window's 0.5 s before
     # (the bound 1 + 3.09 sqrt(1/19.5 + 1/39) = 1.86 times it)
     d = comp._judge_fit(accepted, m, u, y)
     assert d.accepted and "the window" in d.figures["quiet"]
-    assert comp._quiet(250, 500) == pytest.approx(
+    assert comp._residual_bound(250, 500) == pytest.approx(
         1.0 + 3.09 * np.sqrt(1 / (2 * 2 * 19.5 * 0.25) + 1 / (2 * 2 * 19.5 * 0.5)))
     # a sensor stuck over the newest 0.25 s: its residual is the feedback's own swing,
     # above either bound

@@ -1089,7 +1089,7 @@ class AdaptiveCompensator:
         if usual is None:
             n_usual = u.size // 2 - n_fit
             usual = _window_residual(model, u, y, n_fit, n_usual)
-        if not residual <= self._quiet(n_fit, n_usual) * usual:
+        if not residual <= self._residual_bound(n_fit, n_usual) * usual:
             return Decision(decision.t_s, False, f"the model fits the latest "
                             f"{n_fit / self.fs_hz:g} s of feedback by {fit:.1f} % "
                             f"(needs {acc.min_fit_pct:g} %): the sensor or the loop "
@@ -1100,7 +1100,7 @@ class AdaptiveCompensator:
                             "): a quiet or noisy feedback")
         return Decision(decision.t_s, True, "", decision.design, figures)
 
-    def _quiet(self, n_fit: int, n_usual: int | None = None) -> float:
+    def _residual_bound(self, n_fit: int, n_usual: int | None = None) -> float:
         """The residual bound's factor over the usual residual (:meth:`_judge_fit`),
         that of ``n_usual`` samples (None: of loads, exact)."""
         lo, hi = self.band_hz
