@@ -91,6 +91,9 @@ def test_design_refuses_what_cannot_be_inverted():
         design_compensator(_loop())
     with pytest.raises(ParameterError, match="preview"):
         design_compensator(_loop(), band_hz=BAND, mode="causal", preview=5)
+    for within in ((1.0,), (0.0, 5.0), (1.0, float("nan")), "tight"):
+        with pytest.raises(ParameterError, match="within"):
+            design_compensator(_loop(), band_hz=BAND, within=within)
 
 
 # ----------------------------------------------------------------------------- guard

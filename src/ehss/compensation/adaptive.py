@@ -328,6 +328,7 @@ def design_compensator(model: ArmaxModel, *, band_hz: tuple[float, float] | None
         raise ParameterError(f"mode={mode!r} must be one of {MODES}")
     n_taps = check_int(n_taps, "n_taps", lo=1)
     preview = _check_preview(mode, preview, n_taps)
+    within = _check_within(within)
     band = band_hz if band_hz is not None else model.band_hz
     if band is None:
         raise ParameterError("the compensator needs the band the model is trusted over: "
@@ -389,6 +390,17 @@ def _realise(sos: np.ndarray, inv: InverseModel, band: tuple[float, float], *,
         error=got[inside] / target[inside] - 1.0, peak_gain=float(np.max(np.abs(got))),
         settle_samples=settle_samples(sos, taps.size),
     )
+
+
+def _check_within(within: Any) -> tuple[float, float]:
+    """``within`` as (dB, degrees), each positive (inf: no bound)."""
+    try:
+        db, deg = within
+    except (TypeError, ValueError):
+        raise ParameterError(f"within={within!r} must be a pair (dB, degrees)") from None
+    return (db if db == math.inf else check_real(db, "within dB", lo=0.0, lo_open=True),
+            deg if deg == math.inf else check_real(deg, "within degrees", lo=0.0,
+                                                   lo_open=True))
 
 
 def _check_preview(mode: str, preview: Any, n_taps: int) -> int:
