@@ -1,7 +1,7 @@
 """A Dask cluster on localhost started as a user starts one, and an archive of tiny records.
 
 The cluster is a ``dask scheduler`` process and ``dask worker`` processes
-(``--nworkers 1 --nthreads 1``) on free ports, each in a session of its own so that it
+(``--nworkers 1 --nthreads 1``) on ports they choose, each in a session of its own so that it
 can be stopped (or killed) with everything it started; the finaliser stops them all.
 The workers import ehss from this source tree (``PYTHONPATH``).
 """
@@ -9,6 +9,7 @@ The workers import ehss from this source tree (``PYTHONPATH``).
 from __future__ import annotations
 
 import datetime as dt
+import json
 import os
 import signal
 import socket
@@ -88,16 +89,35 @@ def wait_for_workers(address: str, n: int, timeout_s: float = 60.0) -> None:
         client.wait_for_workers(n, timeout=timeout_s)
 
 
+def _listening(info: Path, proc: subprocess.Popen, timeout_s: float = 60.0) -> str:
+    """The address the scheduler ``proc`` writes to ``info`` once it listens."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if info.exists():
+            try:
+                return str(json.loads(info.read_text())["address"])
+            except (ValueError, KeyError):
+                pass   # being written
+        if proc.poll() is not None:
+            raise RuntimeError(f"the scheduler exited ({proc.returncode}); see its log")
+        time.sleep(0.05)
+    raise TimeoutError(f"the scheduler wrote no address to {info} in {timeout_s:g} s")
+
+
 class Cluster:
     """A running scheduler and its workers."""
 
     def __init__(self, folder: Path, n_workers: int, worker_args: tuple[str, ...] = ()):
-        port = free_port()
-        self.address = f"tcp://127.0.0.1:{port}"
         self.folder = folder
+        # the scheduler binds ports of its own choosing (0) and writes where it listens:
+        # a port found free here may be taken by another test's process before the
+        # scheduler binds it ("Address already in use", seen once in seven runs)
+        info = folder / "scheduler.json"
         self.procs = [start([sys.executable, "-m", "dask", "scheduler", "--host",
-                             "127.0.0.1", "--port", str(port), "--dashboard-address",
-                             f"127.0.0.1:{free_port()}"], folder / "scheduler.log")]
+                             "127.0.0.1", "--port", "0", "--dashboard-address",
+                             "127.0.0.1:0", "--scheduler-file", str(info)],
+                            folder / "scheduler.log")]
+        self.address = _listening(info, self.procs[0])
         self.n = 0
         for _ in range(n_workers):
             self.add_worker(*worker_args)
