@@ -104,6 +104,53 @@ def test_pure_delay_phase(rng):
     assert_allclose(frf.magnitude_db[band], 0.0, atol=0.1)
 
 
+def test_a_delay_taken_out_makes_a_short_record_of_a_delay_exact(rng):
+    # y is u 40 samples late; segments of 256 hold only (1 - 40/256) of each other
+    u = rng.standard_normal(1000)
+    y = np.concatenate([np.zeros(40), u[:-40]])
+    plain = h1_estimate(u, y, FS, nperseg=256)
+    aligned = h1_estimate(u, y, FS, nperseg=256, delay=40)
+    band = plain.freq_hz <= 200
+    # unaligned: the coherence falls by about (1 - tau/T)^2 = 0.71
+    assert np.median(plain.coherence[band]) < 0.85
+    # aligned, the segments of y are those of u: the response is e^{-j w 40} to rounding
+    # and the coherence 1, from the 960 samples left (6 averages)
+    expected = np.exp(-2j * np.pi * aligned.freq_hz * 40 / FS)
+    assert_allclose(aligned.response, expected, rtol=0, atol=1e-12)
+    assert_allclose(aligned.coherence, 1.0, rtol=0, atol=1e-12)
+    assert aligned.delay_samples == 40 and aligned.n_averages == n_segments(960, 256, 128)
+    assert aligned.band(10.0, 100.0).delay_samples == 40
+
+
+def test_auto_finds_the_lag_of_a_lagging_response(rng):
+    # a low-pass 25 samples late: the cross-correlation peaks at 25 plus its own lag
+    b, a = scipy.signal.butter(2, 100.0, fs=FS)
+    u = rng.standard_normal(2000)
+    y = np.concatenate([np.zeros(25), scipy.signal.lfilter(b, a, u)[:-25]])
+    frf = h1_estimate(u, y, FS, nperseg=256, delay="auto")
+    assert 25 <= frf.delay_samples <= 28      # the filter's own group delay: 2.25 samples
+    band = frf.freq_hz <= 150
+    exact = _exact(b, a, frf.freq_hz) * np.exp(-2j * np.pi * frf.freq_hz * 25 / FS)
+    plain = h1_estimate(u, y, FS, nperseg=256)
+    # the estimate is of the same response, and nearer it
+    err, err_plain = (np.max(np.abs(f.response[band] - exact[band])) for f in (frf, plain))
+    assert err < 0.02 < err_plain
+    # no lag: nothing read late
+    assert h1_estimate(u, scipy.signal.lfilter(b, a, u), FS, nperseg=256,
+                       delay="auto").delay_samples in (1, 2, 3)
+    assert h1_estimate(u, 2.0 * u, FS, nperseg=256, delay="auto").delay_samples == 0
+
+
+def test_bad_delays(rng):
+    u = rng.standard_normal(300)
+    with pytest.raises(ParameterError, match="'auto'"):
+        h1_estimate(u, u, FS, nperseg=256, delay="late")
+    with pytest.raises(ParameterError, match="delay"):
+        h1_estimate(u, u, FS, nperseg=256, delay=-1)
+    with pytest.raises(DataError, match="less than a segment"):
+        h1_estimate(u, u, FS, nperseg=256, delay=45)
+
+
 def test_band_and_columns(rng):
     u = rng.standard_normal(8192)
     frf = h1_estimate(u, 2 * u, FS)
