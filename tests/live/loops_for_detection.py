@@ -8,7 +8,8 @@ change-detection tests: each returns a live record ``(layout, samples, fs)`` lik
   4 kHz: valve lag, piston and specimen mass on the oil column's stiffness and the
   spring, proportional position control;
 * :data:`HIGH_PASS` (:func:`loop_record`): a 30 Hz mode behind a 0.5 Hz
-  second-order high-pass (an AC-coupled sensor, an acceleration generator), at 1 kHz.
+  second-order high-pass (an AC-coupled sensor, an acceleration generator), at 1 kHz;
+* :data:`DELAYED`: a 12 Hz, ζ = 0.5 loop behind 2 ms of delay, at 1 kHz.
 
 Each channel's reference is band-pass filtered random noise and its feedback carries white
 sensor noise of 1 % of the feedback's RMS (seeds per channel). A change multiplies one
@@ -21,6 +22,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import control
 import numpy as np
 from numba import njit
 from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
@@ -28,7 +30,7 @@ from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
 from ehss.live.rig import rig_layout
 
 __all__ = ["servo_record", "specimen_record", "loop_record", "LoopSpec", "SERVO",
-           "SPECIMEN", "HIGH_PASS", "discrete", "simulate_states", "reference"]
+           "SPECIMEN", "HIGH_PASS", "DELAYED", "discrete", "simulate_states", "reference"]
 
 
 def _servo_ss(wn_scale: float) -> StateSpace:
@@ -78,6 +80,17 @@ def _high_pass_ss(mass_factor: float) -> StateSpace:
     wn, wh = 2 * math.pi * 30.0 / math.sqrt(mass_factor), 2 * math.pi * 0.5
     num = np.polymul([wn**2], [1.0, 0.0, 0.0])
     den = np.polymul([1.0, 1.4 * wn, wn**2], [1.0, 1.4 * wh, wh**2])
+    return StateSpace(*tf2ss(num, den))
+
+
+def _delayed_ss(mass_factor: float) -> StateSpace:
+    """A 12 Hz, ζ 0.5 position loop (a mass on the loop's stiffness and damping: its
+    moving mass × ``mass_factor``) behind 2 ms of delay (third-order Padé), as the
+    loopback target of the UDP tests runs one."""
+    w = 2 * math.pi * 12.0
+    num_d, den_d = control.pade(0.002, 3)
+    num = np.polymul([w * w], num_d)
+    den = np.polymul([mass_factor, 2 * 0.5 * w, w * w], den_d)
     return StateSpace(*tf2ss(num, den))
 
 
@@ -174,6 +187,8 @@ SERVO = LoopSpec("servo", _servo_mass, 2000.0, 1e-3, (1.0, 60.0), "mass")
 SPECIMEN = LoopSpec("specimen", _specimen_ss, 4000.0, 1e-3, (1.0, 100.0), "stiffness")
 #: The loop behind a 0.5 Hz high-pass at 1 kHz; its factor scales the moving mass.
 HIGH_PASS = LoopSpec("high-pass", _high_pass_ss, 1000.0, 1e-3, (1.0, 40.0), "mass")
+#: The 12 Hz loop behind 2 ms of delay at 1 kHz; its factor scales the moving mass.
+DELAYED = LoopSpec("delayed", _delayed_ss, 1000.0, 1e-3, (0.5, 20.0), "mass")
 
 
 def servo_record(*, n_channels: int = 2, duration_s: float, seed: int,

@@ -17,12 +17,21 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from loops_for_detection import HIGH_PASS, SERVO, SPECIMEN, LoopSpec, discrete, simulate_states
+from loops_for_detection import (
+    DELAYED,
+    HIGH_PASS,
+    SERVO,
+    SPECIMEN,
+    LoopSpec,
+    discrete,
+    simulate_states,
+)
 
 import ehss
 from ehss.target.filter import Compensator, CompensatorFilter
 
-__all__ = ["SteppingLoop", "LoopBlock", "loop_desired", "SERVO", "SPECIMEN", "HIGH_PASS"]
+__all__ = ["SteppingLoop", "LoopBlock", "loop_desired", "SERVO", "SPECIMEN", "HIGH_PASS",
+           "DELAYED"]
 
 
 def loop_desired(spec: LoopSpec, duration_s: float, seeds: tuple[int, ...], *,
