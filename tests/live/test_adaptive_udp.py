@@ -96,8 +96,12 @@ def _run(speed: float, **settings):
 @pytest.mark.slow
 @pytest.mark.realtime
 def test_a_remote_target_follows_a_payload_change():
-    # paced at 8x real time; the second run keeps the inverse built before the change
-    rec, counters, sent = _run(8.0)
+    # paced at 2x real time: the host's latency (the worker's judgement, the datagram,
+    # the target's inbox), tens of milliseconds, puts each load that many samples times
+    # the pace later in the stream; at 8x a load judged 1 s after the change came in
+    # 0.9-1.3 s later, at 1x and 2x 0.45-0.5 s later, as in process. The second run
+    # keeps the inverse built before the change, and adapts nothing: at 8x
+    rec, counters, sent = _run(2.0)
     frozen, _, _ = _run(8.0, adapt_until_s=CHANGE_S - 0.1)
     assert rec.desired.shape == (2, int(DURATION_S * FS))  # every sample, in order
     before = rec.tracking_rms(8.0, CHANGE_S)
@@ -112,17 +116,15 @@ def test_a_remote_target_follows_a_payload_change():
     assert changes and changes[0][0] == "1" and CHANGE_S < changes[0][1] <= CHANGE_S + 1.5
     assert all(ch == "1" for ch, _ in changes)
     # +40 % mass raises this loop's error under the old inverse about 70-fold (the rig's:
-    # 9-fold); a full model takes over 2.5-6 s after the change, when depending on where
-    # the host's timing puts the loads on the remote target (README, "A real target over
-    # UDP": the aim, 2 s, is not met here; [16, 20) s measured at up to 70x, as before
-    # the models were refitted). From 6 s after the change every 2-s stretch of channel
-    # 1 is within 1.5x its level before
-    stretches = [(a, a + 2.0) for a in np.arange(CHANGE_S + 6.0, DURATION_S, 2.0)]
+    # 9-fold); the first model refitted on the rows since the change (1 s of them) is
+    # in 1.5 s after it. From 2 s after the change every 2-s stretch of channel 1 is
+    # within 1.5x its level before (1.18-1.30x over [16, 18) s, at most 1.34x later:
+    # five runs at 1x and 2x; README, "A real target over UDP")
+    stretches = [(a, a + 2.0) for a in np.arange(CHANGE_S + 2.0, DURATION_S, 2.0)]
     for w in stretches:
         assert rec.tracking_rms(*w)[0] <= 1.5 * before[0], w
     # while the inverse built before the change stays at least 2x worse there
-    for a in np.arange(CHANGE_S + 6.0, DURATION_S, 2.0):
-        w = (a, a + 2.0)
+    for w in stretches:
         assert frozen.tracking_rms(*w)[0] >= 2.0 * rec.tracking_rms(*w)[0], w
     # channel 2 does not change (the rig's bound: the scatter of 1-s stretches, +-30 %)
     assert rec.tracking_rms(CHANGE_S + 2.0, DURATION_S)[1] <= 1.3 * before[1]
