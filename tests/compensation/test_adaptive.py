@@ -618,3 +618,23 @@ def test_a_disagreement_within_twice_the_channels_usual_one_is_a_near_miss():
     assert not comp.assess(1.0, late, h1, r, usual_disagreement=(0.5, 8.0)).fault
     # usual disagreements within the bounds change nothing
     assert comp.assess(1.0, late, h1, r, usual_disagreement=(0.2, 3.0)).fault
+
+
+@pytest.mark.parametrize("n", [1500, 60])
+def test_a_record_through_the_ratio_of_two_compensators(n):
+    # C_then / C_base applied by FFT with the FIR's response on the FFT's grid: the
+    # same as with each response summed over its taps at every frequency (the slow,
+    # direct form of CompensatorDesign.frequency_response), to rounding; a record
+    # shorter than the FIR pads to the FIR's length
+    from ehss.compensation.adaptive import _through
+
+    base = design_compensator(_loop(), band_hz=BAND)
+    heavier = ArmaxModel(a=_loop().a, b=0.8 * _loop().b, delay=1, dt=1.0 / FS)
+    then = design_compensator(heavier, band_hz=BAND)
+    x = np.random.default_rng(3).standard_normal(n)
+    n_fft = 1 << int(np.ceil(np.log2(max(2 * n, base.taps.size))))
+    f = np.fft.rfftfreq(n_fft, 1.0 / FS)
+    slow = np.fft.irfft(np.fft.rfft(x, n_fft) * then.frequency_response(f)
+                        / base.frequency_response(f), n_fft)[:n]
+    fast = _through(x, then, base)
+    assert np.max(np.abs(fast - slow)) <= 1e-12 * np.max(np.abs(slow))
