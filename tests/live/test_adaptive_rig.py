@@ -77,21 +77,22 @@ def test_adaptation_follows_a_payload_change(seeds, factor):
     after = [adapted.tracking_rms(*w) for w in _WINDOWS_S]
     # channel 1 over [22, 24) s within 2x its level before, and every later 2-s stretch
     # within 1.5x. The aim, 1.5x from 2 s after the change, is missed over [22, 24) s on
-    # some references (1.1-1.6x measured on 16 pairs after +40 %: README, "Adaptive
+    # some references (0.84-2.48x measured on 24 runs after +40 %: README, "Adaptive
     # compensation"): the heavier loop's own level, adapted from the start, is 1.2-1.4x
     # the lighter one's, and a 2-s stretch of the unchanged loop scatters by +-40 %
-    # about its 10-s level with the reference's content. The later stretches' bound is
-    # met here on this realisation of the sensor noise (seeds 3, 4: 1.46x at most after
-    # +40 %), not on every one (1.52x and 1.66x with the rig's noise seeds 1 and 2, the
-    # same code): a change that alters the course of a run can cross it while it is
-    # within the scatter over many, and is to be judged on those (README)
+    # about its 10-s level with the content of its reference. The bounds are met here
+    # on this realisation of the sensor noise (seeds 1, 2: 1.56x over [22, 24) s;
+    # seeds 3, 4: 1.46x at most later), not on every one (with the rig's noise seed 1,
+    # seeds 1, 2 give 2.18x and seeds 3, 4 1.52x, the same code): a change that alters
+    # the course of a run can cross them while it is within the scatter over many, and
+    # is to be judged on those (README)
     assert after[0][0] <= 2.0 * before[0]
     for a in after[1:]:
         assert a[0] <= 1.5 * before[0]
     # against what the changed loop itself reaches, the adaptation is complete from 2 s
     # after the change: every stretch within 1.5x of the same stretch of the rig that had
-    # the new payload all along (1.1-1.4x over [22, 24) s, <= 1.4x later, on seeds 1-4
-    # and three realisations of the sensor noise: README)
+    # the new payload all along (1.16-1.32x over [22, 24) s, <= 1.17x later, on seeds 1-4
+    # with this noise; 1.84x over [22, 24) s on seeds 1, 2 with the noise's seed 1: README)
     for w, a in zip(_WINDOWS_S, after, strict=True):
         assert a[0] <= 1.5 * settled.tracking_rms(*w)[0], w
     # while the inverse built before the change, not adapted, stays at least 2x worse in
