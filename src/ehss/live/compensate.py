@@ -1067,7 +1067,7 @@ class Judging:
         sees it (:func:`seen_alike`). On a 12 Hz loop behind two samples of delay,
         models that matched the changed loop within 1 % were refused 16° off at the
         band's top, 0.75 and 1 s after +40 % mass, and its error took 2.5–3 s to come
-        back (1.3–1.4× its level before over [2, 4) s after the change now). In steady
+        back (1.26–1.43× its level before over [2, 4) s after the change now). In steady
         running the estimate is taken as it is: a refusal there keeps a compensator that
         tracks well, and taken out there too, the bias let in models that the rig's
         guard had refused, with no better tracking over 24 runs after +40 % payload
@@ -1121,8 +1121,9 @@ class Judging:
     def _better(self, corrected: Verdict, refitted: Verdict, snap: Snapshot) -> Verdict:
         """Of a correction and a refitted model, judged on the same rows since a change,
         the one that leaves less tracking error where the correction was checked (the
-        newest rows, which it was not fitted to; the model was), if both pass; else the
-        one that passes (the correction if neither does).
+        newest rows, which it was not fitted to; the model was), if both pass and those
+        rows ran the compensator both would replace; else the correction if it passes,
+        the model if only it does.
 
         Which one is better depends on the loop and the change: on the simulated rig,
         1 s after +40 % payload, the correction left 13–19 % of the running one's error
@@ -1238,11 +1239,12 @@ def seen_alike(model: ehss.ArmaxModel, h1: FrequencyResponse, u: np.ndarray, fre
     A point averages the response over its bin, weighted by the window's main lobe and
     the drive's spectrum there: at the band's edges, where the drive's spectrum falls
     to nothing within a bin, and in short segments, that average is not the response
-    at the bin's centre. On a 10 Hz loop 0.75 s after a change (segments of 0.26 s),
-    the point at 19.5 Hz of a 0.5–20 Hz drive was 16° off a model that matched the
-    loop: the estimate of the model's own output through the same segments shows the
-    same bias, and the ratio of the two estimates compares like with like. An unstable
-    model, or one whose estimate has no power at a point, is left as it is."""
+    at the bin's centre. On the 12 Hz loop behind 2 ms of delay 0.75 s after +40 % mass
+    (segments of 0.26 s), the point at 19.5 Hz of a 0.5–20 Hz drive was 16° off a model
+    that matched the loop: the estimate of the model's own output through the same
+    segments shows the same bias, and the ratio of the two estimates compares like with
+    like. An unstable model, or one whose estimate has no power at a point, is left as
+    it is."""
     if not model.is_stable():
         return h1
     with np.errstate(over="ignore", invalid="ignore"):
