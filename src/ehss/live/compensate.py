@@ -1064,9 +1064,9 @@ class Judging:
         and their points are biased where the loop lags or the drive's spectrum ends
         within a bin: each segment of the feedback is read as late as it lags the drive
         (``delay="auto"``), and each point is compared with the model as the estimate
-        sees it (:func:`seen_alike`). On a 12 Hz loop behind two samples of delay,
-        models that matched the changed loop within 1 % were refused 16° off at the
-        band's top, 0.75 and 1 s after +40 % mass, and its error took 2.5–3 s to come
+        sees it (:func:`seen_alike`). On a 12 Hz loop behind two samples of delay, the
+        model refitted 0.75 s after +40 % mass was refused 16.4° off at the band's top
+        (0.3° as the estimate sees the model), and the error took 2.5–3 s to come
         back (1.26–1.43× its level before over [2, 4) s after the change now). In steady
         running the estimate is taken as it is: a refusal there keeps a compensator that
         tracks well, and taken out there too, the bias let in models that the rig's
