@@ -728,10 +728,8 @@ class ChannelAdapter:
         """Whether the rows since the latest change suffice to refit the model (after
         the start-up from the state the change left the loop in, as the running model
         has it: :meth:`Judging.refine`)."""
-        model = self.compensator.current_model
-        settle = 0 if model is None or not model.is_stable() else _start_up(model)
-        return self.settings.refine is not False \
-            and self._n - self._changed_at >= self.judging.refine_rows + settle
+        return self.settings.refine is not False and self._n - self._changed_at \
+            >= self.judging.rows_to_refit(self.compensator.current_model)
 
     def started(self, until: int, apply_index: int | None = None) -> None:
         """The compensator just accepted is sent: it fades in from sample
@@ -1079,12 +1077,11 @@ class Judging:
         h1 = ehss.h1_estimate(uh, yh, fs=self.fs, nperseg=nper, delay="auto")
         return seen_alike(model, h1, u, fresh)
 
-    def _rows_to_refit(self, snap: Snapshot) -> int:
+    def rows_to_refit(self, running: ehss.ArmaxModel | None) -> int:
         """Rows since a change that a refit needs: :attr:`refine_rows` after the
-        start-up of the running model (:meth:`refine`)."""
-        model = snap.running_model
-        return self.refine_rows + (0 if model is None or not model.is_stable()
-                                   else _start_up(model))
+        start-up of the ``running`` model (:meth:`refine`)."""
+        return self.refine_rows + (0 if running is None or not running.is_stable()
+                                   else _start_up(running))
 
     def _refine_rows(self, n_params: int) -> int:
         lo, hi = self.compensator.band_hz
@@ -1113,7 +1110,7 @@ class Judging:
         fresh = snap.fresh if self.settings.refine is not False else 0
         if snap.spans:
             corrected = self.correct(t_s, snap)
-            if fresh and u.size - fresh >= self._rows_to_refit(snap):
+            if fresh and u.size - fresh >= self.rows_to_refit(snap.running_model):
                 return self._better(corrected, self._model_verdict(t_s, snap, fresh), snap)
             return corrected
         return self._model_verdict(t_s, snap, fresh)
@@ -1150,7 +1147,7 @@ class Judging:
 
     def _model_verdict(self, t_s: float, snap: Snapshot, fresh: int) -> Verdict:
         u, y = snap.drive, snap.feedback
-        if fresh and u.size - fresh < self._rows_to_refit(snap):
+        if fresh and u.size - fresh < self.rows_to_refit(snap.running_model):
             return Verdict(Decision(t_s, False, f"{u.size - fresh} samples since the change "
                                     "of the loop: too few to refit its model yet",
                                     fault=False), None, "")
