@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import platform
 import time
-from importlib.metadata import PackageNotFoundError, version
 
 __all__ = ["versions", "timestamp"]
 
@@ -13,6 +12,10 @@ _PACKAGES = ("numpy", "scipy", "numba", "control", "matplotlib")
 
 def versions() -> dict[str, str]:
     """Versions of Python, ehss and the numerical packages it runs on."""
+    # imported here: the metadata's reader costs tens of milliseconds, and every command
+    # imports this module before it knows whether it will write anything
+    from importlib.metadata import PackageNotFoundError, version
+
     out = {"python": platform.python_version()}
     for name in ("ehss", *_PACKAGES):
         try:

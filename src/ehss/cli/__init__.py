@@ -95,20 +95,33 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     import argparse
     import importlib
 
-    from ehss import __version__
-
     class _Parser(argparse.ArgumentParser):
         """ArgumentParser whose errors are one line on stderr and exit code 2."""
 
         def error(self, message: str) -> None:  # type: ignore[override]
             self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
+    class _Version(argparse.Action):
+        """``--version``: the installed version, looked up only when asked for (the
+        package metadata's reader costs tens of milliseconds at every start)."""
+
+        def __init__(self, option_strings: list[str], dest: str) -> None:
+            super().__init__(option_strings, dest=argparse.SUPPRESS,
+                             default=argparse.SUPPRESS, nargs=0,
+                             help="show the version of ehss and exit")
+
+        def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
+            from ehss import __version__
+
+            print(f"ehss {__version__}")   # on stdout, as argparse's own version action
+            parser.exit()
+
     parser = _Parser(
         prog="ehss",
         description="Electro-hydraulic servo systems: simulate the rig, identify its closed "
         "loops with RELS, validate the models and compensate the drive.",
     )
-    parser.add_argument("--version", action="version", version=f"ehss {__version__}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     named = None if argv is None else _named_command(argv)
     registered: set[str] = set()
