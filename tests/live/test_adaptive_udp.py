@@ -27,7 +27,7 @@ from ehss.live.udp import UdpSource
 TARGET = Path(__file__).with_name("udp_target.py")
 SRC = Path(__file__).resolve().parents[2] / "src"
 FS = 1000.0
-DURATION_S = 26.0
+DURATION_S = 22.0
 CHANGE_S = 14.0
 FIELDS = ("t", *(f"{f}{k}" for k in (1, 2) for f in ("ref", "fb", "des")))
 
@@ -93,15 +93,24 @@ def _run(speed: float, **settings):
     return rec, counters, sender.sent
 
 
+def _course(rec) -> list[tuple]:
+    """What channel 1 was sent, refused and flagged from the change on: the reading of
+    a failure."""
+    return [(e["t_s"], e["kind"], e.get("model"), e.get("apply_index"), e.get("reason"))
+            for e in rec.events if e.get("channel") == "1" and e["t_s"] >= CHANGE_S]
+
+
 @pytest.mark.slow
 @pytest.mark.realtime
 def test_a_remote_target_follows_a_payload_change():
-    # paced at 2x real time: the host's latency (the worker's judgement, the datagram,
-    # the target's inbox), tens of milliseconds, puts each load that many samples times
-    # the pace later in the stream; at 8x a load judged 1 s after the change came in
-    # 0.9-1.3 s later, at 1x and 2x 0.45-0.5 s later, as in process. The second run
-    # keeps the inverse built before the change, and adapts nothing: at 8x
-    rec, counters, sent = _run(2.0)
+    # paced at real time, as a target runs: the host's latency (the worker's judgement,
+    # the datagram, the target's inbox), tens of milliseconds, puts each load that many
+    # samples times the pace later in the stream; at 8x a load judged 1 s after the
+    # change came in 0.9-1.3 s later, at 1x and 2x 0.45-0.5 s later, as in process, but
+    # at 2x a host whose cores were taken by other work came 2 s after the change at
+    # 1.5-4.8x its level before. The second run keeps the inverse built before the
+    # change, and adapts nothing: at 8x
+    rec, counters, sent = _run(1.0)
     frozen, _, _ = _run(8.0, adapt_until_s=CHANGE_S - 0.1)
     assert rec.desired.shape == (2, int(DURATION_S * FS))  # every sample, in order
     before = rec.tracking_rms(8.0, CHANGE_S)
@@ -118,11 +127,11 @@ def test_a_remote_target_follows_a_payload_change():
     # +40 % mass raises this loop's error under the old inverse about 70-fold (the rig's:
     # 9-fold); the first model refitted on the rows since the change (1 s of them) is
     # in 1.5 s after it. From 2 s after the change every 2-s stretch of channel 1 is
-    # within 1.5x its level before (1.18-1.30x over [16, 18) s, at most 1.34x later:
-    # five runs at 1x and 2x; README, "A real target over UDP")
+    # within 1.5x its level before (1.15-1.33x over [16, 18) s, at most 1.24x later:
+    # three runs; README, "A real target over UDP")
     stretches = [(a, a + 2.0) for a in np.arange(CHANGE_S + 2.0, DURATION_S, 2.0)]
     for w in stretches:
-        assert rec.tracking_rms(*w)[0] <= 1.5 * before[0], w
+        assert rec.tracking_rms(*w)[0] <= 1.5 * before[0], (w, _course(rec))
     # while the inverse built before the change stays at least 2x worse there
     for w in stretches:
         assert frozen.tracking_rms(*w)[0] >= 2.0 * rec.tracking_rms(*w)[0], w
