@@ -300,6 +300,29 @@ def test_a_compensator_that_raises_the_error_is_rolled_back():
 
 
 
+@pytest.mark.slow
+def test_a_change_soon_after_the_first_compensator_is_followed_not_rolled_back():
+    # +40 % payload at 8 s, while a load judged before it fades in (at 8.46 s). The
+    # trigger learns the compensated level from the first compensator's takeover on
+    # (the uncompensated start, tens of times higher, would widen it), tests from about
+    # 8.5 s, finds the rise already there and does not date it to that load: a change of
+    # the loop, followed. Learning from the start instead, it dated the rise to the load,
+    # and two rollbacks of equally old inverses held channel 1 at 2.7-10x the calm run's
+    # level, second by second, until 11 s (measured)
+    desired = _desired(14.0, (3, 4))
+    change = (RigEvent(8.0, "load.mass_kg", 1.4 * ehss.preset("default").load.mass_kg, "1"),)
+    rec = _run(desired, events=change)
+    calm = _run(desired)
+    assert not [e for e in rec.events if e["kind"] == "compensator_rollback"]
+    changes = [(e["channel"], e["t_s"]) for e in rec.events
+               if e["kind"] == "compensator_change"]
+    assert len(changes) == 1 and changes[0][0] == "1" and 8.0 < changes[0][1] <= 9.5
+    # from 2 s after the change, within 2x the unchanged rig (the heavier loop's own
+    # level is 1.2-1.4x; measured 1.39-1.47x per second from 10 s)
+    for a in (10.0, 12.0):
+        assert rec.tracking_rms(a, a + 2.0)[0] <= 2.0 * calm.tracking_rms(a, a + 2.0)[0], a
+
+
 def _earthquake_like(duration_s: float, seed: int) -> np.ndarray:
     """0.5–15 Hz random motion under an envelope: a rise over 3 s, 12 s of strong
     motion at 0.5 mm RMS, then a coda that dies away (time constant 6 s), as the

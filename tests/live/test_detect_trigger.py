@@ -126,3 +126,38 @@ def test_rearmed_it_tests_on_against_the_level_before_the_rise(rng):
         else:
             assert len(times) == 1
             assert not trigger.held     # learnt anew from the blocks after the hold
+
+
+def test_a_rise_there_before_the_test_began_is_not_dated(rng):
+    # the trigger tests from learn_s + lag_s (6 s) after it starts; a rise at 5.5 s is
+    # already there in the first block tested: it began then or before, and cannot be
+    # told from a load that faded in just then. A rise at 10 s, with blocks tested
+    # below it first, is dated
+    for at_s, censored in ((5.5, True), (10.0, False)):
+        e = rng.standard_normal(20_000)
+        e[int(at_s * FS):] *= 3.0
+        trigger = TrackingTrigger(FS)
+        times = _run(trigger, e)
+        assert len(times) == 1 and trigger.onset_censored is censored, (at_s, times)
+        if not censored:
+            assert abs(trigger.onset_index - at_s * FS) <= 100
+
+
+def test_restarted_with_a_hold_it_neither_tests_nor_learns_the_held_samples(rng):
+    # a level 30x higher for the first 2 s (an uncompensated start), then the steady
+    # one, and a 3x rise at 7.5 s. Learning from the start, the test's level takes in
+    # the first 2 s until 8 s, when the rise is flagged and dated to 8.0 s as if it
+    # began there, where a load could have faded in. Restarted with the first 2 s held,
+    # it learns the steady level alone, tests from 8 s, and says the rise was already
+    # there: not dated
+    e = rng.standard_normal(20_000)
+    e[:2000] *= 30.0
+    e[7500:] *= 3.0
+    plain = TrackingTrigger(FS)
+    assert len(_run(plain, e)) == 1
+    assert not plain.onset_censored and plain.onset_index >= 8000
+    held = TrackingTrigger(FS)
+    held.restart(2000)
+    times = _run(held, e)
+    assert len(times) == 1 and 8.0 < times[0] <= 8.5
+    assert held.onset_censored

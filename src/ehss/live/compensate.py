@@ -601,10 +601,13 @@ class ChannelAdapter:
         (:data:`~ehss.live.detect.ONSET_Z`; every block before it, from the CUSUM's last
         zero, below) is the one in which that load began to fade in, or a later one up
         to the first block after its fade-in. A rise flagged on the level held since an
-        undoing (in the blocks right after it) is a change of the loop."""
+        undoing (in the blocks right after it), or already there in the first block the
+        test took (:attr:`~ehss.live.detect.TrackingTrigger.onset_censored`), is a
+        change of the loop."""
         trigger = self.trigger
         self.change_at_load = None
-        if trigger is None or trigger.held:
+        if trigger is None or trigger.held or trigger.onset_censored:
+            # a rise already there when the test began cannot be dated to a load
             return None
         block = int(round(trigger.settings.block_s * self.fs))
         for load in reversed(self._undoable):
@@ -746,6 +749,11 @@ class ChannelAdapter:
             self._undoable = self._undoable[-2:] + [
                 _Load(apply_index, until, before, self._running_model)]
         self._running_model = self.compensator.current_model
+        if before is None and self.trigger is not None:
+            # the first compensator takes over: the error falls tens of times, and the
+            # blocks before it would widen the level the trigger tests against (a
+            # change 6 s after the first load was flagged only 2.4 s after it came)
+            self.trigger.restart(until - self._n)
         self.busy_from, self.busy_until = apply_index, until
         self._corrected_from = None if self._accepted_taps is None else until
         if self.compensator.current is not None:

@@ -537,8 +537,11 @@ class TriggerSettings:
 def _onset_blocks(run: list[float]) -> int:
     """Blocks of ``run`` (the z since the CUSUM's last zero) from its first at or above
     :data:`ONSET_Z` on (all of them if none is)."""
-    first = next((i for i, z in enumerate(run) if z >= ONSET_Z), 0)
-    return len(run) - first
+    return len(run) - _first_onset(run)
+
+
+def _first_onset(run: list[float]) -> int:
+    return next((i for i, z in enumerate(run) if z >= ONSET_Z), 0)
 
 
 class TrackingTrigger:
@@ -584,6 +587,11 @@ class TrackingTrigger:
         #: at the latest trigger, the level of the error since the change, √(median
         #: e²) of its blocks (geometric mean), over the learnt level
         self.rise = 1.0
+        #: at the latest trigger, whether the rise was there from the first block
+        #: tested (since the test started or restarted): it began then or before, and
+        #: :attr:`onset_index` is only the latest it can have begun
+        self.onset_censored = False
+        self._tested = 0
         self._seen = 0
         # what the latest trigger was tested against: the blocks before the change it
         # flagged and their calibration (kept for rearm); while the blocks are too few
@@ -594,12 +602,16 @@ class TrackingTrigger:
         self._held: Calibration | None = None
         self._hold_until = 0
 
-    def restart(self) -> None:
-        """Learn anew (the loop changed): the test waits ``learn_s`` of blocks."""
+    def restart(self, hold: int = 0) -> None:
+        """Learn anew (the loop changed, or the first compensator takes over): the
+        test waits ``learn_s`` of blocks; the next ``hold`` samples are neither tested
+        nor learnt."""
         self._x = []
         self._cusum = 0.0
         self._run = []
         self._held = None
+        self._tested = 0
+        self._hold_until = max(self._hold_until, self._seen + max(0, int(hold)))
 
     def rearm(self, hold: int) -> None:
         """Test on as before the latest trigger, whose rise was not a change of the
@@ -612,6 +624,7 @@ class TrackingTrigger:
         self._held = self._flagged
         self._cusum = 0.0
         self._run = []
+        self._tested = 0
         self._hold_until = self._seen + max(0, int(hold))
 
     @property
@@ -663,6 +676,7 @@ class TrackingTrigger:
         """One step of the CUSUM; True (dated, and the test restarted) at a trigger."""
         # S_k = max(0, S_{k−1} + z_k − κ), alarm at S_k ≥ h
         z = (x - cal.mean) / cal.sd
+        self._tested += 1
         self._cusum = max(0.0, self._cusum + z - DRIFT)
         # the z of the blocks since the sum last was zero
         self._run = self._run + [z] if self._cusum > 0.0 else []
@@ -670,6 +684,7 @@ class TrackingTrigger:
             return False
         self.triggers += 1
         n_onset = _onset_blocks(self._run)
+        self.onset_censored = len(self._run) == self._tested and _first_onset(self._run) == 0
         self.onset_s = n_onset * self.settings.block_s
         self.onset_index = self._seen - n_onset * self._n_block
         # x = ln(median e²): half the mean excess of x is the log of the level's ratio
