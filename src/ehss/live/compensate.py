@@ -633,27 +633,33 @@ class ChannelAdapter:
         rise is :data:`~ehss.live.detect.ONSET_Z` standard errors or more above that
         before the load (from the standard deviation of the blocks before; one-sided, a
         loop that did not change is taken for a changed one in about 1 rise in 25 with
-        the 5–15 blocks the window holds before a load: Student's t). With fewer than
-        three blocks before the load the timing alone decides."""
+        the 5–15 blocks before a load: Student's t). The blocks before are those of the
+        window when the load was sent (:attr:`_Load.before`, all of them older than
+        its fade-in), not those the window still holds when the rise is flagged: a
+        second after the load, those are few, and a change that came just before the
+        load is among them (−30 % payload on the rig 0.2 s before a load was rolled back
+        so, 4 blocks before against 10 since, and followed only 2 s after it). With
+        fewer than three blocks before the load the timing alone decides."""
         model = load.model
-        if model is None:
+        if model is None or load.before is None:
             return True
         u, y, _ = self.window.latest()
         first = self._n - self.window.fill
-        eps = BaselineResidual(model.a, model.b, model.a, model.delay)(u, y)
-
-        def levels(a: int, b: int) -> np.ndarray:
-            return np.array([block_statistic(eps[i:i + block])
-                             for i in range(max(a, block), b - block + 1, block)])
-
-        # the first block of the window holds the simulation's start
-        before = levels(0, load.apply_index - first)
-        after = levels(onset - first, self._n - first)
-        before, after = before[np.isfinite(before)], after[np.isfinite(after)]
+        after = _output_error_levels(model, u, y, onset - first, self._n - first, block)
+        before = load.before
         if before.size < 3 or not after.size:
             return True
         spread = float(np.std(before, ddof=1)) * math.sqrt(1 / before.size + 1 / after.size)
         return float(np.mean(after) - np.mean(before)) < ONSET_Z * spread
+
+    def _levels_now(self, model: ehss.ArmaxModel | None) -> np.ndarray | None:
+        """The trigger's block statistic of ``model``'s output errors over the window
+        as it is (:meth:`_loop_unchanged`; None without a trigger or a model)."""
+        if self.trigger is None or model is None:
+            return None
+        u, y, _ = self.window.latest()
+        block = int(round(self.trigger.settings.block_s * self.fs))
+        return _output_error_levels(model, u, y, 0, u.size, block)
 
     def follow_change(self) -> None:
         """The loop changed (a trigger): the estimator follows quickly for
@@ -747,7 +753,8 @@ class ChannelAdapter:
             self._undoable = []
         elif before is not None and before is not self.compensator.current:
             self._undoable = self._undoable[-2:] + [
-                _Load(apply_index, until, before, self._running_model)]
+                _Load(apply_index, until, before, self._running_model,
+                      self._levels_now(self._running_model))]
         self._running_model = self.compensator.current_model
         if before is None and self.trigger is not None:
             # the first compensator takes over: the error falls tens of times, and the
@@ -910,12 +917,27 @@ class ChannelAdapter:
 @dataclass(frozen=True)
 class _Load:
     """A load of a model's inverse that may be undone: it faded in from sample
-    ``apply_index`` to ``until``; ``design`` (with its ``model``) ran before it."""
+    ``apply_index`` to ``until``; ``design`` (with its ``model``) ran before it, and
+    ``before`` holds the trigger's block statistic of that model's output errors over
+    the window when the load was sent (None: no model or no trigger)."""
 
     apply_index: int
     until: int
     design: CompensatorDesign
     model: ehss.ArmaxModel | None
+    before: np.ndarray | None = None
+
+
+def _output_error_levels(model: ehss.ArmaxModel, u: np.ndarray, y: np.ndarray,
+                         start: int, stop: int, block: int) -> np.ndarray:
+    """ln median ε² (:func:`~ehss.live.detect.block_statistic`) of the output errors
+    y − (q^{-d} B/A) u of ``model``, run on the window ``u, y`` from its first sample, in
+    blocks of ``block`` from ``start`` to ``stop`` (the first block, which holds the
+    simulation's start, left out); finite ones only."""
+    eps = BaselineResidual(model.a, model.b, model.a, model.delay)(u, y)
+    x = np.array([block_statistic(eps[i:i + block])
+                  for i in range(max(start, block), stop - block + 1, block)])
+    return x[np.isfinite(x)]
 
 
 @dataclass(frozen=True)
