@@ -554,6 +554,8 @@ class ChannelAdapter:
         #: at the latest change flagged, the apply index of the load it came with
         #: (None: none), when the model's prediction errors told it from that load's
         self.change_at_load: int | None = None
+        # the sample a change flagged at a load began at, by the model's output errors
+        self._began: int | None = None
 
     def _forgetting(self, memory_s: float | None) -> float:
         """λ = 1 − 1/(memory fs) of a memory (None: ``memory_s``)."""
@@ -589,10 +591,12 @@ class ChannelAdapter:
             self._thetas.popleft()
         changed = self.trigger is not None and self.trigger(desired - feedback)
         if changed:
+            self._began = None
             self.undo = self._load_that_rose()
             changed = self.undo is None
         if changed:
-            self.follow_change()
+            self.follow_change(None if self._began is None
+                               else (self._n - self._began) / self.fs)
         return changed
 
     def _load_that_rose(self) -> _Load | None:
@@ -615,6 +619,7 @@ class ChannelAdapter:
                 if self._loop_unchanged(load, trigger.onset_index, block):
                     return load
                 self.change_at_load = load.apply_index
+                self._began = self._change_began(load, trigger.onset_index, block)
                 return None
         return None
 
@@ -652,6 +657,36 @@ class ChannelAdapter:
         spread = float(np.std(before, ddof=1)) * math.sqrt(1 / before.size + 1 / after.size)
         return float(np.mean(after) - np.mean(before)) < ONSET_Z * spread
 
+    def _change_began(self, load: _Load, onset: int, block: int) -> int:
+        """The sample a change flagged at ``load`` began at, by the output errors of the
+        model before it (:meth:`_loop_unchanged`), which the load does not move: the
+        least-squares change point of their level in the window's blocks (Hinkley's
+        estimate of one shift of the mean: the split that maximises
+        k (m − k) / m · (x̄_after − x̄_before)², the level rising), no later than the
+        trigger's onset (``onset``, dated by the tracking error, which the load's
+        fade-in moves too). On the rig, −30 % payload dated by the trigger to a load
+        0.7 s after it came was dated here to its own block; from the later date the
+        first correction waited 0.7 s longer for its rows (1.96× the level before over
+        [22, 24) s against 0.75×, the rig's noise seed 1)."""
+        assert load.model is not None
+        u, y, _ = self.window.latest()
+        first = self._n - self.window.fill
+        x = _output_error_levels(load.model, u, y, 0, self._n - first, block,
+                                 finite=False)
+        # block i (from 0) holds samples first + (i + 1) block ... first + (i + 2) block
+        last = min(x.size, (onset - first) // block)   # splits before the onset's block
+        best, began = 0.0, onset
+        m = x.size
+        for k in range(2, last):
+            a, b = x[:k], x[k:]
+            if not (np.isfinite(a).all() and np.isfinite(b).all()):
+                continue
+            gain = float(np.mean(b) - np.mean(a))
+            score = k * (m - k) / m * gain * gain
+            if gain > 0.0 and score > best:
+                best, began = score, first + (k + 1) * block
+        return min(began, onset)
+
     def _levels_now(self, model: ehss.ArmaxModel | None) -> np.ndarray | None:
         """The trigger's block statistic of ``model``'s output errors over the window
         as it is (:meth:`_loop_unchanged`; None without a trigger or a model)."""
@@ -661,9 +696,11 @@ class ChannelAdapter:
         block = int(round(self.trigger.settings.block_s * self.fs))
         return _output_error_levels(model, u, y, 0, u.size, block)
 
-    def follow_change(self) -> None:
+    def follow_change(self, onset_s: float | None = None) -> None:
         """The loop changed (a trigger): the estimator follows quickly for
-        ``follow_s``, and θ̂ is averaged from here on only.
+        ``follow_s``, and θ̂ is averaged from here on only. The change began
+        ``onset_s`` before (default: the trigger's :attr:`~ehss.live.detect.
+        TrackingTrigger.onset_s`).
 
         Its bound of tr P is lifted to ``follow_trace_bound`` (its forgetting then
         acts, as the tracker's does), and at the end P is set back to the one it had
@@ -671,7 +708,9 @@ class ChannelAdapter:
         """
         while len(self._thetas) > 1:  # the newest stays: a snapshot needs one
             self._thetas.popleft()
-        onset = 0.0 if self.trigger is None else self.trigger.onset_s
+        if onset_s is None:
+            onset_s = 0.0 if self.trigger is None else self.trigger.onset_s
+        onset = onset_s
         self._since = self._n - int(round(onset * self.fs))
         self._changed_at = self._since
         est = self.estimator
@@ -929,15 +968,16 @@ class _Load:
 
 
 def _output_error_levels(model: ehss.ArmaxModel, u: np.ndarray, y: np.ndarray,
-                         start: int, stop: int, block: int) -> np.ndarray:
+                         start: int, stop: int, block: int, *,
+                         finite: bool = True) -> np.ndarray:
     """ln median ε² (:func:`~ehss.live.detect.block_statistic`) of the output errors
     y − (q^{-d} B/A) u of ``model``, run on the window ``u, y`` from its first sample, in
     blocks of ``block`` from ``start`` to ``stop`` (the first block, which holds the
-    simulation's start, left out); finite ones only."""
+    simulation's start, left out); the finite ones only, unless ``finite`` is False."""
     eps = BaselineResidual(model.a, model.b, model.a, model.delay)(u, y)
     x = np.array([block_statistic(eps[i:i + block])
                   for i in range(max(start, block), stop - block + 1, block)])
-    return x[np.isfinite(x)]
+    return x[np.isfinite(x)] if finite else x
 
 
 @dataclass(frozen=True)
