@@ -348,6 +348,26 @@ def test_a_change_just_before_a_load_is_told_from_it_and_dated(seeds, noise):
     assert rec.tracking_rms(22.0, 24.0)[0] <= 1.5 * rec.tracking_rms(10.0, 20.0)[0]
 
 
+@pytest.mark.slow
+def test_a_judgement_on_the_loop_before_a_change_is_not_sent():
+    # +40 % payload at 20 s; a judgement taken at 20.25 s, on a window still mostly of
+    # the loop before, comes back after the change was flagged (20.4 s). Sent, it was
+    # an inverse of the loop that was, and the first correction then lacked rows under
+    # it: the first refit ran alone at 21.0 s and channel 1 was at 1.75x its level
+    # before over [22, 24) s (measured). Not sent, the correction races the refit
+    # there and wins: about 1.3x
+    desired = _desired(40.0, (7, 8))   # the references of the README's table
+    change = (RigEvent(20.0, "load.mass_kg", 1.4 * ehss.preset("default").load.mass_kg, "1"),)
+    rig = SteppingRig("position", desired, fs=FS, events=change, preview=128, seed=0)
+    rec = AdaptiveLoop(rig, CompensationSettings(band_hz=BAND), loop="position",
+                       params=ehss.preset("default")).run(duration_s=24.0)
+    flagged = next(e["t_s"] for e in rec.events if e["kind"] == "compensator_change")
+    stale = [e for e in rec.events if e["kind"] == "compensator_refused"
+             and "judged on the loop before the change" in e["reason"]]
+    assert stale and all(e["t_s"] < flagged for e in stale)
+    assert rec.tracking_rms(22.0, 24.0)[0] <= 1.5 * rec.tracking_rms(10.0, 20.0)[0]
+
+
 def _earthquake_like(duration_s: float, seed: int) -> np.ndarray:
     """0.5–15 Hz random motion under an envelope: a rise over 3 s, 12 s of strong
     motion at 0.5 mm RMS, then a coda that dies away (time constant 6 s), as the

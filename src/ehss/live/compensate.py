@@ -556,6 +556,8 @@ class ChannelAdapter:
         self.change_at_load: int | None = None
         # the sample a change flagged at a load began at, by the model's output errors
         self._began: int | None = None
+        #: the sample the latest change was flagged at (-1: none)
+        self.flagged_at = -1
 
     def _forgetting(self, memory_s: float | None) -> float:
         """λ = 1 − 1/(memory fs) of a memory (None: ``memory_s``)."""
@@ -711,6 +713,7 @@ class ChannelAdapter:
         if onset_s is None:
             onset_s = 0.0 if self.trigger is None else self.trigger.onset_s
         onset = onset_s
+        self.flagged_at = self._n
         self._since = self._n - int(round(onset * self.fs))
         self._changed_at = self._since
         est = self.estimator
@@ -1444,7 +1447,18 @@ class AdaptiveLoop:
             if every or self.target.index >= due:
                 del self._pending[k]
                 verdict = future.result()
-                self.adapters[k].take(verdict)
+                ad = self.adapters[k]
+                if int(round(t_s * self.fs)) < ad.flagged_at and not every:
+                    # judged on the loop before a change flagged since: an inverse of
+                    # the loop that was, and a load that the first correction would
+                    # have to wait for rows under (on the rig, +40 % payload, seeds
+                    # 7, 8: sent, it left no correction to race the first refit)
+                    self._event({"kind": "compensator_refused", "channel": ad.name,
+                                 "t_s": t_s, "reason": "judged on the loop before the "
+                                 f"change flagged at {ad.flagged_at / self.fs:.2f} s: "
+                                 "not sent"})
+                    continue
+                ad.take(verdict)
                 if not every:
                     self._apply(k, t_s, verdict.decision)
 
