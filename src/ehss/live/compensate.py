@@ -701,8 +701,8 @@ class ChannelAdapter:
     def follow_change(self, onset_s: float | None = None) -> None:
         """The loop changed (a trigger): the estimator follows quickly for
         ``follow_s``, and θ̂ is averaged from here on only. The change began
-        ``onset_s`` before (default: the trigger's :attr:`~ehss.live.detect.
-        TrackingTrigger.onset_s`).
+        ``onset_s`` before (default: the trigger's
+        :attr:`~ehss.live.detect.TrackingTrigger.onset_s`).
 
         Its bound of tr P is lifted to ``follow_trace_bound`` (its forgetting then
         acts, as the tracker's does), and at the end P is set back to the one it had
@@ -712,9 +712,8 @@ class ChannelAdapter:
             self._thetas.popleft()
         if onset_s is None:
             onset_s = 0.0 if self.trigger is None else self.trigger.onset_s
-        onset = onset_s
         self.flagged_at = self._n
-        self._since = self._n - int(round(onset * self.fs))
+        self._since = self._n - int(round(onset_s * self.fs))
         self._changed_at = self._since
         est = self.estimator
         if self._follow_until is None:
@@ -727,7 +726,7 @@ class ChannelAdapter:
             # than its blocks held
             self._correct_until = self._n + int(round(self.settings.correct_s * self.fs))
             self._base = self.compensator.current
-            since = self._n - int(round(onset * self.fs))
+            since = self._n - int(round(onset_s * self.fs))
             # the compensator sent last may not have run from the change on: the rows
             # before it took over ask for the one before it
             if self.busy_until <= since:

@@ -541,6 +541,7 @@ def _onset_blocks(run: list[float]) -> int:
 
 
 def _first_onset(run: list[float]) -> int:
+    """Index in ``run`` of its first z at or above :data:`ONSET_Z` (0 if none is)."""
     return next((i for i, z in enumerate(run) if z >= ONSET_Z), 0)
 
 
