@@ -640,13 +640,14 @@ class ChannelAdapter:
         rise is :data:`~ehss.live.detect.ONSET_Z` standard errors or more above that
         before the load (from the standard deviation of the blocks before; one-sided, a
         loop that did not change is taken for a changed one in about 1 rise in 25 with
-        the 5–15 blocks before a load: Student's t). The blocks before are those of the
-        window when the load was sent (:attr:`_Load.before`, all of them older than
-        its fade-in), not those the window still holds when the rise is flagged: a
-        second after the load, those are few, and a change that came just before the
-        load is among them (−30 % payload on the rig 0.2 s before a load was rolled back
-        so, 4 blocks before against 10 since, and followed only 2 s after it). With
-        fewer than three blocks before the load the timing alone decides."""
+        about 14 blocks before a load: Student's t). The blocks before are those of the
+        window when the load was sent (:attr:`_Load.before`, the 1.5-s window's blocks
+        but its first, all of them older than the load's fade-in), not those the
+        window still holds when the rise is flagged: a second after the load, those are
+        few, and a change that came just before the load is among them (−30 % payload
+        on the rig 0.2 s before a load was rolled back so, 4 blocks before against 10
+        since, and followed only 2 s after it). With fewer than three blocks before the
+        load the timing alone decides."""
         model = load.model
         if model is None or load.before is None:
             return True
