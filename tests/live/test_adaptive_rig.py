@@ -24,11 +24,14 @@ def _desired(duration_s: float, seeds: tuple[int, int] = (1, 2)) -> np.ndarray:
         for seed in seeds])
 
 
-def _run(desired, *, events=(), faults=(), adapt_until_s=np.inf):
+def _run(desired, *, events=(), faults=(), adapt_until_s=np.inf, noise=0, duration_s=None):
+    """The adaptive loop on the rig (sensor noise seed ``noise``), for ``duration_s`` of
+    the reference (default all of it)."""
     rig = SteppingRig("position", desired, fs=FS, events=events, faults=faults, preview=128,
-                      seed=0)
+                      seed=noise)
     settings = CompensationSettings(band_hz=BAND, adapt_until_s=adapt_until_s)
-    return AdaptiveLoop(rig, settings, loop="position", params=ehss.preset("default")).run()
+    return AdaptiveLoop(rig, settings, loop="position",
+                        params=ehss.preset("default")).run(duration_s=duration_s)
 
 
 #: Stretches after the change judged one by one: 2 s each, from 2 s after it to the end.
@@ -338,9 +341,7 @@ def test_a_change_just_before_a_load_is_told_from_it_and_dated(seeds, noise):
     # correction waited 0.7 s longer for its rows (1.96x)
     desired = _desired(40.0, seeds)   # the references of the README's table
     change = (RigEvent(20.0, "load.mass_kg", 0.7 * ehss.preset("default").load.mass_kg, "1"),)
-    rig = SteppingRig("position", desired, fs=FS, events=change, preview=128, seed=noise)
-    rec = AdaptiveLoop(rig, CompensationSettings(band_hz=BAND), loop="position",
-                       params=ehss.preset("default")).run(duration_s=24.0)
+    rec = _run(desired, events=change, duration_s=24.0, noise=noise)
     assert not [e for e in rec.events if e["kind"] == "compensator_rollback"]
     changes = [e for e in rec.events if e["kind"] == "compensator_change"]
     assert len(changes) == 1 and changes[0]["channel"] == "1" \
@@ -358,9 +359,7 @@ def test_a_judgement_on_the_loop_before_a_change_is_not_sent():
     # there and wins: about 1.3x
     desired = _desired(40.0, (7, 8))   # the references of the README's table
     change = (RigEvent(20.0, "load.mass_kg", 1.4 * ehss.preset("default").load.mass_kg, "1"),)
-    rig = SteppingRig("position", desired, fs=FS, events=change, preview=128, seed=0)
-    rec = AdaptiveLoop(rig, CompensationSettings(band_hz=BAND), loop="position",
-                       params=ehss.preset("default")).run(duration_s=24.0)
+    rec = _run(desired, events=change, duration_s=24.0)
     flagged = next(e["t_s"] for e in rec.events if e["kind"] == "compensator_change")
     stale = [e for e in rec.events if e["kind"] == "compensator_refused"
              and "judged on the loop before the change" in e["reason"]]
