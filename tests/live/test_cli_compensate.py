@@ -58,6 +58,32 @@ def test_bad_compensation_input_exits_2_with_one_line(argv, word, capsys):
     assert len(err.splitlines()) == 1 and word in err, err
 
 
+
+def test_a_rig_reference_beyond_the_rigs_limits_stops_before_the_run(tmp_path, capsys):
+    import ehss
+    from ehss.cli._live_compensate import _check_within_limits
+    from ehss.live.rig import rig_reference
+
+    # 1 mm over 1-30 Hz peaks at about 0.43 m/s on the position loop, over its 0.2 m/s:
+    # every compensator would be refused, so the run does not start
+    report = tmp_path / "run.json"
+    argv = ["live", "--rig", "position", "--duration", "10", "--band", "1", "30",
+            "--rms", "0.001", "--compensate", "preview", "--speed", "inf",
+            "--report", str(report), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "beyond the rig's limits" in err and "max_velocity_m_s" in err, err
+    assert not report.exists()
+    # the same reference at a quarter of the level is within them
+    params = ehss.preset("default")
+    fs = params.timing.control_rate_hz
+    quarter = rig_reference(10_000, fs, band_hz=(1.0, 30.0), rms=2.5e-4, seed=1)
+    _check_within_limits(quarter[None, :], fs, "position", params, 2.5e-4, (1.0, 30.0))
+    with pytest.raises(ehss.ParameterError, match="channel 1's reference"):
+        _check_within_limits(4 * quarter[None, :], fs, "position", params, 1e-3, (1.0, 30.0))
+
+
 @pytest.mark.slow
 def test_a_change_flagged_and_its_correction_are_printed(capsys):
     # +40 % payload on channel 1 at 10 s: the compensator's trigger (calibrated on the
