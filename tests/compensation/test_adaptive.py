@@ -5,18 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ehss.compensation.adaptive import (
-    AdaptiveCompensator,
-    Decision,
-    UpdateGuard,
-    compare_compensators,
-    design_compensator,
-    fit_correction,
-    fold_correction,
-    free_run_fit,
-    run_compensator,
-)
+from ehss.compensation.adaptive import AdaptiveCompensator, Decision, UpdateGuard, free_run_fit
 from ehss.compensation.checks import DriveLimits
+from ehss.compensation.compensator_design import design_compensator, run_compensator
+from ehss.compensation.correction import compare_compensators, fit_correction, fold_correction
 from ehss.errors import DataError, ParameterError
 from ehss.frequency import h1_estimate
 from ehss.identification.model import ArmaxModel
@@ -626,7 +618,7 @@ def test_a_record_through_the_ratio_of_two_compensators(n):
     # same as with each response summed over its taps at every frequency (the slow,
     # direct form of CompensatorDesign.frequency_response), to rounding; a record
     # shorter than the FIR pads to the FIR's length
-    from ehss.compensation.adaptive import _through
+    from ehss.compensation.correction import _through
 
     base = design_compensator(_loop(), band_hz=BAND)
     heavier = ArmaxModel(a=_loop().a, b=0.8 * _loop().b, delay=1, dt=1.0 / FS)
