@@ -284,9 +284,12 @@ def design_compensator(model: ArmaxModel, *, band_hz: tuple[float, float] | None
     --------
     >>> from ehss.identification.model import ArmaxModel
     >>> m = ArmaxModel(a=[1.0, -0.9], b=[0.1], delay=1, dt=1e-3)
-    >>> d = design_compensator(m, band_hz=(1.0, 50.0), n_taps=64)
-    >>> d.preview, d.max_amplitude_error_db < 0.01
-    (32, True)
+    >>> d = design_compensator(m, band_hz=(1.0, 50.0), n_taps=256)
+    >>> d.preview, bool(d.max_amplitude_error_db < 0.05), bool(d.max_phase_error_deg < 0.1)
+    (128, True, True)
+
+    The FIR must resolve the band limit's lowest edge: 64 taps (64 ms at 1 kHz) leave
+    about 0.3 dB / 0.4° near 1 Hz.
     """
     if not isinstance(model, ArmaxModel):
         raise TypeError(f"model must be an ArmaxModel, not {type(model).__name__}")
