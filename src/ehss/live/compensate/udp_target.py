@@ -1,0 +1,156 @@
+"""A remote target over UDP (:class:`UdpTarget`), and the sender of its compensators
+(:class:`DatagramSender`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ehss.errors import ParameterError
+
+
+class DatagramSender:
+    """Sends compensators to a remote target, one :mod:`ehss.target.datagram` each.
+
+    Parameters
+    ----------
+    address : (host, port)
+        The target's compensator port.
+    first_sequence : int, optional
+        Sequence number of the first datagram (default: the Unix time in ms, so that a
+        restarted host keeps numbering upwards).
+    """
+
+    def __init__(self, address: tuple[str, int], *, first_sequence: int | None = None) -> None:
+        import socket
+
+        self.address = (str(address[0]), int(address[1]))
+        self.sequence = int(time.time() * 1000) if first_sequence is None \
+            else int(first_sequence)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sent = 0
+
+    def send(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        """Encode and send one update; True once sent (the target may still refuse it)."""
+        from ehss.target.datagram import CompensatorUpdate, encode
+
+        update = CompensatorUpdate(channel=channel, sequence=self.sequence,
+                                   apply_index=int(apply_index), crossfade=int(crossfade),
+                                   compensator=compensator)
+        self._sock.sendto(encode(update), self.address)
+        self.sequence += 1
+        self.sent += 1
+        return True
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+@dataclass(frozen=True)
+class _UdpBlock:
+    first_index: int
+    desired: np.ndarray
+    drive: np.ndarray
+    feedback: np.ndarray
+
+
+class UdpTarget:
+    """A remote target as :class:`AdaptiveLoop` drives it.
+
+    The target streams, in the ``ehss live`` wire format, each channel's drive
+    (``ref<k>``, the model's input), feedback (``fb<k>``) and desired reference
+    (``des<k>``), and takes compensators back as :mod:`ehss.target.datagram` datagrams;
+    its filters read the reference ``preview`` samples ahead, and sample indices are the
+    stream's.
+
+    Parameters
+    ----------
+    source : UdpSource
+        Receives the stream (its layout must have ``des<k>`` for every channel).
+    sender : DatagramSender
+    fs : float
+    preview : int
+    reference_rms : sequence of float
+        RMS of each channel's desired reference (the estimators' scale).
+    idle_stop_s : float
+        The run ends when no data came for this long after the first.
+    """
+
+    def __init__(self, source: Any, sender: DatagramSender, *, fs: float, preview: int,
+                 reference_rms: Any, idle_stop_s: float = 1.0) -> None:
+        layout = source.layout
+        self.channels = tuple(layout.channels)
+        missing = [f"des{c}" for c in self.channels if f"des{c}" not in layout.fields]
+        if missing:
+            raise ParameterError(f"the stream has no field {missing[0]!r}: a target that "
+                                 "takes compensators sends each channel's desired reference")
+        self.source, self.sender = source, sender
+        self.fs, self.preview = float(fs), int(preview)
+        self.reference_rms = np.asarray(reference_rms, dtype=float)
+        self._ri, self._fi = layout.ref_index, layout.fb_index
+        self._di = [layout.fields.index(f"des{c}") for c in self.channels]
+        self._idle = float(idle_stop_s)
+        self._last: float | None = None
+        self._done = False
+        self.index = 0
+        # (end index, arrival time) of the first and the latest block: the target's clock
+        self._first_arrival: tuple[int, float] | None = None
+        self._latest_arrival: tuple[int, float] | None = None
+        self._largest_block = 0
+
+    @property
+    def finished(self) -> bool:
+        return self._done or self.source.finished
+
+    def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        return self.sender.send(channel, compensator, apply_index, crossfade)
+
+    def _arrived(self, first: int, n: int, arrival: float) -> None:
+        self._latest_arrival = (first + n, arrival)
+        if self._first_arrival is None:
+            self._first_arrival = (first + n, arrival)
+        self._largest_block = max(self._largest_block, n)
+
+    def ahead(self) -> int:
+        """Samples the target is estimated to be past :attr:`index` now.
+
+        The target sent the latest block that arrived when it had computed it, and has
+        gone on at its own rate since: the samples that arrived but are not yet taken,
+        those it has computed since that block's arrival (the rate measured from the
+        arrival times of the stream so far, ``fs`` until a second has come), and one
+        more block, the most it can be ahead of what it has sent."""
+        if self._latest_arrival is None or self._first_arrival is None:
+            return 0
+        (end0, t0), (end, t) = self._first_arrival, self._latest_arrival
+        rate = (end - end0) / (t - t0) if t - t0 >= 1.0 else self.fs
+        since = max(0.0, time.time() - t) * rate
+        return max(0, end - self.index) + int(math.ceil(since)) + self._largest_block
+
+    def step(self, n: int) -> _UdpBlock:
+        """The samples that arrived (at least one unless the stream went idle)."""
+        got: list[np.ndarray] = []
+        have = 0
+        while have < n:
+            blocks = self.source.poll(0.05)
+            for b in blocks:
+                got.append(b.samples)
+                have += b.samples.shape[0]
+                self._arrived(b.first_index, b.samples.shape[0], b.arrival_s)
+            now = time.monotonic()
+            if blocks:
+                self._last = now
+            elif self._last is not None and now - self._last >= self._idle:
+                self._done = True
+                break
+            elif have:
+                break
+        x = np.concatenate(got) if got else np.empty((0, len(self.source.layout.fields)))
+        first = self.index
+        self.index += x.shape[0]
+        return _UdpBlock(first, x[:, self._di].T.copy(), x[:, list(self._ri)].T.copy(),
+                         x[:, list(self._fi)].T.copy())
