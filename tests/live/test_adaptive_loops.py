@@ -165,7 +165,7 @@ def test_a_change_taken_for_a_load_is_still_followed(monkeypatch: pytest.MonkeyP
 def test_the_refit_follows_the_stream_it_is_for() -> None:
     # by default the models are refitted while channels x rate leaves the worker its
     # share of a core (REFINE_LOAD); a setting given stays; the record says which
-    from ehss.live.compensate import REFINE_LOAD
+    from ehss.live.compensate.settings import REFINE_LOAD
 
     auto = CompensationSettings()
     assert auto.refine is None

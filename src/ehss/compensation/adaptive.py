@@ -50,8 +50,6 @@ from ehss.compensation.correction import (
     CORRECTION_MAX_RATIO,
     CORRECTION_PHASE_DEG,
     Correction,
-    compare_compensators,
-    fit_correction,
     fold_correction,
 )
 from ehss.errors import EhssError, ParameterError
@@ -66,11 +64,6 @@ __all__ = [
     "AdaptiveCompensator",
     "free_run_fit",
     "KeptRunning",
-    # ehss.live.compensate imports these from here: re-exported until it imports them
-    # from ehss.compensation.correction (it also imports MODES and CompensatorDesign,
-    # which this module uses, from here)
-    "compare_compensators",
-    "fit_correction",
 ]
 
 #: How a refusal for the model's disagreement with the H1 estimate begins.

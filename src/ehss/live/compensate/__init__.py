@@ -16,7 +16,7 @@ design. A change of the loop shows first in the channel's own tracking error: a 
 sequential test on it (:class:`~ehss.live.detect.TrackingTrigger`) makes the
 channel's first estimator follow for a while (:meth:`ChannelAdapter.follow_change`)
 and, in preview mode, has the running compensator corrected from the data since the
-change (:func:`~ehss.compensation.adaptive.fit_correction`, a five-tap FIR folded into
+change (:func:`~ehss.compensation.correction.fit_correction`, a five-tap FIR folded into
 it) until the full model's inverse takes over again. A rise that the trigger dates to
 the fade-in of a load, while the model of before still matches the loop, is that
 compensator's: the one before it is sent again (``"kind": "compensator_rollback"``),
@@ -44,7 +44,6 @@ from ehss.live.compensate.adapter import ChannelAdapter
 from ehss.live.compensate.judging import Judging, Snapshot, Verdict, seen_alike
 from ehss.live.compensate.loop import AdaptiveLoop, CompensationRecord
 from ehss.live.compensate.settings import JUDGE_IN, CompensationSettings, Target
-from ehss.live.compensate.settings import REFINE_LOAD as REFINE_LOAD
 from ehss.live.compensate.udp_target import DatagramSender, UdpTarget
 
 __all__ = ["CompensationSettings", "ChannelAdapter", "AdaptiveLoop", "CompensationRecord",

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 import ehss
-from ehss.compensation.adaptive import AdaptiveCompensator, CompensatorDesign, Decision
+from ehss.compensation.adaptive import AdaptiveCompensator, Decision
+from ehss.compensation.compensator_design import CompensatorDesign
 from ehss.live.compensate.judging import Judging, Snapshot, Verdict
 from ehss.live.compensate.settings import CompensationSettings
 from ehss.live.detect import ONSET_Z, BaselineResidual, TrackingTrigger, block_statistic

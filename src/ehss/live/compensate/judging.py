@@ -14,14 +14,9 @@ import numpy as np
 
 import ehss
 from ehss._settle import SETTLE_TIME_CONSTANTS, decay_samples
-from ehss.compensation.adaptive import (
-    AdaptiveCompensator,
-    CompensatorDesign,
-    Decision,
-    compare_compensators,
-    fit_correction,
-    free_run_fit,
-)
+from ehss.compensation.adaptive import AdaptiveCompensator, Decision, free_run_fit
+from ehss.compensation.compensator_design import CompensatorDesign
+from ehss.compensation.correction import compare_compensators, fit_correction
 from ehss.errors import EhssError
 from ehss.frequency import FrequencyResponse
 from ehss.identification import oe_pem
@@ -30,7 +25,7 @@ from ehss.live.compensate.settings import CompensationSettings
 #: Independent samples of the band per parameter that a model's refit to its output
 #: errors needs (:meth:`Judging.refine`), a record of T s in a band of B Hz holding
 #: about 2 B T of them: two, half as many as a correction's taps ask
-#: (:func:`~ehss.compensation.adaptive.fit_correction`), since a refit starts next to
+#: (:func:`~ehss.compensation.correction.fit_correction`), since a refit starts next to
 #: its answer (the recursive estimate, the running model) and its prior record holds
 #: the loop above the band, which the rows do not. Four made it come after the correction on the
 #: simulated rig (0.81 s against 1.23 s of data), which left −30 % payload on one pair
@@ -53,10 +48,10 @@ class Snapshot:
     averaged θ̂ (estimator's, then tracker's; shape (1 or 2, n_params)) at one time;
     while a change is corrected, the compensator corrected and the spans of the windows
     since the change, each with the correction that ran then (``spans`` of
-    :func:`~ehss.compensation.adaptive.fit_correction`; empty: judge the model); the
+    :func:`~ehss.compensation.correction.fit_correction`; empty: judge the model); the
     compensator that runs, and the spans of the windows that each compensator ran
     alone since the latest change (``spans`` of
-    :func:`~ehss.compensation.adaptive.compare_compensators`); the first sample of the
+    :func:`~ehss.compensation.correction.compare_compensators`); the first sample of the
     windows since the latest change of the loop (0: it came before them); whether the
     refits go without their record above the band, and then the latest model refitted
     and not loaded, where the next refit goes on from (:meth:`Judging.refine`); the

@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from ehss.compensation.adaptive import CompensatorDesign, Decision
+from ehss.compensation.adaptive import Decision
+from ehss.compensation.compensator_design import CompensatorDesign
 from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
 from ehss.live.compensate.adapter import ChannelAdapter

@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from ehss._checks import check_int, check_real
-from ehss.compensation.adaptive import MODES, UpdateGuard
+from ehss.compensation.adaptive import UpdateGuard
+from ehss.compensation.compensator_design import MODES
 from ehss.errors import ParameterError
 from ehss.live.detect import TriggerSettings
 
@@ -139,7 +140,7 @@ class CompensationSettings:
         For at most this long after a trigger, in preview mode, the running compensator
         is corrected instead of replaced: a short non-causal FIR ``K``
         (``correction_span`` taps each side) fitted to the data since the change
-        (:func:`ehss.compensation.adaptive.fit_correction`) as soon as they suffice,
+        (:func:`ehss.compensation.correction.fit_correction`) as soon as they suffice,
         and fitted again once the data under each correction suffice to check the next
         on; the full model is not judged meanwhile. The first correction refused (it
         does not halve the error left, or a guard fails) ends it, and the full model's
@@ -155,7 +156,7 @@ class CompensationSettings:
         correction) in the H1 window, each compensator's feedback there changed as the
         new one would have changed it, and loaded only if it leaves at most
         ``1 + load_sigmas`` standard errors of that ratio of the error the running one
-        left (:func:`ehss.compensation.adaptive.compare_compensators`; 2, one-sided,
+        left (:func:`ehss.compensation.correction.compare_compensators`; 2, one-sided,
         would refuse one in 44 models that are no worse if the ratio were Gaussian and
         its stretches independent; negative: a load must be better by that many). On
         the simulated rig that ratio on past rows does not foretell the ratio on the
