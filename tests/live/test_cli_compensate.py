@@ -17,12 +17,13 @@ def test_compensated_rig_run_reports_and_records_its_figures(tmp_path, capsys):
     report, record = tmp_path / "run.json", tmp_path / "run.h5"
     argv = ["live", "--rig", "position", "--channels", "2", "--duration", "8",
             "--band", "0.5", "20", "--compensate", "preview", "--speed", "inf",
-            "--report", str(report), "--record", str(record), "--quiet"]
+            "--max-gain", "3.5", "--report", str(report), "--record", str(record), "--quiet"]
     assert main(argv) == 0
     err = capsys.readouterr().err
     assert "compensating (preview)" in err and "channel 2: tracking RMS" in err
     out = json.loads(report.read_text())
     assert out["compensation"]["mode"] == "preview"
+    assert out["compensation"]["max_gain"] == 3.5
     for name in ("1", "2"):
         ch = out["channels"][name]
         assert ch["loads"] > 0
@@ -51,6 +52,11 @@ def test_compensated_rig_run_reports_and_records_its_figures(tmp_path, capsys):
       "0.5", "20", "--rms", "0.001", "--target", "127.0.0.1:9", "--compensate",
       "preview"], "des1"),
     (["live", "--rig", "position", "--rms", "0.001"], "--compensate only"),
+    (["live", "--rig", "position", "--max-gain", "4"], "--compensate only"),
+    (["live", "--rig", "position", "--compensate", "preview", "--max-gain", "0.5"],
+     "--max-gain"),
+    (["live", "--rig", "position", "--compensate", "preview", "--max-gain", "inf"],
+     "--max-gain"),
 ])
 def test_bad_compensation_input_exits_2_with_one_line(argv, word, capsys):
     assert main(argv) == 2

@@ -223,6 +223,10 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
             "3-50 Hz for the acceleration loop, whose online model misses its 0.5 Hz "
             "high-passes below; 1000 N over 1-50 Hz for the force loop); with --udp "
             "the RMS of the target's reference"))),
+        ("--max-gain", dict(type=float, metavar="G", help=(
+            "--compensate: a compensator whose drive's RMS or peak exceeds G times the "
+            "reference's is refused, as `ehss compensate` refuses such a drive (default: "
+            "3); the refusal says how far over it was"))),
         ("--target", dict(metavar="HOST:PORT", help=(
             "--compensate with --udp: where the compensator datagrams go "
             "(ehss.target.datagram); the stream must carry des<k>, each channel's "
@@ -420,12 +424,16 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.record is not None:
         check_new_recording(args.record)
     if args.compensate is None:
-        for flag, value in (("--rms", args.rms), ("--target", args.target)):
+        for flag, value in (("--rms", args.rms), ("--max-gain", args.max_gain),
+                            ("--target", args.target)):
             if value is not None:
                 raise ParameterError(f"{flag} applies to --compensate only")
     if args.target is not None and args.udp is None:
         raise ParameterError("--target applies to --compensate with --udp only (the "
                              "simulated rig takes its compensator without datagrams)")
+    if args.max_gain is not None:
+        # a compensator's drive is bounded below by the reference itself (gain 1)
+        check_real(args.max_gain, "--max-gain", lo=1.0, lo_open=True)
     if args.stop_after is not None:
         _check_positive("--stop-after", args.stop_after)
 

@@ -227,7 +227,8 @@ def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, 
     from ehss.live.rig import SteppingRig
     from ehss.live.session import LiveSession
 
-    settings = CompensationSettings(mode=args.compensate, band_hz=band).for_stream(
+    settings = CompensationSettings(mode=args.compensate, band_hz=band,
+                                    guard=_guard(args)).for_stream(
         len(target.channels), float(target.fs))
     est, det = estimation_settings(args)
     counters = getattr(getattr(target, "source", None), "counters", None)
@@ -269,6 +270,13 @@ def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, 
                           "events": rec.events,
                           "settings": {**report.settings, "argv": sys.argv[1:]}})
     return 0
+
+
+def _guard(args: argparse.Namespace) -> Any:
+    """The update guard, with ``--max-gain`` if given (checked with the options)."""
+    from ehss.compensation.adaptive import UpdateGuard
+
+    return UpdateGuard() if args.max_gain is None else UpdateGuard(max_gain=args.max_gain)
 
 
 def _baselines(args: argparse.Namespace, source: _HandedSource) -> dict:
