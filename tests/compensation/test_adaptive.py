@@ -630,3 +630,24 @@ def test_a_record_through_the_ratio_of_two_compensators(n):
                         / base.frequency_response(f), n_fft)[:n]
     fast = _through(x, then, base)
     assert np.max(np.abs(fast - slow)) <= 1e-12 * np.max(np.abs(slow))
+
+
+def test_the_running_drive_is_judged_against_its_reference_and_the_limits():
+    # what the target ran: a drive within the gains and limits is no fault, nor one
+    # beyond them by less than NEAR_MISS (2); 3.5 times the reference's peak rate against
+    # a bound 1.5 times the reference's own is (2.33 times the bound); a reference itself
+    # beyond the bound is none either (no compensator keeps the drive within)
+    r = band_limited_random(band_hz=BAND, rms=1.0, duration_s=4.0, fs=FS, seed=3).values
+    rate = float(np.max(np.abs(np.diff(r)))) * FS
+    comp = AdaptiveCompensator(FS, BAND, preview=128,
+                               guard=UpdateGuard(limits=DriveLimits(max_rate=1.5 * rate)))
+    assert comp.drive_fault(1.1 * r, r) == ""
+    assert comp.drive_fault(2.5 * r, r) == ""
+    assert "peak rate" in comp.drive_fault(3.5 * r, r, gains=False)
+    assert comp.drive_fault(3.5 * r, 1.8 * r) == ""
+    # and the gain against the reference, as a new compensator's drive: 7 times it
+    plain = AdaptiveCompensator(FS, BAND, preview=128)
+    assert plain.drive_fault(5.0 * r, r) == ""
+    assert "(bound 3×)" in plain.drive_fault(7.0 * r, r)
+    # which a fading reference's ratio says nothing of: the limits alone then
+    assert plain.drive_fault(7.0 * r, r, gains=False) == ""

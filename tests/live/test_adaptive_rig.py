@@ -136,6 +136,38 @@ def test_a_fault_keeps_the_last_good_inverse(kind, value):
                for d in rec.decisions["2"])
 
 
+
+@pytest.mark.slow
+def test_a_running_compensator_whose_drive_breaks_the_limits_is_switched_off():
+    # causal mode buys its accuracy in the band with a gain of about 90 above it: 3 % of
+    # broadband noise added to channel 1's reference from 10 s took the drive to
+    # 0.8-0.9 m/s against the rig's 0.2 m/s until the end, every new compensator refused
+    # for it (measured before the switch-off). The reference itself stays within them.
+    desired = _desired(16.0)
+    noisy = np.arange(desired.shape[1]) >= 10.0 * FS
+    desired[0, noisy] += 0.03 * RMS_M * np.random.default_rng(5).standard_normal(noisy.sum())
+    params = ehss.preset("default")
+    check_drive(desired[0], desired[0], FS, max_gain=None, min_gain=None, loop="position",
+                params=params)
+    rig = SteppingRig("position", desired, fs=FS, preview=0, seed=0)
+    settings = CompensationSettings(band_hz=BAND, mode="causal", judge_in="stream")
+    rec = AdaptiveLoop(rig, settings, loop="position", params=params).run()
+    off = [ld for ld in rec.loads if ld["model"] == "off"]
+    assert [ld["channel"] for ld in off] == ["1"], off
+    assert 10.0 < off[0]["t_s"] <= 11.0 and "max_velocity_m_s" in off[0]["reason"]
+    assert any(e["kind"] == "alarm" and e["channel"] == "1" and e["t_s"] == off[0]["t_s"]
+               for e in rec.events)
+    # compensated before; from the switch-off's cross-fade on, the drive is the reference
+    assert any(ld["channel"] == "1" and ld["model"] != "off" and ld["t_s"] < 10.0
+               for ld in rec.loads)
+    until = off[0]["apply_index"] + off[0]["crossfade"]
+    np.testing.assert_allclose(rec.drive[0, until:], desired[0, until:], rtol=0,
+                               atol=1e-12 * RMS_M)
+    check_drive(rec.drive[0, until:], desired[0, until:], FS, loop="position", params=params)
+    # channel 2 compensated on, within the checks all along
+    assert any(ld["channel"] == "2" and ld["t_s"] > 11.0 for ld in rec.loads)
+    check_drive(rec.drive[1], desired[1], FS, loop="position", params=params)
+
 def test_causal_compensation_cuts_the_phase_lag():
     # the reference made online (no preview): the compensator is the least-squares causal
     # prediction of the inverse; its phase lag at 10 Hz against the loop's own

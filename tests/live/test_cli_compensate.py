@@ -155,6 +155,25 @@ def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
     assert "--band" not in lines["channel 2"] and "unstable" in lines["channel 2"]
 
 
+
+def test_a_channel_switched_off_says_so_with_the_reason(capsys):
+    from types import SimpleNamespace
+
+    from ehss.cli._live_compensate import _compare
+
+    n = 2000
+    text = "the drive of the compensator that ran failed the checks (peak rate): ..."
+    rec = SimpleNamespace(
+        desired=np.ones((2, n)), feedback=np.zeros((2, n)), fs=1000.0, channels=("1", "2"),
+        loads=[{"channel": "1", "model": "estimator", "t_s": 0.5},
+               {"channel": "1", "model": "off", "t_s": 1.25, "text": text}],
+        decisions={"1": [{"accepted": True, "reason": ""}], "2": []},
+        tracking_rms=lambda t0, t1: np.ones(2))
+    out = _compare(rec, [])
+    assert out["1"]["switched_off"] == 1 and "switched_off" not in out["2"]
+    line = next(x for x in capsys.readouterr().err.splitlines() if "switched off" in x)
+    assert line.startswith("ehss live: channel 1:") and "1.25 s" in line and text in line
+
 #: Each loop whose default reference changes when it is compensated: the run's length
 #: (s), the band said, and the least gain over no compensation. The position loop's 1 mm
 #: over 1-50 Hz played for detection asks for drives every guard refuses; below 3 Hz the

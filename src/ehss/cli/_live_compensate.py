@@ -311,6 +311,12 @@ def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
               f"{without[k] / with_[k] if with_[k] > 0 else math.inf:.1f}x), "
               f"{channels[name]['loads']} compensators loaded, "
               f"{channels[name]['refusals']} refused", file=sys.stderr)
+        offs = [ld for ld in rec.loads if ld["channel"] == name and ld["model"] == "off"]
+        if offs:
+            channels[name]["switched_off"] = len(offs)
+            print(f"ehss live: channel {name}: compensation switched off {len(offs)}x, "
+                  f"the latest at {offs[-1]['t_s']:.2f} s: {offs[-1]['text']}",
+                  file=sys.stderr)
         refused = [d["reason"] for d in rec.decisions[name] if not d["accepted"]]
         if not channels[name]["loads"] and refused:
             channels[name]["latest_refusal"] = refused[-1]

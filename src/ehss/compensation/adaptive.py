@@ -37,7 +37,12 @@ import numpy as np
 import scipy.signal
 
 from ehss._checks import check_real
-from ehss.compensation.checks import DEFAULT_MAX_GAIN, DriveLimits, check_drive
+from ehss.compensation.checks import (
+    DEFAULT_MAX_GAIN,
+    DEFAULT_MIN_GAIN,
+    DriveLimits,
+    check_drive,
+)
 from ehss.compensation.compensator_design import (
     MODES,
     CompensatorDesign,
@@ -644,10 +649,31 @@ class AdaptiveCompensator:
 
     def _passes(self, drive: np.ndarray, r: np.ndarray) -> bool:
         """Whether ``drive`` for ``r`` passes the checks of :meth:`_checked_drive`."""
+        return not self._drive_error(drive, r)
+
+    def _drive_error(self, drive: np.ndarray, r: np.ndarray, *, gains: bool = True) -> str:
+        """Why ``drive`` for ``r`` fails the checks of :meth:`_checked_drive` (empty if
+        it passes; without ``gains``, the rig's limits alone)."""
         g = self.guard
+        max_gain, min_gain = (g.max_gain, DEFAULT_MIN_GAIN) if gains else (None, None)
         try:
-            check_drive(drive, r, self.fs_hz, max_gain=g.max_gain, limits=g.limits,
-                        loop=self.loop, params=self.params)
-        except EhssError:
-            return False
-        return True
+            check_drive(drive, r, self.fs_hz, max_gain=max_gain, min_gain=min_gain,
+                        limits=g.limits, loop=self.loop, params=self.params)
+        except EhssError as exc:
+            return str(exc)
+        return ""
+
+    def drive_fault(self, drive: Any, reference: Any, *, gains: bool = True) -> str:
+        """Why the drive the target ran for ``reference`` fails the checks a new
+        compensator's drive must pass (the gains against the reference, unless
+        ``gains`` is False, and the rig's limits) as a fault, or empty: if it passes
+        divided by :data:`NEAR_MISS` (a refusal of a new compensator that near is no
+        fault either: the servo's inverse over 1–60 Hz asks 3.02–3.47× now and then),
+        or if the reference itself is beyond the rig's limits (no compensator can keep
+        the drive within them there, none included)."""
+        drive = np.asarray(drive, dtype=float)
+        reference = np.asarray(reference, dtype=float)
+        if not self._drive_error(drive / NEAR_MISS, reference, gains=gains) \
+                or self._drive_error(reference, reference, gains=False):
+            return ""
+        return self._drive_error(drive, reference, gains=gains)

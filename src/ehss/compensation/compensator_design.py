@@ -34,6 +34,7 @@ References: eqs (16)–(22) of the paper (the model and its recursive estimate).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -56,6 +57,7 @@ __all__ = [
     "MODES",
     "CompensatorDesign",
     "design_compensator",
+    "pass_through",
     "run_compensator",
 ]
 
@@ -381,6 +383,25 @@ def _check_preview(mode: str, preview: Any, n_taps: int) -> int:
     if preview is None:
         return n_taps // 2
     return check_int(preview, "preview", lo=0, hi=n_taps - 1)
+
+
+def pass_through(fs_hz: float, band_hz: tuple[float, float], *, mode: str = "preview",
+                 preview: int | None = None, n_taps: int = 256) -> CompensatorDesign:
+    """The compensator that passes the reference as it is (drive = reference), in the
+    form :func:`design_compensator` gives for ``mode``, ``preview`` and ``n_taps``:
+    what a target runs with compensation off.
+
+    >>> d = pass_through(1000.0, (0.5, 20.0), preview=128)
+    >>> d.preview, int(d.taps.argmax()), float(d.taps.sum()), d.peak_gain
+    (128, 128, 1.0, 1.0)
+    """
+    identity = ArmaxModel(a=np.ones(1), b=np.ones(1), delay=0, dt=1.0 / fs_hz)
+    design = design_compensator(identity, band_hz=band_hz, mode=mode, preview=preview,
+                                n_taps=n_taps)
+    taps = np.zeros_like(design.taps)
+    taps[design.preview] = 1.0
+    return dataclasses.replace(design, taps=taps, error=np.zeros_like(design.error),
+                               peak_gain=1.0)
 
 
 def run_compensator(design: CompensatorDesign, reference: Any) -> np.ndarray:

@@ -189,6 +189,7 @@ def _compensation_html(comp: CompensationSnapshot, events: Sequence[dict]) -> st
     for e in reversed([e for e in events if e["kind"].startswith("compensator")][-8:]):
         what = (_LOADED.get(e.get("model"), "loaded") if e["kind"] == "compensator" else
                 "change flagged: following it" if e["kind"] == "compensator_change" else
+                html.escape(e.get("text") or e["kind"]) if e["kind"] == "compensator_off" else
                 html.escape(e.get("reason") or e.get("text") or e["kind"]))
         rows.append(f"t = {e['t_s']:.2f} s &nbsp; channel {e['channel']}: {what}")
     return "<br>".join(rows)

@@ -441,6 +441,24 @@ class ChannelAdapter:
         if self.trigger is not None:
             self.trigger.rearm(until - self._n)
 
+    def switched_off(self, design: CompensatorDesign, apply_index: int, until: int) -> None:
+        """Compensation is off: ``design`` (the reference passed as it is,
+        :func:`~ehss.compensation.compensator_design.pass_through`) is sent and fades in
+        from sample ``apply_index`` to ``until``. It runs with no model, nothing before
+        it may be undone or corrected any more, and the trigger learns the error
+        anew from ``until`` (many times the compensated one: not a change)."""
+        self.undo = None
+        self._undoable = []
+        self._correct_until = 0
+        self._spans = []
+        self.compensator.current = design
+        self.compensator.current_model = None
+        self.busy_from, self.busy_until = apply_index, until
+        self._ran.append((until, design))
+        self._running, self._running_model, self._before = design, None, None
+        if self.trigger is not None:
+            self.trigger.restart(until - self._n)
+
     def _end_follow(self) -> None:
         self._follow_until = None
         self.estimator.set_trace_bound(self._trace_bound)
@@ -465,11 +483,14 @@ class ChannelAdapter:
         if len(self._misses) >= USUAL_JUDGEMENTS[0]:
             q = np.quantile(np.array(self._misses), USUAL_DISAGREEMENT, axis=0)
             usual = (float(q[0]), float(q[1]))
+        first = self._n - self.window.fill
+        alone = None if self.compensator.current is None or self.busy_until > self._n \
+            else max(0, self.busy_until - first)
         return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
                         self._base if spans else None, spans, self.compensator.current,
                         self._ran_spans(), fresh, self.compensator.current_model,
                         unanchored, self._refitted if unanchored else None, floor, level,
-                        usual)
+                        usual, alone)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator

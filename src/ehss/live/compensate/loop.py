@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ehss.compensation.adaptive import Decision
-from ehss.compensation.compensator_design import CompensatorDesign
+from ehss.compensation.compensator_design import CompensatorDesign, pass_through
 from ehss.errors import EhssError, ParameterError
 from ehss.live.channel import reference_band
 from ehss.live.compensate.adapter import ChannelAdapter
@@ -128,7 +128,7 @@ class AdaptiveLoop:
                 continue
             snap = ad.snapshot()
             if self._worker is None:
-                self._apply(k, t_s, ad.judge(t_s, snap))
+                self._take(k, t_s, ad.judging(t_s, snap))
                 continue
             future = self._worker.submit(ad.judging, t_s, snap) \
                 if isinstance(self._worker, ThreadPoolExecutor) \
@@ -153,9 +153,20 @@ class AdaptiveLoop:
                                  f"change flagged at {ad.flagged_at / self.fs:.2f} s: "
                                  "not sent"})
                     continue
-                ad.take(verdict)
-                if not every:
-                    self._apply(k, t_s, verdict.decision)
+                if every:
+                    ad.take(verdict)
+                else:
+                    self._take(k, t_s, verdict)
+
+    def _take(self, k: int, t_s: float, verdict: Verdict) -> None:
+        """Record a judgement and act on it: send what it accepted, or log its refusal;
+        and if the drive of the compensator that runs failed the checks
+        (:meth:`Judging.running_fault`) and nothing replaces it, switch compensation
+        off."""
+        self.adapters[k].take(verdict)
+        self._apply(k, t_s, verdict.decision)
+        if verdict.running_fault and not verdict.decision.accepted:
+            self._switch_off(k, t_s, verdict.running_fault)
 
     def close(self) -> None:
         """Stop the worker (a worker process starts with the loop; :meth:`run` stops it
@@ -239,6 +250,31 @@ class AdaptiveLoop:
         crossfade = max(1, int(round(self.settings.guard.crossfade_s * self.fs)))
         ok = self.target.load(k, comp, apply_index, crossfade)
         return {"apply_index": int(apply_index), "crossfade": crossfade, "accepted": bool(ok)}
+
+    def _switch_off(self, k: int, t_s: float, reason: str) -> None:
+        """Send the reference as it is (:func:`~ehss.compensation.compensator_design.
+        pass_through`), as any load is sent, and raise an alarm: the drive of the
+        compensator that ran failed the checks, which a drive equal to the reference
+        passes (:meth:`AdaptiveCompensator.drive_fault`). A compensator whose drive
+        passes is loaded again as before."""
+        ad = self.adapters[k]
+        comp = ad.compensator
+        off = pass_through(self.fs, comp.band_hz, mode=comp.mode, preview=comp.preview,
+                           n_taps=comp.n_taps)
+        sent = self._send(k, t_s, off, not_before=ad.busy_until)
+        if sent is None:
+            return
+        ad.switched_off(off, sent["apply_index"], sent["apply_index"] + sent["crossfade"])
+        event = {"kind": "compensator_off", "channel": ad.name, "t_s": t_s, **sent,
+                 "model": "off", "reason": reason,
+                 "text": f"the drive of the compensator that ran failed the checks "
+                         f"({reason}): the reference is sent as it is"}
+        self.loads.append(event)
+        self._event(event)
+        if not ad.alarm:
+            ad.alarm = True
+            self._event({"kind": "alarm", "channel": ad.name, "t_s": t_s,
+                         "text": f"compensation off: {reason}"})
 
     def _roll_back(self, k: int) -> None:
         """Undo the load the trigger dated a rise of the error to: send the compensator
