@@ -140,11 +140,13 @@ def test_a_fault_keeps_the_last_good_inverse(kind, value):
 @pytest.mark.slow
 def test_a_running_compensator_whose_drive_breaks_the_limits_is_switched_off():
     # causal mode buys its accuracy in the band with a gain of about 90 above it: 3 % of
-    # broadband noise added to channel 1's reference from 10 s took the drive to
-    # 0.8-0.9 m/s against the rig's 0.2 m/s until the end, every new compensator refused
-    # for it (measured before the switch-off). The reference itself stays within them.
-    desired = _desired(16.0)
-    noisy = np.arange(desired.shape[1]) >= 10.0 * FS
+    # broadband noise added to channel 1's reference from 10 to 13 s took the drive to
+    # 0.8-0.9 m/s against the rig's 0.2 m/s while it lasted, every new compensator
+    # refused for it (measured before the switch-off). The reference itself stays
+    # within the limits.
+    desired = _desired(18.0)
+    t = np.arange(desired.shape[1]) / FS
+    noisy = (t >= 10.0) & (t < 13.0)
     desired[0, noisy] += 0.03 * RMS_M * np.random.default_rng(5).standard_normal(noisy.sum())
     params = ehss.preset("default")
     check_drive(desired[0], desired[0], FS, max_gain=None, min_gain=None, loop="position",
@@ -155,18 +157,28 @@ def test_a_running_compensator_whose_drive_breaks_the_limits_is_switched_off():
     off = [ld for ld in rec.loads if ld["model"] == "off"]
     assert [ld["channel"] for ld in off] == ["1"], off
     assert 10.0 < off[0]["t_s"] <= 11.0 and "max_velocity_m_s" in off[0]["reason"]
-    assert any(e["kind"] == "alarm" and e["channel"] == "1" and e["t_s"] == off[0]["t_s"]
-               for e in rec.events)
-    # compensated before; from the switch-off's cross-fade on, the drive is the reference
-    assert any(ld["channel"] == "1" and ld["model"] != "off" and ld["t_s"] < 10.0
-               for ld in rec.loads)
+    alarms = [(e["kind"], e["t_s"]) for e in rec.events
+              if e["kind"] in ("alarm", "clear") and e["channel"] == "1"]
+    assert alarms[0] == ("alarm", off[0]["t_s"])
+    # compensated before; from the switch-off's cross-fade to the next load the drive is
+    # the reference, within the rig's limits
+    loads = [ld for ld in rec.loads if ld["channel"] == "1" and ld["model"] != "off"]
+    assert any(ld["t_s"] < 10.0 for ld in loads)
     until = off[0]["apply_index"] + off[0]["crossfade"]
-    np.testing.assert_allclose(rec.drive[0, until:], desired[0, until:], rtol=0,
+    back = next(ld for ld in loads if ld["t_s"] > off[0]["t_s"])
+    np.testing.assert_allclose(rec.drive[0, until:back["apply_index"]],
+                               desired[0, until:back["apply_index"]], rtol=0,
                                atol=1e-12 * RMS_M)
     check_drive(rec.drive[0, until:], desired[0, until:], FS, loop="position", params=params)
+    # once the noise has left the windows a compensator passes again and the alarm
+    # clears (measured 14.25 s), and the tracking is what it was before (measured
+    # 46 um against 44 um)
+    assert 13.0 < back["t_s"] <= 15.0 and ("clear", back["t_s"]) in alarms
+    assert rec.tracking_rms(15.0, 18.0)[0] <= 1.25 * rec.tracking_rms(6.0, 10.0)[0]
     # channel 2 compensated on, within the checks all along
     assert any(ld["channel"] == "2" and ld["t_s"] > 11.0 for ld in rec.loads)
     check_drive(rec.drive[1], desired[1], FS, loop="position", params=params)
+
 
 def test_causal_compensation_cuts_the_phase_lag():
     # the reference made online (no preview): the compensator is the least-squares causal

@@ -155,7 +155,6 @@ def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
     assert "--band" not in lines["channel 2"] and "unstable" in lines["channel 2"]
 
 
-
 def test_a_channel_switched_off_says_so_with_the_reason(capsys):
     from types import SimpleNamespace
 

@@ -389,19 +389,22 @@ def pass_through(fs_hz: float, band_hz: tuple[float, float], *, mode: str = "pre
                  preview: int | None = None, n_taps: int = 256) -> CompensatorDesign:
     """The compensator that passes the reference as it is (drive = reference), in the
     form :func:`design_compensator` gives for ``mode``, ``preview`` and ``n_taps``:
-    what a target runs with compensation off.
+    what a target runs with compensation off. Its FIR ends at the one tap it needs
+    (``preview + 1`` taps), so that a target takes it up after that many samples, the
+    fewest its filter's rule allows (:func:`ehss._settle.settle_samples`).
 
     >>> d = pass_through(1000.0, (0.5, 20.0), preview=128)
-    >>> d.preview, int(d.taps.argmax()), float(d.taps.sum()), d.peak_gain
-    (128, 128, 1.0, 1.0)
+    >>> d.preview, d.taps.size, float(d.taps[128]), d.peak_gain, d.settle_samples
+    (128, 129, 1.0, 1.0, 129)
     """
     identity = ArmaxModel(a=np.ones(1), b=np.ones(1), delay=0, dt=1.0 / fs_hz)
     design = design_compensator(identity, band_hz=band_hz, mode=mode, preview=preview,
                                 n_taps=n_taps)
-    taps = np.zeros_like(design.taps)
-    taps[design.preview] = 1.0
+    taps = np.zeros(design.preview + 1)
+    taps[-1] = 1.0
     return dataclasses.replace(design, taps=taps, error=np.zeros_like(design.error),
-                               peak_gain=1.0)
+                               peak_gain=1.0,
+                               settle_samples=settle_samples(design.sos, taps.size))
 
 
 def run_compensator(design: CompensatorDesign, reference: Any) -> np.ndarray:

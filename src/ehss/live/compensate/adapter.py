@@ -14,7 +14,7 @@ import numpy as np
 import ehss
 from ehss.compensation.adaptive import AdaptiveCompensator, Decision
 from ehss.compensation.compensator_design import CompensatorDesign
-from ehss.live.compensate.judging import Judging, Snapshot, Verdict
+from ehss.live.compensate.judging import QUIET_REFERENCE, Judging, Snapshot, Verdict
 from ehss.live.compensate.settings import CompensationSettings
 from ehss.live.detect import ONSET_Z, BaselineResidual, TrackingTrigger, block_statistic
 
@@ -151,6 +151,8 @@ class ChannelAdapter:
         self._began: int | None = None
         #: the sample the latest change was flagged at (-1: none)
         self.flagged_at = -1
+        # the reference as it is, sent when compensation was switched off (None: never)
+        self._off: CompensatorDesign | None = None
 
     def _forgetting(self, memory_s: float | None) -> float:
         """λ = 1 − 1/(memory fs) of a memory (None: ``memory_s``)."""
@@ -441,6 +443,36 @@ class ChannelAdapter:
         if self.trigger is not None:
             self.trigger.rearm(until - self._n)
 
+    def running_fault(self) -> str:
+        """Why the drive the target ran since the compensator that runs took over
+        fails the checks a new compensator's drive must pass, on the same reference
+        (:meth:`AdaptiveCompensator.drive_fault`), or empty; also while none runs but
+        the reference as it is, or it has run alone for less than the guard's fresh
+        stretch (``fit_s``). Its gains against the reference count only where the
+        reference holds at least :data:`~ehss.live.compensate.judging.QUIET_REFERENCE`
+        of its usual RMS (over the windows of the channel's recent loads): as a record
+        fades out, the compensator's own memory outlasts it and the ratio grows without
+        bound (a pause on the rig switched compensation off, "inf×"); the rig's limits
+        count always.
+
+        The guard judges each new compensator on the recent reference; the one that
+        runs meets every reference after it. In causal mode its gain above the band
+        (about 90 on the rig's position loop) is harmless for a band-limited
+        reference, but 3 % of broadband noise added to the reference took the drive
+        to 0.8–0.9 m/s against the rig's 0.2 m/s for as long as it lasted, while every
+        new compensator was refused for it."""
+        comp = self.compensator
+        n_check = max(1, int(round(self.settings.guard.fit_s * self.fs)))
+        a = self.busy_until - (self._n - self.window.fill)
+        if comp.current is None or comp.current is self._off or self.busy_until > self._n \
+                or self.window.fill - max(0, a) < n_check:
+            return ""
+        u, _, r = self.window.latest()
+        u, r = u[max(0, a):], r[max(0, a):]
+        gains = len(self._levels) >= RESIDUAL_LOADS[0] \
+            and float(np.std(r)) >= QUIET_REFERENCE * float(np.median(self._levels))
+        return comp.drive_fault(u, r, gains=gains)
+
     def switched_off(self, design: CompensatorDesign, apply_index: int, until: int) -> None:
         """Compensation is off: ``design`` (the reference passed as it is,
         :func:`~ehss.compensation.compensator_design.pass_through`) is sent and fades in
@@ -451,6 +483,7 @@ class ChannelAdapter:
         self._undoable = []
         self._correct_until = 0
         self._spans = []
+        self._off = design
         self.compensator.current = design
         self.compensator.current_model = None
         self.busy_from, self.busy_until = apply_index, until
@@ -483,14 +516,11 @@ class ChannelAdapter:
         if len(self._misses) >= USUAL_JUDGEMENTS[0]:
             q = np.quantile(np.array(self._misses), USUAL_DISAGREEMENT, axis=0)
             usual = (float(q[0]), float(q[1]))
-        first = self._n - self.window.fill
-        alone = None if self.compensator.current is None or self.busy_until > self._n \
-            else max(0, self.busy_until - first)
         return Snapshot(u, y, r, np.mean([t for _, t in self._thetas], axis=0),
                         self._base if spans else None, spans, self.compensator.current,
                         self._ran_spans(), fresh, self.compensator.current_model,
                         unanchored, self._refitted if unanchored else None, floor, level,
-                        usual, alone)
+                        usual)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator

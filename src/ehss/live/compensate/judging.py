@@ -59,9 +59,7 @@ class Snapshot:
     window (the medians over its recent loads; None before
     :data:`~ehss.live.compensate.adapter.RESIDUAL_LOADS` of them:
     :meth:`AdaptiveCompensator._judge_fit`, :meth:`Judging._quiet`); how far its models
-    usually miss the H1 estimate (:data:`~ehss.live.compensate.adapter.USUAL_DISAGREEMENT`);
-    the first sample of the windows from which the compensator that runs ran alone
-    (None: none runs alone yet)."""
+    usually miss the H1 estimate (:data:`~ehss.live.compensate.adapter.USUAL_DISAGREEMENT`)."""
 
     drive: np.ndarray
     feedback: np.ndarray
@@ -78,21 +76,17 @@ class Snapshot:
     residual_floor: float | None = None
     reference_level: float | None = None
     disagreement: tuple[float, float] | None = None
-    alone_from: int | None = None
 
 
 @dataclass(frozen=True)
 class Verdict:
     """A judgement: the decision, the model judged (None if there was none) and whose
     model it is (``"estimator"`` or ``"tracker"``; ``"correction"`` for a correction of
-    the running compensator, with no model); why the drive of the compensator that
-    runs fails the checks a new one's must pass (empty: it passes;
-    :meth:`Judging.running_fault`)."""
+    the running compensator, with no model)."""
 
     decision: Decision
     model: ehss.ArmaxModel | None
     chosen: str
-    running_fault: str = ""
 
 
 class Judging:
@@ -277,35 +271,6 @@ class Judging:
                        "correction")
 
     def __call__(self, t_s: float, snap: Snapshot) -> Verdict:
-        verdict = self._judge(t_s, snap)
-        fault = self.running_fault(snap)
-        return dataclasses.replace(verdict, running_fault=fault) if fault else verdict
-
-    def running_fault(self, snap: Snapshot) -> str:
-        """Why the drive the target ran since the compensator that runs took over
-        fails the checks a new compensator's drive must pass, on the same reference
-        (:meth:`AdaptiveCompensator.drive_fault`), or empty (also while it has run
-        alone for less than the guard's fresh stretch, ``fit_s``). Its gains against
-        the reference count only where the reference holds at least
-        :data:`QUIET_REFERENCE` of its usual RMS (``snap.reference_level``): as a
-        record fades out, the compensator's own memory outlasts it and the ratio grows
-        without bound (a pause on the rig switched compensation off, "inf×"); the rig's
-        limits count always.
-
-        The guard judges each new compensator on the recent reference; the one that
-        runs meets every reference after it. In causal mode its gain above the band
-        (about 90 on the rig's position loop) is harmless for a band-limited
-        reference, but 3 % of broadband noise added to the reference took the drive
-        to 0.9 m/s against the rig's 0.2 m/s for as long as it lasted, while every new
-        compensator was refused for it."""
-        a = snap.alone_from
-        if snap.current is None or a is None or snap.drive.size - a < self._n_check:
-            return ""
-        usual = snap.reference_level
-        gains = usual is not None and float(np.std(snap.desired[a:])) >= QUIET_REFERENCE * usual
-        return self.compensator.drive_fault(snap.drive[a:], snap.desired[a:], gains=gains)
-
-    def _judge(self, t_s: float, snap: Snapshot) -> Verdict:
         quiet = self._quiet(snap)
         if quiet:
             return Verdict(Decision(t_s, False, quiet, fault=False), None, "")

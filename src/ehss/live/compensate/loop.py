@@ -122,13 +122,17 @@ class AdaptiveLoop:
         ``self._collect_after`` samples later, or here and now."""
         for k in channels:
             ad = self.adapters[k]
+            fault = ad.running_fault()
+            if fault:
+                self._switch_off(k, t_s, fault)
+                continue
             # one compensator at a time: the last one sent must be in before the next
             if k in self._pending or not ad.compensator.due(t_s) \
                     or self.target.index < ad.busy_until or not ad.ready():
                 continue
             snap = ad.snapshot()
             if self._worker is None:
-                self._take(k, t_s, ad.judging(t_s, snap))
+                self._apply(k, t_s, ad.judge(t_s, snap))
                 continue
             future = self._worker.submit(ad.judging, t_s, snap) \
                 if isinstance(self._worker, ThreadPoolExecutor) \
@@ -153,20 +157,9 @@ class AdaptiveLoop:
                                  f"change flagged at {ad.flagged_at / self.fs:.2f} s: "
                                  "not sent"})
                     continue
-                if every:
-                    ad.take(verdict)
-                else:
-                    self._take(k, t_s, verdict)
-
-    def _take(self, k: int, t_s: float, verdict: Verdict) -> None:
-        """Record a judgement and act on it: send what it accepted, or log its refusal;
-        and if the drive of the compensator that runs failed the checks
-        (:meth:`Judging.running_fault`) and nothing replaces it, switch compensation
-        off."""
-        self.adapters[k].take(verdict)
-        self._apply(k, t_s, verdict.decision)
-        if verdict.running_fault and not verdict.decision.accepted:
-            self._switch_off(k, t_s, verdict.running_fault)
+                ad.take(verdict)
+                if not every:
+                    self._apply(k, t_s, verdict.decision)
 
     def close(self) -> None:
         """Stop the worker (a worker process starts with the loop; :meth:`run` stops it
