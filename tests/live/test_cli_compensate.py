@@ -126,7 +126,11 @@ def test_a_channel_that_never_loads_says_why(capsys):
     assert main(argv) == 0
     err = capsys.readouterr().err
     line = next(x for x in err.splitlines() if "no compensator was loaded" in x)
-    assert "the drive's RMS is" in line and "(bound 3×)" in line and "--band" not in line
+    assert "the drive's RMS is" in line and "(bound 3×)" in line
+    # most refusals were the gain: a narrower band is the thing to try, not a bound
+    # raised many times over
+    assert "narrower --band" in line and "--max-gain 3×" in line
+    assert "would let them through" not in line
 
 
 def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
@@ -154,6 +158,36 @@ def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
     assert "--band" in lines["channel 1"]
     assert "--band" not in lines["channel 2"] and "unstable" in lines["channel 2"]
 
+
+def test_models_refused_for_their_gain_point_to_the_band_and_near_misses_to_the_bound(
+        capsys):
+    from types import SimpleNamespace
+
+    from ehss.cli._live_compensate import _compare
+
+    n = 2000
+
+    def over(what, gain):
+        return (f"the drive's {what} is {gain:.3g}× the reference's (bound 3×): the inverse "
+                "amplifies where the model is not to be trusted; narrow the band or "
+                "re-identify")
+
+    rec = SimpleNamespace(
+        desired=np.ones((2, n)), feedback=np.zeros((2, n)), fs=1000.0, channels=("1", "2"),
+        loads=[],
+        decisions={"1": [{"accepted": False, "reason": r}
+                         for r in (over("RMS", 3.12), over("peak", 3.47), over("RMS", 3.3))],
+                   "2": [{"accepted": False, "reason": r}
+                         for r in (over("RMS", 37.8), over("RMS", 78.3))]},
+        tracking_rms=lambda t0, t1: np.ones(2))
+    _compare(rec, [])
+    lines = {x.split(":")[1].strip(): x for x in capsys.readouterr().err.splitlines()
+             if "no compensator was loaded" in x}
+    # within twice the bound (a near miss): the bound that would let them through;
+    # beyond it, the band alone
+    assert "up to 3.47×" in lines["channel 1"] and "--max-gain 3.5 would" in lines["channel 1"]
+    assert "up to 78.3×" in lines["channel 2"] and "narrower --band" in lines["channel 2"]
+    assert "would let them through" not in lines["channel 2"]
 
 def test_a_channel_switched_off_says_so_with_the_reason(capsys):
     from types import SimpleNamespace

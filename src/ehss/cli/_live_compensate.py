@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -325,16 +326,33 @@ def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
     return channels
 
 
+#: The gain check's refusal (:func:`ehss.compensation.check_drive`): the ratio it found.
+_OVER_GAIN = re.compile(
+    r"the drive's (?:RMS|peak) is ([0-9.eE+-]+)× the reference's \(bound ([0-9.eE+-]+)×")
+
+
 def _hint(refused: list[str]) -> str:
     """What to try when every judgement of a channel was refused, if the reasons say."""
-    from ehss.compensation.adaptive import H1_DISAGREES
+    from ehss.compensation.adaptive import H1_DISAGREES, NEAR_MISS
 
     h1 = sum(r.startswith(H1_DISAGREES) for r in refused)
-    if 2 * h1 < len(refused):
+    if 2 * h1 >= len(refused):
+        # most refusals: models that miss the loop somewhere in the band, often where
+        # the reference's skirt reaches a resonance it hardly excites (README, "Where
+        # the defaults stop")
+        return (". Most models disagreed with the H1 estimate: a --band where the "
+                "reference holds its power (not where its spectrum only rolls off) lets "
+                "them be validated")
+    over = [(float(m.group(1)), float(m.group(2)))
+            for m in map(_OVER_GAIN.match, refused) if m]
+    if 2 * len(over) < len(refused):
         return ""
-    # most refusals: models that miss the loop somewhere in the band, often where the
-    # reference's skirt reaches a resonance it hardly excites (README, "Where the
-    # defaults stop")
-    return (". Most models disagreed with the H1 estimate: a --band where the reference "
-            "holds its power (not where its spectrum only rolls off) lets them be "
-            "validated")
+    # most refusals: inverses that need more gain in the band than the bound allows (a
+    # lightly damped mode there, a band reaching past the loop's own); a bound raised
+    # beyond NEAR_MISS times itself would let through what the guard calls a fault
+    gain, bound = max(over)
+    hint = (f". Most drives were over --max-gain {bound:g}× (up to {gain:.3g}×): a "
+            "narrower --band asks less of the inverse")
+    if gain <= NEAR_MISS * bound:
+        hint += f"; --max-gain {math.ceil(10 * gain) / 10:g} would let them through"
+    return hint
