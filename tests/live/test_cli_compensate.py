@@ -226,3 +226,17 @@ def test_a_rig_compensated_with_its_defaults_loads(loop, tmp_path, capsys):
     assert f"compensating (preview), band {band}" in capsys.readouterr().err
     ch = json.loads(report.read_text())["channels"]["1"]
     assert ch["loads"] > 0 and ch["tracking_rms"] < ch["tracking_rms_without"] / gain
+
+
+def test_compensating_a_loop_its_gains_leave_unstable_stops_before_the_run(tmp_path, capsys):
+    # the paper's printed gains leave its position loop unstable (pole radius 1.02): the
+    # rig runs into its limits and follows no reference, so there is no inverse to adapt
+    report, record = tmp_path / "run.json", tmp_path / "run.h5"
+    argv = ["live", "--rig", "position", "--preset", "paper", "--duration", "3",
+            "--compensate", "preview", "--speed", "inf", "--report", str(report),
+            "--record", str(record), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "position loop is unstable" in err and "--tune" in err, err
+    assert not report.exists() and not record.exists()

@@ -32,12 +32,14 @@ PREVIEW_SAMPLES = 128
 
 
 def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, Any]:
-    from ehss.cli._params import warn_if_unstable
+    from ehss.cli._params import unstable_loop
     from ehss.live.rig import RIG_COMPENSATE_SIGNAL, SteppingRig, parse_event, rig_reference
 
     params = ehss.load_params(args.params) if args.params else ehss.preset(args.preset)
-    warn_if_unstable("live", params, args.rig,
-                     f"--params {args.params}" if args.params else f"--preset {args.preset}")
+    why = unstable_loop(params, args.rig,
+                        f"--params {args.params}" if args.params else f"--preset {args.preset}")
+    if why is not None:     # its closed loop follows no reference: no inverse to adapt
+        raise ParameterError(f"{why}; --compensate needs a loop that follows its reference")
     fs = params.timing.control_rate_hz if args.fs is None else float(args.fs)
     rms, band = RIG_COMPENSATE_SIGNAL[args.rig]
     band = band if args.band is None else tuple(args.band)

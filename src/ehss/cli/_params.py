@@ -49,25 +49,31 @@ def loop_check(params: RigParams, loop: str) -> tuple[float, Margins]:
     return linear.closed_loop_radius(params, loop), margins
 
 
-def warn_if_unstable(command: str, params: RigParams, loop: str, source: str) -> bool:
-    """One line on stderr when ``loop``'s gains do not stabilise this rig (linearised);
-    True if so. ``source`` is how the command was given the parameters (``--params
-    rig.toml``), for the ``ehss params`` command the line suggests. The run goes on: the
-    nonlinear rig then shows a limit cycle or drifts to its limits, which is what such
-    gains do, but not a response to its reference."""
-    import sys
-
+def unstable_loop(params: RigParams, loop: str, source: str) -> str | None:
+    """Why ``loop``'s gains do not stabilise this rig (linearised), with the ``ehss
+    params`` command that designs gains for it, or None when they do. ``source`` is how
+    the command was given the parameters (``--params rig.toml``)."""
     from ehss import linear
 
     radius = linear.closed_loop_radius(params, loop)  # milliseconds; the margins' grid
     if radius < 1.0:                                  # takes 0.1-0.3 s, so only when
-        return False                                  # they are printed
+        return None                                   # they are printed
     m = linear.margins(linear.loop_gain(params, loop, discrete=True))
-    print(f"ehss {command}: warning: the {loop} loop is unstable with these gains on this "
-          f"rig (linearised: closed-loop pole radius {radius:.4f}, gain margin "
-          f"{m.gain_margin_db:.2f} dB); `ehss params {source} --tune --save TUNED.toml` "
-          "designs gains for it", file=sys.stderr)
-    return True
+    return (f"the {loop} loop is unstable with these gains on this rig (linearised: "
+            f"closed-loop pole radius {radius:.4f}, gain margin {m.gain_margin_db:.2f} dB); "
+            f"`ehss params {source} --tune --save TUNED.toml` designs gains for it")
+
+
+def warn_if_unstable(command: str, params: RigParams, loop: str, source: str) -> bool:
+    """One line on stderr when ``loop``'s gains do not stabilise this rig (linearised);
+    True if so. The run goes on: the nonlinear rig then shows a limit cycle or drifts to
+    its limits, which is what such gains do, but not a response to its reference."""
+    import sys
+
+    why = unstable_loop(params, loop, source)
+    if why is not None:
+        print(f"ehss {command}: warning: {why}", file=sys.stderr)
+    return why is not None
 
 
 def _tuned(params: RigParams) -> RigParams:
