@@ -8,6 +8,8 @@ import zlib
 
 import numpy as np
 
+from ehss.target import MAX_PREVIEW, MAX_TAPS
+
 # the table in ehss.target.datagram, written out again
 _HEAD = "<4sHHQdQIII"
 
@@ -46,7 +48,7 @@ def corrupted() -> list[tuple[str, bytes, str]]:
         ("17 sections", frame(n_sections=17), "sections"),
         ("2**32 - 1 sections", frame(n_sections=2**32 - 1), "sections"),
         ("no taps", frame(taps=()), "taps"),
-        ("257 taps", frame(taps=np.ones(257)), "taps"),
+        (f"{MAX_TAPS + 1} taps", frame(taps=np.ones(MAX_TAPS + 1)), "taps"),
         ("tap count too large", frame(n_taps=2**31), "taps"),
         ("a bit flipped", bytes(flipped), "checksum"),
         ("wrong checksum", frame(crc=12345), "checksum"),
@@ -55,7 +57,7 @@ def corrupted() -> list[tuple[str, bytes, str]]:
         ("sample rate 0", frame(fs_hz=0.0), "sample_rate"),
         ("sample rate negative", frame(fs_hz=-5000.0), "sample_rate"),
         ("sample rate 2 GHz", frame(fs_hz=2e9), "sample_rate"),
-        ("preview 256", frame(preview=256), "preview"),
+        (f"preview {MAX_PREVIEW + 1}", frame(preview=MAX_PREVIEW + 1), "preview"),
         ("NaN in a section", frame(sos=[[1.0, nan, 0, 1, 0, 0]]), "non_finite"),
         ("inf in the taps", frame(taps=[1.0, -inf]), "non_finite"),
         ("NaN as a0", frame(sos=[[1.0, 0, 0, nan, 0, 0]]), "non_finite"),

@@ -13,6 +13,8 @@ from hypothesis import strategies as st
 
 from ehss.target import (
     FAULTS,
+    MAX_PREVIEW,
+    MAX_TAPS,
     RESULTS,
     Compensator,
     CompensatorFilter,
@@ -36,7 +38,7 @@ def _update(c: Compensator, **kw) -> CompensatorUpdate:
 
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n_sections=st.integers(0, 16),
-       n_taps=st.integers(1, 256), preview=st.integers(0, 255),
+       n_taps=st.integers(1, MAX_TAPS), preview=st.integers(0, MAX_PREVIEW),
        channel=st.integers(0, 2**16 - 1), sequence=st.integers(0, 2**64 - 1),
        apply_index=st.integers(0, 2**64 - 1), crossfade=st.integers(0, 2**32 - 1))
 def test_round_trip(seed, n_sections, n_taps, preview, channel, sequence, apply_index,

@@ -13,22 +13,24 @@ offset        type      meaning
 16            float64   sample rate of the model the compensator was designed from, Hz
 24            uint64    apply index: the sample from which the compensator applies
 32            uint32    cross-fade length N, samples (0 or 1: switch outright)
-36            uint32    preview p, samples (0: causal), at most MAX_PREVIEW = 255
+36            uint32    preview p, samples (0: causal), at most MAX_PREVIEW = 2047
 40            uint32    number of second-order sections S, 0..16
 44            float64   6·S section coefficients, row by row: ``b0 b1 b2 a0 a1 a2``
-44 + 48 S     uint32    number of FIR taps T, 1..256
+44 + 48 S     uint32    number of FIR taps T, 1..2048
 48 + 48 S     float64   T taps ``h_0 … h_{T-1}``
 48 + 48 S     uint32    CRC-32 (``zlib.crc32``, the IEEE 802.3 polynomial) of every byte
 + 8 T                   before it
 ============  ========  ===================================================================
 
-so a datagram is ``52 + 48 S + 8 T`` bytes (at most 2 868). A datagram is refused, and
-counted by the first of these faults it has (the C decoder checks the same, in the same
-order): ``truncated`` (shorter than its counts say), ``magic``, ``version``, ``sections``
-(S > 16), ``taps`` (T = 0 or T > 256), ``length`` (longer than its counts say),
-``checksum``, ``sample_rate`` (not finite or outside 1e-9..1e9 Hz), ``preview``
-(p > 255), ``non_finite`` (a NaN or infinite coefficient), ``not_normalised`` (a section's
-``a0`` is not 1) and ``unstable`` (a section with a pole on or outside the unit circle).
+so a datagram is ``52 + 48 S + 8 T`` bytes (at most 17 204: a target's UDP stack must
+take IP fragments, as loopback and the usual stacks do; 2 868 bytes at the 256 taps of
+1 kHz). A datagram is refused, and counted by the first of these faults it has (the C
+decoder checks the same, in the same order): ``truncated`` (shorter than its counts
+say), ``magic``, ``version``, ``sections`` (S > 16), ``taps`` (T = 0 or T > 2048),
+``length`` (longer than its counts say), ``checksum``, ``sample_rate`` (not finite or
+outside 1e-9..1e9 Hz), ``preview`` (p > 2047), ``non_finite`` (a NaN or infinite
+coefficient), ``not_normalised`` (a section's ``a0`` is not 1) and ``unstable`` (a
+section with a pole on or outside the unit circle).
 
 The sequence number orders the updates of one channel: a host numbers them upwards
 (e.g. from the Unix time in milliseconds when it starts, so that a restarted host keeps
@@ -100,7 +102,7 @@ def datagram_bytes(n_sections: int, n_taps: int) -> int:
     return HEADER.size + 48 * n_sections + COUNT.size + 8 * n_taps + CHECKSUM.size
 
 
-#: Largest datagram: 16 sections and 256 taps.
+#: Largest datagram: 16 sections and 2048 taps.
 MAX_DATAGRAM_BYTES = datagram_bytes(MAX_SECTIONS, MAX_TAPS)
 
 

@@ -12,7 +12,7 @@
  *   36       uint32   preview p, samples
  *   40       uint32   S, 0 .. 16
  *   44       float64  6 S section coefficients, row by row
- *   44+48S   uint32   T, 1 .. 256
+ *   44+48S   uint32   T, 1 .. EHSS_COMP_MAX_TAPS (2048)
  *   48+48S   float64  T taps
  *   48+48S+8T uint32  CRC-32 (IEEE 802.3, as zlib.crc32) of every byte before it
  */

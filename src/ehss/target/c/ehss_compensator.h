@@ -43,11 +43,16 @@ extern "C" {
 #endif
 
 #define EHSS_COMP_MAX_SECTIONS 16
-#define EHSS_COMP_MAX_TAPS 256
+/* The FIR's capacity: 0.41 s at 5 kHz (ehss designs 0.256 s of taps by default). A
+ * target short of memory may define it lower before including this header, and give
+ * `ehss live --taps` at most as many. */
+#ifndef EHSS_COMP_MAX_TAPS
+#define EHSS_COMP_MAX_TAPS 2048
+#endif
 #define EHSS_COMP_MAX_PREVIEW (EHSS_COMP_MAX_TAPS - 1)
 #define EHSS_COMP_VERSION 1
-/* 52 + 48 * 16 + 8 * 256 */
-#define EHSS_COMP_MAX_DATAGRAM_BYTES 2868
+/* 52 + 48 * 16 + 8 * EHSS_COMP_MAX_TAPS (17 204 bytes at 2048 taps) */
+#define EHSS_COMP_MAX_DATAGRAM_BYTES (52 + 48 * EHSS_COMP_MAX_SECTIONS + 8 * EHSS_COMP_MAX_TAPS)
 /* largest relative difference of a compensator's sample rate from the channel's */
 #define EHSS_COMP_SAMPLE_RATE_TOLERANCE 1e-3
 
