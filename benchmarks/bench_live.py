@@ -152,6 +152,7 @@ class _TimedTarget:
 def run_adaptive(duration: float, tracker: bool, *, fs: float = 5000.0,
                  n_channels: int = 8, block_s: float = 0.005, where: str = "process") -> dict:
     import ehss
+    from ehss.compensation.compensator_design import fir_taps
     from ehss.live.compensate import AdaptiveLoop, CompensationSettings
     from ehss.live.rig import SteppingRig
 
@@ -160,7 +161,9 @@ def run_adaptive(duration: float, tracker: bool, *, fs: float = 5000.0,
         ehss.signals.band_limited_random(band_hz=band, rms=5e-4, duration_s=duration,
                                          fs=fs, seed=seed, fade_s=0.2).values
         for seed in range(1, n_channels + 1)])
-    rig = _TimedTarget(SteppingRig("position", desired, fs=fs, preview=128, seed=0))
+    # the target reads half the FIR ahead, as `ehss live --compensate preview` has it
+    rig = _TimedTarget(SteppingRig("position", desired, fs=fs, preview=fir_taps(fs) // 2,
+                                   seed=0))
     settings = CompensationSettings(band_hz=band, judge_in=where,
                                     tracker_trace_bound=1e12 if tracker else None)
     loop = AdaptiveLoop(rig, settings, loop="position", params=ehss.preset("default"))

@@ -173,7 +173,7 @@ def test_the_refit_follows_the_stream_it_is_for() -> None:
     assert auto.for_stream(8, 5000.0).refine is False
     assert auto.for_stream(1, REFINE_LOAD).refine is True
     assert auto.for_stream(1, REFINE_LOAD + 1.0).refine is False
-    forced = CompensationSettings(refine=True)
+    forced = CompensationSettings(refine=True, n_taps=300)
     assert forced.for_stream(8, 5000.0) is forced
     assert auto.for_stream(8, 5000.0).to_dict()["refine"] is False
     # a window twice as long (a narrow band) has twice the rows to refit
@@ -181,6 +181,40 @@ def test_the_refit_follows_the_stream_it_is_for() -> None:
     assert long.h1_window_s == pytest.approx(3.0)
     assert long.for_stream(1, REFINE_LOAD / 2).refine is True
     assert long.for_stream(1, REFINE_LOAD / 2 + 1.0).refine is False
+
+
+def test_the_fir_spans_the_same_time_at_any_rate() -> None:
+    # what the FIR realises is set in hertz (the band limit's transitions), so its taps
+    # follow the rate: 0.256 s of them, at least twice the target's preview, at most
+    # the target's capacity; a length given stays
+    from ehss.compensation.compensator_design import FIR_SPAN_S, design_compensator
+    from ehss.errors import ParameterError
+    from ehss.identification.model import ArmaxModel
+    from ehss.target.filter import MAX_TAPS
+
+    auto = CompensationSettings()
+    assert auto.n_taps is None
+    assert auto.for_stream(2, 1000.0).n_taps == 256
+    assert auto.for_stream(8, 5000.0).n_taps == math.ceil(FIR_SPAN_S * 5000.0) == 1280
+    assert auto.for_stream(1, 500.0, preview=128).n_taps == 256
+    assert auto.for_stream(1, 1e5).n_taps == MAX_TAPS
+    assert CompensationSettings(n_taps=300).for_stream(8, 5000.0).n_taps == 300
+    assert auto.for_stream(8, 5000.0).to_dict()["n_taps"] == 1280
+    with pytest.raises(ParameterError, match="n_taps"):
+        CompensationSettings(n_taps=MAX_TAPS + 1)
+    # a first-order loop at 5 kHz over 1-50 Hz: the span it asks is the one the same
+    # loop asks at 1 kHz (its pole at the same time constant), and 256 taps, a fifth of
+    # it, realise its inverse far worse
+    errors = {}
+    for fs, n_taps in ((1000.0, 256), (5000.0, 1280), (5000.0, 256)):
+        m = ArmaxModel(a=[1.0, -math.exp(-2 * math.pi * 30.0 / fs)],
+                       b=[1.0 - math.exp(-2 * math.pi * 30.0 / fs)], delay=1, dt=1 / fs)
+        errors[fs, n_taps] = design_compensator(m, band_hz=(1.0, 50.0), n_taps=n_taps) \
+            .errors()["rms_relative_error"]
+        if n_taps != 256 or fs == 1000.0:
+            assert design_compensator(m, band_hz=(1.0, 50.0)).taps.size == n_taps
+    assert errors[5000.0, 1280] < 2 * errors[1000.0, 256]
+    assert errors[5000.0, 256] > 5 * errors[5000.0, 1280]
 
 
 def test_a_bad_refit_setting_is_refused() -> None:

@@ -57,6 +57,9 @@ def test_compensated_rig_run_reports_and_records_its_figures(tmp_path, capsys):
      "--max-gain"),
     (["live", "--rig", "position", "--compensate", "preview", "--max-gain", "inf"],
      "--max-gain"),
+    (["live", "--rig", "position", "--taps", "512"], "--compensate only"),
+    (["live", "--rig", "position", "--compensate", "preview", "--taps", "4096"], "--taps"),
+    (["live", "--rig", "position", "--compensate", "preview", "--taps", "0"], "--taps"),
 ])
 def test_bad_compensation_input_exits_2_with_one_line(argv, word, capsys):
     assert main(argv) == 2

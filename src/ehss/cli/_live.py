@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 import ehss
-from ehss._checks import check_band, check_real
+from ehss._checks import check_band, check_int, check_real
 from ehss._provenance import versions
 from ehss.cli import command_help
 from ehss.cli._outputs import InputFile, OutputFile
@@ -227,6 +227,11 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
             "--compensate: a compensator whose drive's RMS or peak exceeds G times the "
             "reference's is refused, as `ehss compensate` refuses such a drive (default: "
             "3); the refusal says how far over it was"))),
+        ("--taps", dict(type=int, metavar="N", help=(
+            "--compensate: FIR taps of each compensator, 1-2048 (default 0.256 s of "
+            "samples: 256 at 1 kHz, 1280 at 5 kHz); preview mode reads N/2 samples "
+            "ahead. A C target compiled with a smaller EHSS_COMP_MAX_TAPS takes at most "
+            "as many"))),
         ("--target", dict(metavar="HOST:PORT", help=(
             "--compensate with --udp: where the compensator datagrams go "
             "(ehss.target.datagram); the stream must carry des<k>, each channel's "
@@ -425,7 +430,7 @@ def _check_options(args: argparse.Namespace) -> None:
         check_new_recording(args.record)
     if args.compensate is None:
         for flag, value in (("--rms", args.rms), ("--max-gain", args.max_gain),
-                            ("--target", args.target)):
+                            ("--taps", args.taps), ("--target", args.target)):
             if value is not None:
                 raise ParameterError(f"{flag} applies to --compensate only")
     if args.target is not None and args.udp is None:
@@ -434,6 +439,10 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.max_gain is not None:
         # a compensator's drive is bounded below by the reference itself (gain 1)
         check_real(args.max_gain, "--max-gain", lo=1.0, lo_open=True)
+    if args.taps is not None:
+        from ehss.target.filter import MAX_TAPS
+
+        check_int(args.taps, "--taps", lo=1, hi=MAX_TAPS)
     if args.stop_after is not None:
         _check_positive("--stop-after", args.stop_after)
 

@@ -26,9 +26,20 @@ from ehss.live.source import Block
 
 __all__ = ["run_compensated"]
 
-#: Samples of reference the target's filter reads ahead in preview mode: half of its
-#: FIR (the other half holds the causal tail of the inverse).
-PREVIEW_SAMPLES = 128
+
+def _taps(args: argparse.Namespace, fs: float) -> int:
+    """FIR taps of each compensator: --taps, or 0.256 s of samples
+    (:func:`~ehss.compensation.compensator_design.fir_taps`)."""
+    from ehss.compensation.compensator_design import fir_taps
+    from ehss.target import MAX_TAPS
+
+    return fir_taps(fs, most=MAX_TAPS) if args.taps is None else int(args.taps)
+
+
+def _preview(args: argparse.Namespace, fs: float) -> int:
+    """Samples of reference the target's filter reads ahead: in preview mode half of
+    its FIR (the other half holds the causal tail of the inverse), else none."""
+    return _taps(args, fs) // 2 if args.compensate == "preview" else 0
 
 
 def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, Any]:
@@ -50,9 +61,8 @@ def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, 
                          for k in range(1, args.channels + 1)])
     _check_within_limits(desired, fs, args.rig, params, rms, band)
     events = tuple(parse_event(e) for e in args.event)
-    preview = PREVIEW_SAMPLES if args.compensate == "preview" else 0
     target = SteppingRig(args.rig, desired, fs=fs, params=params, events=events,
-                         preview=preview, seed=args.seed)
+                         preview=_preview(args, fs), seed=args.seed)
     return target, params, band
 
 
@@ -95,9 +105,8 @@ def _udp_target(args: argparse.Namespace) -> tuple[Any, tuple[float, float]]:
     layout = RecordLayout(parse_fields(args.fields))
     sender = DatagramSender(parse_address(args.target))
     source = UdpSource(layout, parse_address(args.udp), fs=fs)
-    preview = PREVIEW_SAMPLES if args.compensate == "preview" else 0
     try:
-        target = UdpTarget(source, sender, fs=fs, preview=preview,
+        target = UdpTarget(source, sender, fs=fs, preview=_preview(args, fs),
                            reference_rms=[rms] * len(layout.channels),
                            idle_stop_s=2.0 if args.idle_stop is None else args.idle_stop)
     except ParameterError:
@@ -231,6 +240,7 @@ def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, 
     from ehss.live.session import LiveSession
 
     settings = CompensationSettings(mode=args.compensate, band_hz=band,
+                                    n_taps=_taps(args, float(target.fs)),
                                     guard=_guard(args)).for_stream(
         len(target.channels), float(target.fs))
     est, det = estimation_settings(args)

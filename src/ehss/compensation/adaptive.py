@@ -44,10 +44,12 @@ from ehss.compensation.checks import (
     check_drive,
 )
 from ehss.compensation.compensator_design import (
+    FEWEST_TAPS,
     MODES,
     CompensatorDesign,
     _check_preview,
     design_compensator,
+    fir_taps,
     run_compensator,
 )
 from ehss.compensation.correction import (
@@ -287,7 +289,11 @@ class AdaptiveCompensator:
     preview : int, optional
         See :func:`design_compensator`.
     n_taps, max_sections : int
-        The target's sizes.
+        The target's sizes (``n_taps`` default :func:`~ehss.compensation.
+        compensator_design.fir_taps` of ``fs_hz`` and ``preview``). Each design is
+        as long as pays, between :data:`~ehss.compensation.compensator_design.
+        FEWEST_TAPS` (or twice the preview) and ``n_taps`` (``fewest_taps`` of
+        :func:`~ehss.compensation.compensator_design.design_compensator`).
     guard : UpdateGuard, optional
     loop : str, optional
         With ``params``: the loop the drive is played into, whose limits it must respect
@@ -304,7 +310,8 @@ class AdaptiveCompensator:
     """
 
     def __init__(self, fs_hz: float, band_hz: tuple[float, float], *, mode: str = "preview",
-                 preview: int | None = None, n_taps: int = 256, max_sections: int = 16,
+                 preview: int | None = None, n_taps: int | None = None,
+                 max_sections: int = 16,
                  guard: UpdateGuard | None = None, loop: str | None = None,
                  params: Any = None) -> None:
         if mode not in MODES:
@@ -312,6 +319,8 @@ class AdaptiveCompensator:
         self.fs_hz = float(fs_hz)
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))
         self.mode = mode
+        if n_taps is None:
+            n_taps = fir_taps(self.fs_hz, preview or 0)
         self.preview = _check_preview(mode, preview, int(n_taps))
         self.n_taps = int(n_taps)
         self.max_sections = int(max_sections)
@@ -548,7 +557,8 @@ class AdaptiveCompensator:
         def design(within: tuple[float, float]) -> CompensatorDesign:
             return design_compensator(model, band_hz=self.band_hz, mode=self.mode,
                                       preview=self.preview, n_taps=self.n_taps,
-                                      max_sections=self.max_sections, within=within)
+                                      max_sections=self.max_sections, within=within,
+                                      fewest_taps=max(FEWEST_TAPS, 2 * self.preview))
 
         try:
             return self._realisable(design((math.inf, math.inf)), model, figures, running)

@@ -84,7 +84,8 @@ class AdaptiveLoop:
         self.fs = float(target.fs)
         scales, band = _scales_and_band(target, settings.band_hz, self.fs)
         self.band_hz = (float(band[0]), float(band[1]))
-        settings = settings.for_band(self.band_hz).for_stream(len(target.channels), self.fs)
+        settings = settings.for_band(self.band_hz).for_stream(
+            len(target.channels), self.fs, target.preview if settings.mode == "preview" else 0)
         self.settings = settings
         self.adapters = [
             ChannelAdapter(name, self.fs, self.band_hz, float(scales[k]) or 1.0, settings,
@@ -215,7 +216,8 @@ class AdaptiveLoop:
             return
         ad.started(sent["apply_index"] + sent["crossfade"], sent["apply_index"])
         load = {"kind": "compensator", "channel": ad.name, "t_s": t_s, **sent,
-                "model": ad.chosen, "settle_samples": design.settle_samples, **d.figures,
+                "model": ad.chosen, "taps": int(design.taps.size),
+                "settle_samples": design.settle_samples, **d.figures,
                 **design.errors()}
         self.loads.append(load)
         self._event(load)

@@ -11,9 +11,10 @@ from typing import Any, Protocol
 
 from ehss._checks import check_int, check_real
 from ehss.compensation.adaptive import UpdateGuard
-from ehss.compensation.compensator_design import MODES
+from ehss.compensation.compensator_design import MODES, fir_taps
 from ehss.errors import ParameterError
 from ehss.live.detect import TriggerSettings
+from ehss.target.filter import MAX_TAPS
 
 #: The H1 window's length where the band is wide enough (s), and how many of the
 #: estimate's points a narrower band must hold in it
@@ -186,7 +187,10 @@ class CompensationSettings:
         not count. As many in a row before any compensator is loaded make the refits
         go without their record above the band until one is (:meth:`Judging.refine`).
     n_taps, max_sections : int
-        The target's filter sizes (:data:`ehss.target.filter.MAX_TAPS`, ...).
+        The target's filter sizes (at most :data:`ehss.target.filter.MAX_TAPS`, ...).
+        ``n_taps`` None: :func:`~ehss.compensation.compensator_design.fir_taps` of the
+        stream's rate and the target's preview, at most the target's capacity
+        (:meth:`for_stream`): 0.256 s of samples, 256 at 1 kHz, 1280 at 5 kHz.
     guard : UpdateGuard
     refine : bool or None
         Whether each model judged is first refitted to the output errors of the
@@ -236,7 +240,7 @@ class CompensationSettings:
     start_s: float = 2.0
     adapt_until_s: float = math.inf
     alarm_after: int = 3
-    n_taps: int = 256
+    n_taps: int | None = None
     max_sections: int = 16
     guard: UpdateGuard = field(default_factory=UpdateGuard)
     judge_in: str = "thread"
@@ -258,6 +262,8 @@ class CompensationSettings:
         check_real(self.follow_trace_bound, "follow_trace_bound", lo=0.0, lo_open=True)
         check_real(self.correct_s, "correct_s", lo=0.0, unit="s")
         check_int(self.correction_span, "correction_span", lo=0)
+        if self.n_taps is not None:
+            check_int(self.n_taps, "n_taps", lo=1, hi=MAX_TAPS)
         if self.load_sigmas is not None:
             check_real(self.load_sigmas, "load_sigmas")
         if self.refine not in (None, True, False):
@@ -286,17 +292,23 @@ class CompensationSettings:
         (:meth:`h1_window_for`), as a run records them."""
         return dataclasses.replace(self, h1_window_s=self.h1_window_for(band_hz))
 
-    def for_stream(self, n_channels: int, fs: float) -> CompensationSettings:
-        """These settings for a stream of ``n_channels`` at ``fs``: ``refine`` None
-        becomes whether channels × fs ≤ :data:`REFINE_LOAD` (what the worker's share of
-        a core allows), counted in windows of :data:`H1_WINDOW_S`: a refit's cost grows
-        with its rows, and a longer window (``h1_window_s``, :meth:`for_band`) has
-        more."""
-        if self.refine is not None:
-            return self
-        window = H1_WINDOW_S if self.h1_window_s is None else self.h1_window_s
-        return dataclasses.replace(
-            self, refine=n_channels * fs * window / H1_WINDOW_S <= REFINE_LOAD)
+    def for_stream(self, n_channels: int, fs: float, preview: int = 0
+                   ) -> CompensationSettings:
+        """These settings for a stream of ``n_channels`` at ``fs`` whose target reads
+        ``preview`` samples ahead: ``refine`` None becomes whether channels × fs ≤
+        :data:`REFINE_LOAD` (what the worker's share of a core allows), counted in
+        windows of :data:`H1_WINDOW_S`: a refit's cost grows with its rows, and a longer
+        window (``h1_window_s``, :meth:`for_band`) has more; ``n_taps`` None becomes
+        :func:`~ehss.compensation.compensator_design.fir_taps` of ``fs`` and
+        ``preview``."""
+        out = self
+        if out.n_taps is None:
+            out = dataclasses.replace(out, n_taps=fir_taps(fs, preview, most=MAX_TAPS))
+        if out.refine is None:
+            window = H1_WINDOW_S if out.h1_window_s is None else out.h1_window_s
+            out = dataclasses.replace(
+                out, refine=n_channels * fs * window / H1_WINDOW_S <= REFINE_LOAD)
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "band_hz": self.band_hz, "memory_s": self.memory_s,
