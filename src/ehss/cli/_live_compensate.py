@@ -262,8 +262,10 @@ def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, 
         loop = AdaptiveLoop(stepped, settings, loop=args.rig if params is not None else None,
                             params=params, log=_loop_event(session))
         stepped.loop = loop
-        print(f"ehss live: compensating ({args.compensate}), band {band[0]:g}-{band[1]:g} Hz",
-              file=sys.stderr, flush=True)
+        # a remote target must run its filter with this preview, or it refuses them all
+        ahead = f", {target.preview} samples ahead" if args.compensate == "preview" else ""
+        print(f"ehss live: compensating ({args.compensate}, FIR of {settings.n_taps} taps"
+              f"{ahead}), band {band[0]:g}-{band[1]:g} Hz", file=sys.stderr, flush=True)
         session.start()
         with stop_on_sigterm() as stop:
             try:
