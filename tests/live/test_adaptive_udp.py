@@ -61,6 +61,46 @@ def test_the_target_is_placed_by_its_own_clock(rate):
     assert expected <= target.ahead() <= expected + 0.01 * rate   # 10 ms for this test
 
 
+class _Sent:
+    def send(self, channel, compensator, apply_index, crossfade):
+        return True
+
+
+class _OneByOne(_Arrived):
+    """A source whose blocks come one per poll."""
+
+    def poll(self, timeout_s: float) -> list[Block]:
+        return [self.blocks.pop(0)] if self.blocks else []
+
+
+@pytest.mark.parametrize("runs", [False, True])
+def test_a_target_that_runs_no_compensator_is_told(runs):
+    # a target refuses every compensator whose preview is not its own, and its drive
+    # stays its desired reference (the compensator it starts with): the host says so,
+    # once, when the first one sent should have been running for IGNORED_AFTER_S
+    from ehss.live.compensate.udp_target import IGNORED_AFTER_S
+
+    fs, n = 1000.0, 50
+    des = np.sin(np.arange(3000) / 30.0)
+    drive = 1.01 * des if runs else des.copy()
+    blocks = [Block(k, np.column_stack([np.arange(k, k + n) / fs, drive[k:k + n],
+                                        np.zeros(n), des[k:k + n]]), 0.0)
+              for k in range(0, des.size, n)]
+    told = []
+    target = UdpTarget(_OneByOne(blocks), _Sent(), fs=fs, preview=128, reference_rms=[1.0],
+                       warn=told.append)
+    target.load(0, None, apply_index=200, crossfade=100)
+    target.step(250)                                  # before the fade's end + 0.5 s
+    assert not told and not target.ignored
+    target.load(0, None, apply_index=900, crossfade=100)   # later ones change nothing
+    target.step(3000)
+    if runs:
+        assert not told and not target.ignored
+    else:
+        assert len(told) == 1 and target.ignored == {0: told[0]}
+        assert "128 samples ahead at 1000 Hz" in told[0] and f"{IGNORED_AFTER_S:g} s" in told[0]
+
+
 def _run(speed: float, **settings):
     """One run against a fresh target process paced at ``speed`` × real time: the
     host's record, the target's counters and the sender's count."""
@@ -80,6 +120,8 @@ def _run(speed: float, **settings):
         proc.stdin.write("go\n")
         proc.stdin.flush()
         rec = loop.run()
+        # the target ran what it was sent: the host did not take it for one that refuses
+        assert not target.ignored, target.ignored
         counters = json.loads(proc.stdout.readline())
         proc.wait(timeout=30)
     finally:

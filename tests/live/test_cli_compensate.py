@@ -163,6 +163,24 @@ def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
     assert "--band" not in lines["channel 2"] and "unstable" in lines["channel 2"]
 
 
+def test_a_remote_target_that_ran_none_of_its_compensators_is_said_so(capsys):
+    from types import SimpleNamespace
+
+    from ehss.cli._live_compensate import _compare
+
+    n = 2000
+    why = "channel 2: the target's drive is still its desired reference ..."
+    rec = SimpleNamespace(
+        desired=np.ones((2, n)), feedback=np.zeros((2, n)), fs=1000.0, channels=("1", "2"),
+        loads=[{"channel": c, "model": "estimator"} for c in ("1", "2")],
+        decisions={"1": [{"accepted": True}], "2": [{"accepted": True}]},
+        tracking_rms=lambda t0, t1: np.ones(2))
+    out = _compare(rec, [], {1: why})
+    assert out["2"]["ignored_by_target"] == why and "ignored_by_target" not in out["1"]
+    err = capsys.readouterr().err.splitlines()
+    assert f"ehss live: {why}" in err
+
+
 def test_models_refused_for_their_gain_point_to_the_band_and_near_misses_to_the_bound(
         capsys):
     from types import SimpleNamespace

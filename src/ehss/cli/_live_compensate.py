@@ -107,6 +107,8 @@ def _udp_target(args: argparse.Namespace) -> tuple[Any, tuple[float, float]]:
     source = UdpSource(layout, parse_address(args.udp), fs=fs)
     try:
         target = UdpTarget(source, sender, fs=fs, preview=_preview(args, fs),
+                           warn=lambda line: print(f"ehss live: warning: {line}",
+                                                   file=sys.stderr, flush=True),
                            reference_rms=[rms] * len(layout.channels),
                            idle_stop_s=2.0 if args.idle_stop is None else args.idle_stop)
     except ParameterError:
@@ -279,7 +281,7 @@ def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, 
     if rec is None:
         print("ehss live: interrupted; the recording is closed", file=sys.stderr)
         return 130
-    channels = _compare(rec, stepped.plain)
+    channels = _compare(rec, stepped.plain, getattr(target, "ignored", {}))
     finish(args, report, {"compensation": rec.settings, "channels": channels,
                           "loads": rec.loads, "decisions": rec.decisions,
                           "events": rec.events,
@@ -300,9 +302,12 @@ def _baselines(args: argparse.Namespace, source: _HandedSource) -> dict:
     return baselines(args.baseline, source.layout.channels)
 
 
-def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
+def _compare(rec: Any, plain: list[np.ndarray], ignored: dict[int, str] | None = None
+             ) -> dict[str, dict]:
     """Tracking RMS over the second half with and without compensation per channel,
-    loads and refusals; printed, and returned for the report."""
+    loads and refusals, and the channels whose remote target ran none of them
+    (``ignored``, :attr:`~ehss.live.compensate.UdpTarget.ignored`); printed, and
+    returned for the report."""
     n = rec.desired.shape[1]
     if plain:
         # the same rig without compensation, stepped beside it
@@ -314,7 +319,7 @@ def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
         err = rec.desired[:, :m] - rec.feedback[:, :m]
     without = np.sqrt(np.mean(err * err, axis=1))
     with_ = rec.tracking_rms(n / 2 / rec.fs, n / rec.fs)
-    channels = {}
+    channels: dict[str, dict[str, Any]] = {}
     for k, name in enumerate(rec.channels):
         channels[name] = {
             "tracking_rms": float(with_[k]), "tracking_rms_without": float(without[k]),
@@ -326,6 +331,9 @@ def _compare(rec: Any, plain: list[np.ndarray]) -> dict[str, dict]:
               f"{without[k] / with_[k] if with_[k] > 0 else math.inf:.1f}x), "
               f"{channels[name]['loads']} compensators loaded, "
               f"{channels[name]['refusals']} refused", file=sys.stderr)
+        if ignored and k in ignored:
+            channels[name]["ignored_by_target"] = ignored[k]
+            print(f"ehss live: {ignored[k]}", file=sys.stderr)
         offs = [ld for ld in rec.loads if ld["channel"] == name and ld["model"] == "off"]
         if offs:
             channels[name]["switched_off"] = len(offs)

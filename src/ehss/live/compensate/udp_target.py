@@ -6,12 +6,17 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ehss.errors import ParameterError
+
+#: How long after its first compensator should have been faded in a target's drive may
+#: still be its desired reference before the target is taken to refuse them, s.
+IGNORED_AFTER_S = 0.5
 
 
 class DatagramSender:
@@ -79,10 +84,23 @@ class UdpTarget:
         RMS of each channel's desired reference (the estimators' scale).
     idle_stop_s : float
         The run ends when no data came for this long after the first.
+    warn : callable, optional
+        Called once per channel with one line when the target does not run the first
+        compensator sent to it (:attr:`ignored`).
+
+    Attributes
+    ----------
+    ignored : dict
+        Channel index → why the target is taken not to run its compensators: its
+        drive was still exactly its desired reference (the compensator a target starts
+        with, drive = reference) :data:`IGNORED_AFTER_S` after the first one sent should
+        have been faded in. A target refuses every compensator whose preview or sample
+        rate is not its own, and says so only in its own counters.
     """
 
     def __init__(self, source: Any, sender: DatagramSender, *, fs: float, preview: int,
-                 reference_rms: Any, idle_stop_s: float = 1.0) -> None:
+                 reference_rms: Any, idle_stop_s: float = 1.0,
+                 warn: Callable[[str], None] | None = None) -> None:
         layout = source.layout
         self.channels = tuple(layout.channels)
         missing = [f"des{c}" for c in self.channels if f"des{c}" not in layout.fields]
@@ -102,13 +120,42 @@ class UdpTarget:
         self._first_arrival: tuple[int, float] | None = None
         self._latest_arrival: tuple[int, float] | None = None
         self._largest_block = 0
+        self._warn = warn
+        # channel index -> sample from which its first compensator was fully faded in
+        self._expected: dict[int, int] = {}
+        self._checked: set[int] = set()
+        self.ignored: dict[int, str] = {}
 
     @property
     def finished(self) -> bool:
         return self._done or self.source.finished
 
     def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
+        if channel not in self._checked:
+            self._expected.setdefault(channel, int(apply_index) + max(1, int(crossfade)))
         return self.sender.send(channel, compensator, apply_index, crossfade)
+
+    def _check_applied(self, first: int, desired: np.ndarray, drive: np.ndarray) -> None:
+        """Whether each channel's first compensator shows in its drive, on the samples
+        of this block from :data:`IGNORED_AFTER_S` after it was faded in."""
+        end = first + desired.shape[1]
+        for k, at in list(self._expected.items()):
+            start = at + int(round(IGNORED_AFTER_S * self.fs))
+            if end <= start:
+                continue
+            del self._expected[k]
+            self._checked.add(k)
+            d, u = desired[k, max(0, start - first):], drive[k, max(0, start - first):]
+            scale = float(np.max(np.abs(d))) if d.size else 0.0
+            if scale == 0.0 or np.max(np.abs(u - d)) > 1e-12 * scale:
+                continue          # it runs something, or nothing to tell it by
+            why = (f"channel {self.channels[k]}: the target's drive is still its desired "
+                   f"reference {IGNORED_AFTER_S:g} s after the first compensator should "
+                   f"have been faded in: it refuses them (its filter must read "
+                   f"{self.preview} samples ahead at {self.fs:g} Hz; see its counters)")
+            self.ignored[k] = why
+            if self._warn is not None:
+                self._warn(why)
 
     def _arrived(self, first: int, n: int, arrival: float) -> None:
         self._latest_arrival = (first + n, arrival)
@@ -152,5 +199,8 @@ class UdpTarget:
         x = np.concatenate(got) if got else np.empty((0, len(self.source.layout.fields)))
         first = self.index
         self.index += x.shape[0]
-        return _UdpBlock(first, x[:, self._di].T.copy(), x[:, list(self._ri)].T.copy(),
-                         x[:, list(self._fi)].T.copy())
+        block = _UdpBlock(first, x[:, self._di].T.copy(), x[:, list(self._ri)].T.copy(),
+                          x[:, list(self._fi)].T.copy())
+        if self._expected:
+            self._check_applied(first, block.desired, block.drive)
+        return block
