@@ -9,7 +9,7 @@ stream seconds processed per wall second (above 1: faster than real time). In th
 run, the same kernel interpreted by Python (``filter_block.py_func``) on a shorter
 stretch gives the speed-up numba brings; and, when a C compiler and cffi are there,
 the C code (one ``ehss_comp_step`` per sample, called from a C loop) gives the ratio
-to the target's own code.
+to the target's own code, and the time of one ``ehss_comp_decode`` of such a datagram.
 
 Usage::
 
@@ -86,11 +86,24 @@ def _c_rate(n_sections, n_taps, seconds):
         data = encode(CompensatorUpdate(channel=ch, sequence=1, apply_index=0, crossfade=0,
                                         compensator=_compensator(rng, n_sections, n_taps)))
         lib.ehss_comp_decode(s, data, len(data))
+        if ch == 0:
+            data0 = data
         states.append(s)
     t0 = time.perf_counter()
     for s in states:
         lib.run_block(s, ffi.from_buffer("double[]", x), ffi.from_buffer("double[]", y), n)
-    return (n / FS) / (time.perf_counter() - t0)
+    rate = (n / FS) / (time.perf_counter() - t0)
+    # one decode (CRC, checks, the copy into the mailbox) of such a datagram: best of
+    # 2000, each on a freshly started channel so that it is taken (a cffi call adds
+    # about a tenth of a microsecond)
+    s = ffi.new("ehss_comp_state *")
+    best = np.inf
+    for _ in range(2000):
+        lib.ehss_comp_init(s, 0, 3, FS, 0)
+        t0 = time.perf_counter()
+        lib.ehss_comp_decode(s, data0, len(data0))
+        best = min(best, time.perf_counter() - t0)
+    return rate, best * 1e6
 
 
 def main() -> None:
@@ -100,10 +113,10 @@ def main() -> None:
     print(f"Python {platform.python_version()}, numpy {np.__version__}; "
           f"{CHANNELS} channels at {FS:g} Hz, {a.seconds:g} s of stream per case")
     print("| compensator | block | state | real-time factor (numba) | "
-          "interpreted kernel | C, per sample |")
-    print("|---|---:|---|---:|---:|---:|")
+          "interpreted kernel | C, per sample | C decode (µs) |")
+    print("|---|---:|---|---:|---:|---:|---:|")
     for n_sections, n_taps in ((4, 32), (16, 256), (16, 1280), (16, MAX_TAPS)):
-        c_rate = _c_rate(n_sections, n_taps, a.seconds)
+        c_rate, c_decode = _c_rate(n_sections, n_taps, a.seconds) or (None, None)
         for block in (5, 50):
             for fading in (False, True):
                 fast = _rate(n_sections, n_taps, block, a.seconds, fading=fading)
@@ -114,7 +127,8 @@ def main() -> None:
                 finally:
                     target_filter.filter_block = filter_block
                     target_filter.crossfade_block = crossfade_block
-                c_text = f"{c_rate:.0f}" if c_rate is not None and not fading else ""
+                c_text = f"{c_rate:.0f} | {c_decode:.1f}" \
+                    if c_rate is not None and not fading else " | "
                 print(f"| {n_sections} sections, {n_taps} taps | {block} | "
                       f"{'cross-fade' if fading else 'steady'} | {fast:.1f} | "
                       f"{slow:.3f} | {c_text} |")
