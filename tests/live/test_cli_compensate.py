@@ -17,7 +17,8 @@ def test_compensated_rig_run_reports_and_records_its_figures(tmp_path, capsys):
     report, record = tmp_path / "run.json", tmp_path / "run.h5"
     argv = ["live", "--rig", "position", "--channels", "2", "--duration", "8",
             "--band", "0.5", "20", "--compensate", "preview", "--speed", "inf",
-            "--max-gain", "3.5", "--report", str(report), "--record", str(record), "--quiet"]
+            "--max-gain", "3.5", "--memory", "0.4", "--report", str(report),
+            "--record", str(record), "--quiet"]
     assert main(argv) == 0
     err = capsys.readouterr().err
     assert "compensating (preview, FIR of 256 taps, 128 samples ahead), band 0.5-20 Hz" \
@@ -25,6 +26,7 @@ def test_compensated_rig_run_reports_and_records_its_figures(tmp_path, capsys):
     out = json.loads(report.read_text())
     assert out["compensation"]["mode"] == "preview"
     assert out["compensation"]["max_gain"] == 3.5
+    assert out["compensation"]["memory_s"] == 0.4      # the compensators' estimators too
     for name in ("1", "2"):
         ch = out["channels"][name]
         assert ch["loads"] > 0

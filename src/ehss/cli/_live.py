@@ -157,7 +157,8 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
             "rml (default): recursive maximum likelihood, unbiased when the feedback "
             "carries mostly sensor noise; rels: the paper's eqs (19)-(22)"))),
         ("--memory", dict(type=float, default=0.3, metavar="S", help=(
-            "memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: %(default)s s)"))),
+            "memory of the forgetting factor, λ = 1 - 1/(S·fs) (default: %(default)s s); "
+            "with --compensate also the compensators' estimators'"))),
         ("--forgetting", dict(type=float, metavar="LAMBDA", help="λ itself")),
         ("--p0", dict(type=float, default=1e6, metavar="ALPHA", help=(
             "P(0) = α I on the scaled data; tr P(0) also bounds tr P (default: "

@@ -242,6 +242,7 @@ def _run(args: argparse.Namespace, target: Any, params: Any, band: tuple[float, 
     from ehss.live.session import LiveSession
 
     settings = CompensationSettings(mode=args.compensate, band_hz=band,
+                                    memory_s=args.memory,
                                     n_taps=_taps(args, float(target.fs)),
                                     guard=_guard(args)).for_stream(
         len(target.channels), float(target.fs))
