@@ -73,26 +73,32 @@ class _OneByOne(_Arrived):
         return [self.blocks.pop(0)] if self.blocks else []
 
 
-@pytest.mark.parametrize("runs", [False, True])
+@pytest.mark.parametrize("runs", [False, True, "off"])
 def test_a_target_that_runs_no_compensator_is_told(runs):
     # a target refuses every compensator whose preview is not its own, and its drive
     # stays its desired reference (the compensator it starts with): the host says so,
-    # once, when the first one sent should have been running for IGNORED_AFTER_S
+    # once, when the first one sent should have been running for IGNORED_AFTER_S; a
+    # compensator that passes the reference (compensation switched off) tells nothing
     from ehss.live.compensate.udp_target import IGNORED_AFTER_S
+    from ehss.target import Compensator
+
+    fir = Compensator(sos=np.zeros((0, 6)), taps=np.r_[np.zeros(128), 0.9, 0.1],
+                      preview=128, fs_hz=1000.0)
+    first = Compensator.delay(128, fs_hz=1000.0) if runs == "off" else fir
 
     fs, n = 1000.0, 50
     des = np.sin(np.arange(3000) / 30.0)
-    drive = 1.01 * des if runs else des.copy()
+    drive = 1.01 * des if runs is True else des.copy()
     blocks = [Block(k, np.column_stack([np.arange(k, k + n) / fs, drive[k:k + n],
                                         np.zeros(n), des[k:k + n]]), 0.0)
               for k in range(0, des.size, n)]
     told = []
     target = UdpTarget(_OneByOne(blocks), _Sent(), fs=fs, preview=128, reference_rms=[1.0],
                        warn=told.append)
-    target.load(0, None, apply_index=200, crossfade=100)
+    target.load(0, first, apply_index=200, crossfade=100)
     target.step(250)                                  # before the fade's end + 0.5 s
     assert not told and not target.ignored
-    target.load(0, None, apply_index=900, crossfade=100)   # later ones change nothing
+    target.load(0, fir, apply_index=900, crossfade=100)   # later ones change nothing
     target.step(3000)
     if runs:
         assert not told and not target.ignored

@@ -56,6 +56,21 @@ class DatagramSender:
         self._sock.close()
 
 
+def _passes_reference(compensator: Any) -> bool:
+    """Whether ``compensator`` gives the drive = the reference (its impulse response a
+    unit at its preview), as a target runs before any compensator or with compensation
+    switched off (:func:`~ehss.compensation.compensator_design.pass_through`)."""
+    from ehss.target import CompensatorFilter
+
+    n = compensator.settle_samples + compensator.preview + 1
+    impulse = np.zeros(n)
+    impulse[0] = 1.0
+    response = CompensatorFilter(compensator).process(impulse)
+    unit = np.zeros(n)
+    unit[compensator.preview] = 1.0
+    return bool(np.allclose(response, unit, rtol=0.0, atol=1e-12))
+
+
 @dataclass(frozen=True)
 class _UdpBlock:
     first_index: int
@@ -132,7 +147,12 @@ class UdpTarget:
 
     def load(self, channel: int, compensator: Any, apply_index: int, crossfade: int) -> bool:
         if channel not in self._checked:
-            self._expected.setdefault(channel, int(apply_index) + max(1, int(crossfade)))
+            if _passes_reference(compensator):
+                # compensation switched off: drive = reference is what it should run
+                self._expected.pop(channel, None)
+                self._checked.add(channel)
+            else:
+                self._expected.setdefault(channel, int(apply_index) + max(1, int(crossfade)))
         return self.sender.send(channel, compensator, apply_index, crossfade)
 
     def _check_applied(self, first: int, desired: np.ndarray, drive: np.ndarray) -> None:
