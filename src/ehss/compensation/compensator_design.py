@@ -71,9 +71,8 @@ MODES = ("preview", "causal")
 #: set in hertz (the band limit's transition above the band, 10 Hz wide for a band to
 #: 20 Hz; the inverse near the band's edges), so its length in samples follows the rate.
 #: Over 0.5-20 Hz the simulated rig's inverse (model (6, 5, 6) identified on 30 s)
-#: is realised to 0.24 % RMS with 0.256 s at 1 and 2 kHz and 0.44 % at 5 kHz, against
-#: 1.6 % and 6 % with the 256 taps that span it at 1 kHz (0.05 %, 0.2 %, 0.07 % with
-#: twice the span).
+#: is realised to 0.22-0.24 % RMS with 0.256 s at 1, 2 and 5 kHz (256, 512 and 1280
+#: taps), against 1.4 % and 5.9 % with 256 taps at 2 and 5 kHz.
 FIR_SPAN_S = 0.256
 
 #: Fewest taps :class:`~ehss.compensation.adaptive.AdaptiveCompensator` tries before
