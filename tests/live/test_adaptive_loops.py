@@ -30,9 +30,10 @@ _WINDOWS_S = [(t, t + 2.0) for t in np.arange(CHANGE_S + 2.0, DURATION_S, 2.0)]
 #: another machine than those figures' (its rounding takes a run another course, as the
 #: noise does): servo 0.97-1.03x / <= 1.03x, specimen 1.07-1.20x / <= 1.01x, delayed
 #: loop 1.03-1.17x / <= 1.09x, frozen >= 10.7x, every change flagged at 20.1-20.2 s.
-#: The servo's bounds are the ones it had before the refit (1.7-3.1x then: README).
+#: All three are held to the aim, 1.5x from 2 s after the change (before the refit the
+#: servo was 1.7-3.1x over [22, 24) s and held to 4x: README).
 CASES = {
-    "servo 2 kHz, +40 % mass": (SERVO, (1.0, 50.0), 1.4, 4.0, 2.0),
+    "servo 2 kHz, +40 % mass": (SERVO, (1.0, 50.0), 1.4, 1.5, 1.5),
     "specimen 4 kHz, +40 % stiffness": (SPECIMEN, (1.0, 40.0), 1.4, 1.5, 1.5),
     # the 12 Hz loop behind 2 ms of delay: its error rises 20-25x; the first model
     # refitted since the change (0.8-1 s of rows) is in 1.5 s after it
