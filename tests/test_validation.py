@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -104,6 +105,26 @@ def test_frf_error_standard_errors_and_unexcited_points(true_model):
     np.testing.assert_allclose(err.sigma_magnitude_db, 20 / math.log(10) * eps, rtol=1e-12)
     np.testing.assert_allclose(err.sigma_phase_deg, math.degrees(eps), rtol=1e-12)
     assert err.beyond_uncertainty(2.0) == (0.0, 0.0)
+
+
+def test_the_point_furthest_beyond_the_estimate_is_found(true_model):
+    # the estimate off the model by 2 dB at 10 Hz, and by 12 deg at 30 Hz; both points
+    # of coherence 0.9 over 8 averages (standard errors 0.7238 dB and 4.775 deg, above).
+    # Less two of them, 0.553 dB against a bound of 1 dB and 2.45 deg against 5 deg: the
+    # magnitude's share is the larger (0.553 against 0.49), so 10 Hz, and more so with
+    # a bound of 0.5 dB (1.106); with a phase bound of 2 deg (1.225 against 0.553), 30 Hz
+    f = np.array([10.0, 20.0, 30.0])
+    g = true_model.frequency_response(f)
+    off = np.array([10 ** (2.0 / 20.0), 1.0, np.exp(1j * np.radians(12.0))])
+    frf = FrequencyResponse(freq_hz=f, response=g * off, coherence=np.full(3, 0.9),
+                            n_averages=8, nperseg=100, fs=FS)
+    err = frf_error(true_model, frf, band_hz=(0.0, 100.0))
+    assert err.worst_beyond_uncertainty(2.0, 1.0, 5.0) == 10.0
+    assert err.worst_beyond_uncertainty(2.0, 0.5, 5.0) == 10.0
+    assert err.worst_beyond_uncertainty(2.0, 1.0, 2.0) == 30.0
+    empty = frf_error(true_model, dataclasses.replace(frf, coherence=np.zeros(3)),
+                      band_hz=(0.0, 100.0))
+    assert math.isnan(empty.worst_beyond_uncertainty(2.0, 1.0, 5.0))
 
 
 def test_frf_error_phase_is_wrapped(true_model):

@@ -137,6 +137,19 @@ class FrfError:
         ph = np.abs(self.phase_error_deg) - n_sigma * self.sigma_phase_deg
         return float(max(0.0, np.max(mag))), float(max(0.0, np.max(ph)))
 
+    def worst_beyond_uncertainty(self, n_sigma: float, magnitude_db: float,
+                                 phase_deg: float) -> float:
+        """Frequency (Hz) of the point whose error, less ``n_sigma`` standard errors of
+        the estimate, is largest against its bound (``magnitude_db`` in magnitude,
+        ``phase_deg`` in phase, whichever is the larger share): where a model is
+        furthest beyond what the estimate confirms (NaN when nothing was compared)."""
+        if self.n_points == 0:
+            return math.nan
+        mag = np.abs(self.magnitude_error_db) - n_sigma * self.sigma_magnitude_db
+        ph = np.abs(self.phase_error_deg) - n_sigma * self.sigma_phase_deg
+        share = np.maximum(mag / magnitude_db, ph / phase_deg)
+        return float(self.freq_hz[int(np.argmax(share))])
+
     def summary(self) -> dict[str, Any]:
         """Plain floats/ints for JSON."""
         return {

@@ -13,6 +13,7 @@ from ehss.errors import DataError, ParameterError
 from ehss.frequency import h1_estimate
 from ehss.identification.model import ArmaxModel
 from ehss.signals import band_limited_random
+from ehss.validation import frf_error
 
 FS = 1000.0
 BAND = (0.5, 20.0)
@@ -606,6 +607,9 @@ def test_a_disagreement_within_twice_the_channels_usual_one_is_a_near_miss():
     d = comp.assess(1.0, late, h1, r)
     assert not d.accepted and "disagrees" in d.reason
     assert 10.0 < d.figures["h1_phase_deg"] < 16.0
+    # a delay's phase error grows with the frequency: furthest at the band's top
+    top = frf_error(late, h1, band_hz=BAND).compared_hz[1]
+    assert d.figures["h1_worst_hz"] == top and f"furthest at {top:.3g} Hz" in d.reason
     assert d.fault
     assert not comp.assess(1.0, late, h1, r, usual_disagreement=(0.5, 8.0)).fault
     # usual disagreements within the bounds change nothing

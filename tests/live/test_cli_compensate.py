@@ -165,6 +165,35 @@ def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
     assert "--band" not in lines["channel 2"] and "unstable" in lines["channel 2"]
 
 
+def test_where_the_models_missed_the_h1_estimate_is_said(capsys):
+    # channel 1: 5 judgements, 4 refused as the model missed the H1 estimate, 3 of them
+    # furthest at 4.88 Hz (a band's lower edge) and one at 48.8 Hz; channel 2: one such
+    # refusal of three, which says nothing of where its models miss
+    from types import SimpleNamespace
+
+    from ehss.cli._live_compensate import _compare
+    from ehss.compensation.adaptive import H1_DISAGREES
+
+    def miss(hz):
+        return {"accepted": False, "reason": f"{H1_DISAGREES} by ...", "h1_worst_hz": hz}
+
+    n = 2000
+    rec = SimpleNamespace(
+        desired=np.ones((2, n)), feedback=np.zeros((2, n)), fs=1000.0, channels=("1", "2"),
+        loads=[{"channel": "1", "model": "estimator"}, {"channel": "2", "model": "tracker"}],
+        decisions={"1": [{"accepted": True}, miss(4.88), miss(48.8), miss(4.88), miss(4.88)],
+                   "2": [miss(20.0), {"accepted": False, "reason": "unstable"},
+                         {"accepted": False, "reason": "unstable"}]},
+        tracking_rms=lambda t0, t1: np.ones(2))
+    out = _compare(rec, [])
+    assert out["1"]["h1_misses"] == {"refusals": 4, "furthest_hz": 4.88, "furthest_there": 3}
+    assert "h1_misses" not in out["2"]
+    err = capsys.readouterr().err
+    assert ("4 refused, 4 of them as the model missed the H1 estimate, most (3) furthest "
+            "at 4.88 Hz") in err
+    assert "channel 2: tracking RMS" in err and err.count("missed the H1") == 1
+
+
 def test_a_remote_target_that_ran_none_of_its_compensators_is_said_so(capsys):
     from types import SimpleNamespace
 

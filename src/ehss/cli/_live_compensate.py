@@ -327,11 +327,14 @@ def _compare(rec: Any, plain: list[np.ndarray], ignored: dict[int, str] | None =
             "loads": sum(1 for ld in rec.loads if ld["channel"] == name),
             "refusals": sum(1 for d in rec.decisions[name] if not d["accepted"]),
         }
+        missed = _missed(rec.decisions[name])
+        if missed:
+            channels[name]["h1_misses"] = missed
         print(f"ehss live: channel {name}: tracking RMS over the second half "
               f"{with_[k]:.4g} (without compensation {without[k]:.4g}, "
               f"{without[k] / with_[k] if with_[k] > 0 else math.inf:.1f}x), "
               f"{channels[name]['loads']} compensators loaded, "
-              f"{channels[name]['refusals']} refused", file=sys.stderr)
+              f"{channels[name]['refusals']} refused{_said(missed)}", file=sys.stderr)
         if ignored and k in ignored:
             channels[name]["ignored_by_target"] = ignored[k]
             print(f"ehss live: {ignored[k]}", file=sys.stderr)
@@ -347,6 +350,29 @@ def _compare(rec: Any, plain: list[np.ndarray], ignored: dict[int, str] | None =
             print(f"ehss live: channel {name}: no compensator was loaded; the latest "
                   f"refusal: {refused[-1]}{_hint(refused)}", file=sys.stderr)
     return channels
+
+
+def _missed(decisions: list[dict]) -> dict[str, Any] | None:
+    """Where a channel's models missed the H1 estimate, if that was most of its
+    refusals: how many, and the frequency at which most of them were furthest from it
+    (a mode or a high-pass at the band's edge that the reference hardly excites shows
+    there); None otherwise."""
+    refused = [d for d in decisions if not d["accepted"]]
+    worst = [float(d["h1_worst_hz"]) for d in refused if "h1_worst_hz" in d]
+    if not worst or 2 * len(worst) < len(refused):
+        return None
+    values, counts = np.unique(np.round(worst, 9), return_counts=True)
+    k = int(np.argmax(counts))
+    return {"refusals": len(worst), "furthest_hz": float(values[k]),
+            "furthest_there": int(counts[k])}
+
+
+def _said(missed: dict[str, Any] | None) -> str:
+    """:func:`_missed` as the end of a channel's summary line."""
+    if missed is None:
+        return ""
+    return (f", {missed['refusals']} of them as the model missed the H1 estimate, most "
+            f"({missed['furthest_there']}) furthest at {missed['furthest_hz']:.3g} Hz")
 
 
 #: The gain check's refusal (:func:`ehss.compensation.check_drive`): the ratio it found.

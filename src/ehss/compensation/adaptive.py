@@ -530,8 +530,12 @@ class AdaptiveCompensator:
             usual_db, usual_deg = (0.0, 0.0) if usual is None else usual
             gross = (mag_db > NEAR_MISS * max(acc.max_magnitude_db, usual_db)
                      or ph_deg > NEAR_MISS * max(acc.max_phase_deg, usual_deg))
+            worst = err.worst_beyond_uncertainty(acc.uncertainty_sigmas,
+                                                 acc.max_magnitude_db, acc.max_phase_deg)
+            figures["h1_worst_hz"] = worst
             return Decision(t_s, False, f"{H1_DISAGREES} by "
-                            f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty (bounds "
+                            f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty, "
+                            f"furthest at {worst:.3g} Hz (bounds "
                             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",
                             figures=figures, fault=gross)
         return self._checked_drive(
