@@ -655,3 +655,58 @@ def test_the_running_drive_is_judged_against_its_reference_and_the_limits():
     assert "(bound 3×)" in plain.drive_fault(7.0 * r, r)
     # which a fading reference's ratio says nothing of: the limits alone then
     assert plain.drive_fault(7.0 * r, r, gains=False) == ""
+
+
+def _low_edge_miss(h1, deg):
+    """``h1`` with its lowest point in the band turned by ``deg`` degrees (a slow mode
+    or a high-pass below the band that a model misses there), and that point."""
+    import dataclasses
+
+    lowest = frf_error(_loop(), h1, band_hz=BAND).compared_hz[0]
+    k = int(np.argmin(np.abs(h1.freq_hz - lowest)))
+    response = h1.response.copy()
+    response[k] *= np.exp(1j * np.radians(deg))
+    return dataclasses.replace(h1, response=response), float(h1.freq_hz[k])
+
+
+def test_a_model_that_misses_only_the_bands_lowest_point_is_validated_above_it():
+    # the estimate 20 deg off the model at its lowest point only (4x the 5 deg bound):
+    # refused as a fault by default; where the channel's models keep missing there
+    # (low_edge), validated over the band from halfway to the next point, and its
+    # inverse designed over that band only
+    m = _loop()
+    r, h1 = _h1(m)
+    turned, lowest = _low_edge_miss(h1, 20.0)
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    d = comp.assess(1.0, m, turned, r)
+    assert not d.accepted and d.fault and d.figures["h1_worst_hz"] == lowest
+    assert d.figures["h1_lowest_hz"] == lowest
+    v = comp.assess(1.0, m, turned, r, low_edge=True)
+    points = frf_error(m, turned, band_hz=BAND).freq_hz
+    above = float(np.min(points[points > lowest]))
+    assert v.accepted and v.figures["validated_from_hz"] == pytest.approx(
+        0.5 * (lowest + above), rel=1e-12)
+    # the points above agree within the bound, the edge's miss is kept apart
+    assert v.figures["h1_phase_deg"] < 5.0 < 10.0 < v.figures["h1_edge_phase_deg"]
+    assert v.design.band_hz[0] == pytest.approx(v.figures["validated_from_hz"], rel=1e-12)
+    assert v.design.band_hz[1] == BAND[1]
+    # the same model, confirmed everywhere, is designed over the whole band
+    whole = comp.assess(1.0, m, h1, r, low_edge=True)
+    assert whole.accepted and "validated_from_hz" not in whole.figures
+    assert whole.design.band_hz == BAND
+
+
+def test_a_model_that_misses_elsewhere_too_is_refused_even_at_a_low_edge():
+    # the estimate also off at the band's top: a model that misses there is not
+    # validated anywhere it could be trusted, low edge or not
+    import dataclasses
+
+    m = _loop()
+    r, h1 = _h1(m)
+    turned, lowest = _low_edge_miss(h1, 20.0)
+    top = frf_error(m, h1, band_hz=BAND).compared_hz[1]
+    response = turned.response.copy()
+    response[int(np.argmin(np.abs(h1.freq_hz - top)))] *= np.exp(1j * np.radians(20.0))
+    both = dataclasses.replace(turned, response=response)
+    d = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, both, r, low_edge=True)
+    assert not d.accepted and "validated_from_hz" not in d.figures

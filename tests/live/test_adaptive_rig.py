@@ -491,3 +491,28 @@ def test_a_sine_dwell_after_a_random_reference_raises_no_alarm():
     assert np.all(rec.tracking_rms(22.0, 30.0) <= 2.0 * rec.tracking_rms(10.0, 20.0))
     for name in rec.channels:
         assert any("single sine" in d["reason"] for d in rec.decisions[name] if d["t_s"] > 22)
+
+
+def test_models_that_keep_missing_the_bands_lowest_point_are_judged_above_it():
+    # three refusals in a row furthest at the band's lowest point (alarm_after) let the
+    # next models be validated above it; a model accepted over the band above keeps
+    # that, one accepted over the whole band ends it, and a refusal for another reason
+    # or elsewhere in the band counts nothing
+    from ehss.compensation.adaptive import Decision
+    from ehss.live.compensate.adapter import _low_edge
+
+    def edge(at):
+        return Decision(1.0, False, "misses", figures={"h1_worst_hz": at,
+                                                      "h1_lowest_hz": 1.95})
+
+    above = Decision(1.0, True, "", figures={"validated_from_hz": 2.6})
+    whole = Decision(1.0, True, "", figures={})
+    other = Decision(1.0, False, "unstable")
+    count = 0
+    for d, expected in [(edge(1.95), 1), (edge(19.5), 1), (other, 1), (edge(1.95), 2),
+                        (edge(1.95), 3), (edge(1.95), 3), (above, 3), (edge(1.95), 3),
+                        (whole, 0), (edge(1.95), 1)]:
+        count = _low_edge(count, d, 3)
+        assert count == expected, d
+    settings = CompensationSettings(band_hz=BAND)
+    assert settings.alarm_after == 3

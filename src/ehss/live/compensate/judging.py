@@ -59,7 +59,9 @@ class Snapshot:
     window (the medians over its recent loads; None before
     :data:`~ehss.live.compensate.adapter.RESIDUAL_LOADS` of them:
     :meth:`AdaptiveCompensator._judge_fit`, :meth:`Judging._quiet`); how far its models
-    usually miss the H1 estimate (:data:`~ehss.live.compensate.adapter.USUAL_DISAGREEMENT`)."""
+    usually miss the H1 estimate (:data:`~ehss.live.compensate.adapter.USUAL_DISAGREEMENT`);
+    whether they keep missing it at the band's lowest point (``low_edge``:
+    :meth:`AdaptiveCompensator.assess`)."""
 
     drive: np.ndarray
     feedback: np.ndarray
@@ -76,6 +78,7 @@ class Snapshot:
     residual_floor: float | None = None
     reference_level: float | None = None
     disagreement: tuple[float, float] | None = None
+    low_edge: bool = False
 
 
 @dataclass(frozen=True)
@@ -329,7 +332,8 @@ class Judging:
         decision = self.compensator.assess(t_s, model, h1, snap.desired, window=(u, y),
                                            running=snap.current,
                                            residual_floor=snap.residual_floor,
-                                           usual_disagreement=snap.disagreement)
+                                           usual_disagreement=snap.disagreement,
+                                           low_edge=snap.low_edge)
         if rows:
             decision.figures["refit_rows"] = rows
         if fresh:
