@@ -122,6 +122,11 @@ def test_the_point_furthest_beyond_the_estimate_is_found(true_model):
     assert err.worst_beyond_uncertainty(2.0, 1.0, 5.0) == 10.0
     assert err.worst_beyond_uncertainty(2.0, 0.5, 5.0) == 10.0
     assert err.worst_beyond_uncertainty(2.0, 1.0, 2.0) == 30.0
+    # over the points above 10 Hz only: none of the magnitude's miss, the phase's
+    eps_deg = math.degrees(math.sqrt(0.1 / (0.9 * 16)))
+    mag, ph = err.beyond_uncertainty(2.0, err.freq_hz > 10.0)
+    assert mag == 0.0 and ph == pytest.approx(12.0 - 2 * eps_deg, abs=1e-9)
+    assert all(math.isnan(x) for x in err.beyond_uncertainty(2.0, err.freq_hz > 100.0))
     empty = frf_error(true_model, dataclasses.replace(frf, coherence=np.zeros(3)),
                       band_hz=(0.0, 100.0))
     assert math.isnan(empty.worst_beyond_uncertainty(2.0, 1.0, 5.0))

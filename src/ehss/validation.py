@@ -127,14 +127,23 @@ class FrfError:
     sigma_magnitude_db: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     sigma_phase_deg: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
-    def beyond_uncertainty(self, n_sigma: float) -> tuple[float, float]:
+    def excess(self, n_sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each point's absolute magnitude (dB) and phase (deg) errors less ``n_sigma``
+        standard errors of the estimate there (negative: within them)."""
+        return (np.abs(self.magnitude_error_db) - n_sigma * self.sigma_magnitude_db,
+                np.abs(self.phase_error_deg) - n_sigma * self.sigma_phase_deg)
+
+    def beyond_uncertainty(self, n_sigma: float, points: np.ndarray | None = None
+                           ) -> tuple[float, float]:
         """Largest magnitude (dB) and phase (deg) errors left after subtracting
         ``n_sigma`` standard errors of the estimate at each point (0 where the error is
-        within them; NaN when nothing was compared)."""
-        if self.n_points == 0:
+        within them; NaN when nothing was compared), over ``points`` (a mask of
+        :attr:`freq_hz`; default all)."""
+        mag, ph = self.excess(n_sigma)
+        if points is not None:
+            mag, ph = mag[points], ph[points]
+        if mag.size == 0:
             return math.nan, math.nan
-        mag = np.abs(self.magnitude_error_db) - n_sigma * self.sigma_magnitude_db
-        ph = np.abs(self.phase_error_deg) - n_sigma * self.sigma_phase_deg
         return float(max(0.0, np.max(mag))), float(max(0.0, np.max(ph)))
 
     def worst_beyond_uncertainty(self, n_sigma: float, magnitude_db: float,
@@ -145,10 +154,9 @@ class FrfError:
         furthest beyond what the estimate confirms (NaN when nothing was compared)."""
         if self.n_points == 0:
             return math.nan
-        mag = np.abs(self.magnitude_error_db) - n_sigma * self.sigma_magnitude_db
-        ph = np.abs(self.phase_error_deg) - n_sigma * self.sigma_phase_deg
-        share = np.maximum(mag / magnitude_db, ph / phase_deg)
-        return float(self.freq_hz[int(np.argmax(share))])
+        mag, ph = self.excess(n_sigma)
+        return float(self.freq_hz[int(np.argmax(np.maximum(mag / magnitude_db,
+                                                            ph / phase_deg)))])
 
     def summary(self) -> dict[str, Any]:
         """Plain floats/ints for JSON."""

@@ -138,13 +138,6 @@ LOW_EDGE_SHARE = 0.25
 QUIET_Z = 3.09
 
 
-def _beyond(err: FrfError, n_sigma: float, kept: np.ndarray) -> tuple[float, float]:
-    """:meth:`FrfError.beyond_uncertainty` over the points ``kept`` only."""
-    mag = np.abs(err.magnitude_error_db[kept]) - n_sigma * err.sigma_magnitude_db[kept]
-    ph = np.abs(err.phase_error_deg[kept]) - n_sigma * err.sigma_phase_deg[kept]
-    return float(max(0.0, np.max(mag))), float(max(0.0, np.max(ph)))
-
-
 def _polarity_fault(model: ArmaxModel, band: tuple[float, float]) -> str:
     """A closed loop that tracks passes the low edge of its band in phase (|φ| < 90°)."""
     lo = max(band[0], 1e-3 * band[1])
@@ -542,7 +535,8 @@ class AdaptiveCompensator:
         lo = self._validated_from(err) if low_edge else None
         if lo is not None:
             # validated from lo up: the inverse over that band only
-            kept_db, kept_deg = _beyond(err, acc.uncertainty_sigmas, err.freq_hz >= lo)
+            kept_db, kept_deg = err.beyond_uncertainty(acc.uncertainty_sigmas,
+                                                       err.freq_hz >= lo)
             figures.update(validated_from_hz=lo, h1_edge_magnitude_db=mag_db,
                            h1_edge_phase_deg=ph_deg, h1_magnitude_db=kept_db,
                            h1_phase_deg=kept_deg)
@@ -590,10 +584,8 @@ class AdaptiveCompensator:
             return None
         order = np.argsort(err.freq_hz)
         f = err.freq_hz[order]
-        mag = (np.abs(err.magnitude_error_db)
-               - acc.uncertainty_sigmas * err.sigma_magnitude_db)[order]
-        ph = (np.abs(err.phase_error_deg) - acc.uncertainty_sigmas * err.sigma_phase_deg)[order]
-        beyond = (mag > acc.max_magnitude_db) | (ph > acc.max_phase_deg)
+        mag, ph = err.excess(acc.uncertainty_sigmas)
+        beyond = ((mag > acc.max_magnitude_db) | (ph > acc.max_phase_deg))[order]
         if not beyond[0] or beyond.all():
             return None
         k = int(np.argmin(beyond))      # the first point the model meets
