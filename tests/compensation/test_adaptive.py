@@ -710,3 +710,67 @@ def test_a_model_that_misses_elsewhere_too_is_refused_even_at_a_low_edge():
     both = dataclasses.replace(turned, response=response)
     d = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, both, r, low_edge=True)
     assert not d.accepted and "validated_from_hz" not in d.figures
+
+
+def test_a_drive_beyond_the_gain_bound_is_narrowed_to_where_it_passes():
+    # the loop's inverse over the band asks 1.12x the reference's RMS: against a bound
+    # 10 % below what it asks, refused (and marked, for the channel to count); where
+    # the channel's drives keep failing (narrow_top), the widest band from the lower
+    # edge up to an H1 point whose drive passes is designed and accepted
+    m = _loop()
+    r, h1 = _h1(m)
+    asked = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, h1, r)
+    bound = 0.9 * max(asked.figures["rms_gain"], asked.figures["peak_gain"])
+    guard = UpdateGuard(max_gain=bound)
+    comp = AdaptiveCompensator(FS, BAND, preview=128, guard=guard)
+    d = comp.assess(1.0, m, h1, r)
+    assert not d.accepted and "bound" in d.reason and d.figures["drive_refused"]
+    assert not d.fault                       # within twice the bound: a near miss
+    v = comp.assess(1.0, m, h1, r, narrow_top=True)
+    top = v.figures["narrowed_to_hz"]
+    assert v.accepted and BAND[0] < top < BAND[1] and "drive_refused" not in v.figures
+    assert v.design.band_hz == (BAND[0], top)
+    assert max(v.figures["rms_gain"], v.figures["peak_gain"]) <= bound
+    # the band found by bisection passes, and the band one H1 point wider does not:
+    # each tried as the band of a compensator of its own (the drive's demand grows
+    # with the band broadly, not strictly: here 0.5-12.7 Hz passes again)
+    points = np.sort(frf_error(m, h1, band_hz=BAND).freq_hz)
+
+    def passes(f):
+        return AdaptiveCompensator(FS, (BAND[0], float(f)), preview=128,
+                                   guard=guard).assess(1.0, m, h1, r).accepted
+
+    wider = points[np.searchsorted(points, top) + 1]
+    assert passes(top) and not passes(wider)
+    assert top >= points[guard.acceptance.min_frf_points - 1]
+    # by the model's account it tracks the band below its top (to the realisation)
+    f = np.linspace(BAND[0], 0.8 * top, 200)
+    assert np.max(np.abs(m.frequency_response(f) * v.design.frequency_response(f)
+                         - 1.0)) < 0.02
+    # a bound nothing in the band meets: refused as before
+    tight = AdaptiveCompensator(FS, BAND, preview=128, guard=UpdateGuard(max_gain=0.5))
+    assert not tight.assess(1.0, m, h1, r, narrow_top=True).accepted
+
+
+def test_a_narrowed_inverse_replaces_a_stale_compensator_not_a_good_one():
+    # by the model's account over the whole band: the inverse built for a loop a third
+    # as responsive (it leaves 2.3 times the reference) leaves more than the narrowed
+    # one and is replaced; one built for a loop 20 % less responsive leaves 25 %,
+    # less than the narrowed one, which leaves the band above its top uncompensated,
+    # and stays, as does the model's own full inverse (no fault: nothing is wrong)
+    m = _loop()
+    r, h1 = _h1(m)
+    asked = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, h1, r)
+    guard = UpdateGuard(max_gain=0.9 * max(asked.figures["rms_gain"],
+                                           asked.figures["peak_gain"]))
+    comp = AdaptiveCompensator(FS, BAND, preview=128, guard=guard)
+    def stale(k):
+        return design_compensator(ArmaxModel(a=m.a, b=k * m.b, delay=m.delay, dt=m.dt),
+                                  band_hz=BAND, preview=128)
+
+    v = comp.assess(1.0, m, h1, r, running=stale(0.3), narrow_top=True)
+    assert v.accepted and v.figures["narrowed_leaves"] < 2.0
+    for running in (stale(0.8), asked.design):
+        kept = comp.assess(1.0, m, h1, r, running=running, narrow_top=True)
+        assert not kept.accepted and not kept.fault and kept.figures["drive_refused"]
+        assert "with the compensator that runs" in kept.reason

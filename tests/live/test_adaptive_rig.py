@@ -516,3 +516,22 @@ def test_models_that_keep_missing_the_bands_lowest_point_are_judged_above_it():
         assert count == expected, d
     settings = CompensationSettings(band_hz=BAND)
     assert settings.alarm_after == 3
+
+
+def test_drives_that_keep_failing_the_checks_narrow_the_band():
+    # three validated models in a row whose drives failed the gain checks or the rig's
+    # limits (alarm_after) let the next be narrowed to where its drive passes; a load
+    # narrowed keeps that, one over the whole band ends it, and a refusal for another
+    # reason counts nothing
+    from ehss.compensation.adaptive import Decision
+    from ehss.live.compensate.adapter import _over
+
+    over = Decision(1.0, False, "the drive's RMS is 4.9x", figures={"drive_refused": True})
+    narrowed = Decision(1.0, True, "", figures={"narrowed_to_hz": 72.3})
+    whole = Decision(1.0, True, "", figures={})
+    other = Decision(1.0, False, "misses", figures={"h1_worst_hz": 99.6})
+    count = 0
+    for d, expected in [(over, 1), (other, 1), (over, 2), (over, 3), (over, 3),
+                        (narrowed, 3), (other, 3), (whole, 0), (over, 1)]:
+        count = _over(count, d, 3)
+        assert count == expected, d

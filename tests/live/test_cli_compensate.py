@@ -122,21 +122,29 @@ def test_a_change_flagged_and_its_correction_are_printed(capsys):
     assert not [e for e in lines if e["kind"] == "compensator_alarm"]
 
 
-def test_a_channel_that_never_loads_says_why(capsys):
+def test_a_band_beyond_the_loop_is_compensated_up_to_where_the_drive_passes(capsys):
     # a band up to 100 Hz, far above the position loop's, asks for drives tens of times
-    # the reference's RMS (within the rig's limits at 0.05 mm): every judgement is
-    # refused, and the summary says what refused the latest
+    # the reference's RMS (within the rig's limits at 0.05 mm): the first judgements are
+    # refused for it, and after three in a row the models' inverses are loaded up to
+    # where their drive passes, which the summary says; a channel on which nothing is
+    # loaded says why (below)
     argv = ["live", "--rig", "position", "--channels", "1", "--duration", "5", "--band",
             "0.5", "100", "--rms", "0.00005", "--compensate", "preview", "--speed", "inf",
             "--quiet"]
     assert main(argv) == 0
     err = capsys.readouterr().err
-    line = next(x for x in err.splitlines() if "no compensator was loaded" in x)
-    assert "the drive's RMS is" in line and "(bound 3×)" in line
-    # most refusals were the gain: a narrower band is the thing to try, not a bound
-    # raised many times over
-    assert "narrower --band" in line and "--max-gain 3×" in line
-    assert "would let them through" not in line
+    lines = [json.loads(x[len("ehss live: "):]) for x in err.splitlines()
+             if x.startswith("ehss live: {")]
+    over = [e for e in lines if e["kind"] == "compensator_refused"
+            and e["reason"].startswith("the drive's RMS is")]
+    loads = [e for e in lines if e["kind"] == "compensator"]
+    # (a refusal for the same reason as the one before is not printed again)
+    assert over and "(bound 3×)" in over[0]["reason"]
+    assert loads and all(0.5 < e["narrowed_to_hz"] < 100.0 for e in loads)
+    assert all(e["t_s"] > over[-1]["t_s"] for e in loads)
+    summary = next(x for x in err.splitlines() if "tracking RMS over the second half" in x)
+    assert f"{len(loads)} of them up to" in summary and "beyond --max-gain" in summary
+    assert "no compensator was loaded" not in err
 
 
 def test_models_refused_by_the_h1_estimate_point_to_the_band(capsys):
@@ -192,6 +200,31 @@ def test_where_the_models_missed_the_h1_estimate_is_said(capsys):
     assert ("4 refused, 4 of them as the model missed the H1 estimate, most (3) furthest "
             "at 4.88 Hz") in err
     assert "channel 2: tracking RMS" in err and err.count("missed the H1") == 1
+
+
+def test_loads_narrowed_below_the_bands_top_are_said(capsys):
+    # channel 1: three loads, two narrowed (to 70.3 and 74.2 Hz) as their drive over
+    # the band was beyond the gain bound; channel 2: none narrowed
+    from types import SimpleNamespace
+
+    from ehss.cli._live_compensate import _compare
+
+    n = 2000
+    rec = SimpleNamespace(
+        desired=np.ones((2, n)), feedback=np.zeros((2, n)), fs=4000.0, channels=("1", "2"),
+        loads=[{"channel": "1", "model": "estimator", "narrowed_to_hz": 74.2},
+               {"channel": "1", "model": "estimator"},
+               {"channel": "1", "model": "tracker", "narrowed_to_hz": 70.3},
+               {"channel": "2", "model": "estimator"}],
+        decisions={"1": [{"accepted": True}] * 3, "2": [{"accepted": True}]},
+        tracking_rms=lambda t0, t1: np.ones(2))
+    out = _compare(rec, [])
+    assert out["1"]["narrowed"] == {"loads": 2, "lowest_top_hz": 70.3, "highest_top_hz": 74.2}
+    assert "narrowed" not in out["2"]
+    err = capsys.readouterr().err
+    assert ("3 compensators loaded (2 of them up to 70.3-74.2 Hz only: over the whole band "
+            "their drive was beyond --max-gain or the rig's limits), 0 refused") in err
+    assert err.count("up to") == 1
 
 
 def test_a_remote_target_that_ran_none_of_its_compensators_is_said_so(capsys):

@@ -330,10 +330,15 @@ def _compare(rec: Any, plain: list[np.ndarray], ignored: dict[int, str] | None =
         missed = _missed(rec.decisions[name])
         if missed:
             channels[name]["h1_misses"] = missed
+        tops = [float(ld["narrowed_to_hz"]) for ld in rec.loads
+                if ld["channel"] == name and "narrowed_to_hz" in ld]
+        if tops:
+            channels[name]["narrowed"] = {"loads": len(tops), "lowest_top_hz": min(tops),
+                                          "highest_top_hz": max(tops)}
         print(f"ehss live: channel {name}: tracking RMS over the second half "
               f"{with_[k]:.4g} (without compensation {without[k]:.4g}, "
               f"{without[k] / with_[k] if with_[k] > 0 else math.inf:.1f}x), "
-              f"{channels[name]['loads']} compensators loaded, "
+              f"{channels[name]['loads']} compensators loaded{_narrowed(tops)}, "
               f"{channels[name]['refusals']} refused{_said(missed)}", file=sys.stderr)
         if ignored and k in ignored:
             channels[name]["ignored_by_target"] = ignored[k]
@@ -365,6 +370,17 @@ def _missed(decisions: list[dict]) -> dict[str, Any] | None:
     k = int(np.argmax(counts))
     return {"refusals": len(worst), "furthest_hz": float(values[k]),
             "furthest_there": int(counts[k])}
+
+
+def _narrowed(tops: list[float]) -> str:
+    """The loads narrowed below the band's top (their drive over the band was beyond
+    the gain checks or the rig's limits), as part of a channel's summary line."""
+    if not tops:
+        return ""
+    span = f"{min(tops):.3g} Hz" if min(tops) == max(tops) else \
+        f"{min(tops):.3g}-{max(tops):.3g} Hz"
+    return (f" ({len(tops)} of them up to {span} only: over the whole band their drive "
+            "was beyond --max-gain or the rig's limits)")
 
 
 def _said(missed: dict[str, Any] | None) -> str:

@@ -132,6 +132,9 @@ SINE_POINTS = 2.16
 #: The share of the H1 estimate's points at the band's low edge that a model may miss
 #: and still be validated over the rest (:meth:`AdaptiveCompensator._validated_from`).
 LOW_EDGE_SHARE = 0.25
+#: Frequencies over the band at which a narrowed inverse and the running compensator
+#: are compared by the model's account (:meth:`AdaptiveCompensator._tops`).
+NARROWING_GRID = 128
 #: One-sided standard normal quantile of 1e-3: a fresh stretch whose residual is the
 #: channel's usual one exceeds the bound :meth:`AdaptiveCompensator._judge_fit` sets
 #: from it once in a thousand judgements.
@@ -242,6 +245,19 @@ def _narrowband(h1: Any, band: tuple[float, float]) -> str:
 class KeptRunning(ParameterError):
     """A design that, by its own model's account, would track worse than the
     compensator that runs: refused, and not a fault of the loop."""
+
+
+@dataclass(frozen=True)
+class Narrowing:
+    """The bands a drive beyond the gain checks may be narrowed to: their tops (Hz,
+    lowest first), the design over the band up to a top, the relative tracking error
+    (RMS over the whole band) a design leaves by the model's account, and what the
+    compensator that runs leaves by it (inf: none runs)."""
+
+    tops: np.ndarray
+    design: Callable[[float], CompensatorDesign]
+    leaves: Callable[[CompensatorDesign], float]
+    kept: float
 
 
 @dataclass(frozen=True)
@@ -370,7 +386,7 @@ class AdaptiveCompensator:
                running: CompensatorDesign | None = None,
                residual_floor: float | None = None,
                usual_disagreement: tuple[float, float] | None = None,
-               low_edge: bool = False) -> Decision:
+               low_edge: bool = False, narrow_top: bool = False) -> Decision:
         """The decision of :meth:`propose`, without recording it: changes nothing, so
         it may run on another thread or process than the one that records it.
         ``running``: the compensator the target runs (default :attr:`current`), which
@@ -382,10 +398,13 @@ class AdaptiveCompensator:
         of that and the bounds is a near miss); ``low_edge``: the channel's models
         have missed the estimate at the band's lowest point again and again, so that a
         model that misses it only there is validated over the band above
-        (:meth:`_validated_from`)."""
+        (:meth:`_validated_from`); ``narrow_top``: the channel's validated models have
+        asked drives beyond the gain checks or the rig's limits again and again, so
+        that a model whose drive over the band would fail them is compensated up to
+        the highest frequency where it passes (:meth:`_narrowed`)."""
         running = self.current if running is None else running
         decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float), running,
-                               usual_disagreement, low_edge)
+                               usual_disagreement, low_edge, narrow_top)
         if decision.accepted and window is not None:
             decision = self._judge_fit(decision, model, *window, residual_floor=residual_floor)
         excited, n_band, _ = _excitation(h1, self.band_hz)
@@ -507,8 +526,8 @@ class AdaptiveCompensator:
 
     def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray,
                running: CompensatorDesign | None = None,
-               usual: tuple[float, float] | None = None, low_edge: bool = False
-               ) -> Decision:
+               usual: tuple[float, float] | None = None, low_edge: bool = False,
+               narrow_top: bool = False) -> Decision:
         g = self.guard
         if not model.is_stable():
             radius = float(np.max(np.abs(np.roots(model.a))))
@@ -542,7 +561,8 @@ class AdaptiveCompensator:
                            h1_phase_deg=kept_deg)
             band = (lo, self.band_hz[1])
             return self._checked_drive(
-                t_s, lambda: self._designed(model, figures, running, band), r, figures)
+                t_s, lambda: self._designed(model, figures, running, band), r, figures,
+                self._tops(err, band, model, running) if narrow_top else None)
         if mag_db > acc.max_magnitude_db or ph_deg > acc.max_phase_deg:
             # a near miss is within NEAR_MISS of the bounds, or of the disagreements the
             # channel's own models usually show, if larger (``usual``)
@@ -558,7 +578,30 @@ class AdaptiveCompensator:
                             f"{acc.max_magnitude_db:g} dB / {acc.max_phase_deg:g}°)",
                             figures=figures, fault=gross)
         return self._checked_drive(
-            t_s, lambda: self._designed(model, figures, running), r, figures)
+            t_s, lambda: self._designed(model, figures, running), r, figures,
+            self._tops(err, self.band_hz, model, running) if narrow_top else None)
+
+    def _tops(self, err: FrfError, band: tuple[float, float], model: ArmaxModel,
+              running: CompensatorDesign | None) -> Narrowing:
+        """The bands a drive beyond the checks may be narrowed to (:meth:`_narrowed`):
+        ``band`` with its top at each point of the H1 estimate compared inside it that
+        has ``min_frf_points`` compared points at or below it, lowest first, and the
+        model's design over each."""
+        lo, hi = band
+        f = np.sort(err.freq_hz[(err.freq_hz > lo) & (err.freq_hz < hi)])
+        tops = f[self.guard.acceptance.min_frf_points - 1:]
+        grid = np.linspace(lo, hi, NARROWING_GRID)
+        g = model.frequency_response(grid)
+
+        def leaves(design: CompensatorDesign) -> float:
+            return float(np.sqrt(np.mean(np.abs(g * design.frequency_response(grid) - 1.0)
+                                         ** 2)))
+
+        figures: dict[str, Any] = {}
+        kept = leaves(running) if running is not None and running.mode == self.mode \
+            else math.inf
+        return Narrowing(tops, lambda top: self._designed(model, figures, running,
+                                                          (lo, float(top))), leaves, kept)
 
     def _validated_from(self, err: FrfError) -> float | None:
         """The lower edge of the band over which a model is validated when it misses
@@ -686,7 +729,8 @@ class AdaptiveCompensator:
         return design
 
     def _checked_drive(self, t_s: float, design_of: Callable[[], CompensatorDesign],
-                       r: np.ndarray, figures: dict[str, Any]) -> Decision:
+                       r: np.ndarray, figures: dict[str, Any],
+                       narrowing: Narrowing | None = None) -> Decision:
         """The design, if its drive for the recent reference passes the gain checks and
         the rig's limits.
 
@@ -698,7 +742,13 @@ class AdaptiveCompensator:
         1–60 Hz reference asks peaks of 3.12–3.14× against 3× now and then, amid loads,
         and alarmed twice in 30 s; the rig's position loop under its default reference
         asked a peak velocity of 0.2041 m/s against its 0.2 m/s and alarmed once in
-        2 minutes. A model gone wrong asks many times more."""
+        2 minutes. A model gone wrong asks many times more.
+
+        With ``narrowing`` (:meth:`_tops`), a drive that fails is tried again from the
+        designs over narrower bands (:meth:`_narrowed`), and the band found is
+        accepted with its top (``narrowed_to_hz``) if by the model's account it tracks
+        the whole band better than the compensator that runs; a refused drive is marked
+        (``drive_refused``) so that the channel can count such refusals in a row."""
         g = self.guard
         drive, skip = None, 0
         try:
@@ -710,10 +760,64 @@ class AdaptiveCompensator:
         except KeptRunning as exc:
             return Decision(t_s, False, str(exc), figures=figures, fault=False)
         except EhssError as exc:
-            near = drive is not None and self._passes(drive[skip:] / NEAR_MISS, r[skip:])
+            if drive is None:   # no design to drive with
+                return Decision(t_s, False, str(exc), figures=figures)
+            figures["drive_refused"] = True
+            narrowed = None if narrowing is None else self._narrowed(narrowing, r)
+            if narrowing is not None and narrowed is not None:
+                design, top, check = narrowed
+                left = narrowing.leaves(design)
+                if left >= narrowing.kept:
+                    return Decision(t_s, False, (
+                        f"{exc}; up to {top:.3g} Hz, where its drive passes, its inverse "
+                        f"would leave {left:.1%} of the reference over the band against "
+                        f"{narrowing.kept:.1%} with the compensator that runs"),
+                        figures=figures, fault=False)
+                del figures["drive_refused"]
+                figures.update(narrowed_to_hz=top, rms_gain=check.rms_gain,
+                               peak_gain=check.peak_gain, narrowed_leaves=left)
+                return Decision(t_s, True, "", design, figures)
+            near = self._passes(drive[skip:] / NEAR_MISS, r[skip:])
             return Decision(t_s, False, str(exc), figures=figures, fault=not near)
         figures.update(rms_gain=check.rms_gain, peak_gain=check.peak_gain)
         return Decision(t_s, True, "", design, figures)
+
+    def _narrowed(self, narrowing: Narrowing, r: np.ndarray
+                  ) -> tuple[CompensatorDesign, float, Any] | None:
+        """The design over a band of ``narrowing`` whose drive for ``r`` passes the
+        gain checks and the rig's limits, with its top and its check; None if none
+        that the search tries does.
+
+        A model validated over the band whose inverse still asks too much there is
+        right: the band reaches past what the loop can follow within the rig's bounds
+        (a specimen's resonance, a bandwidth that a heavier payload lowered), and the
+        inverse's gain grows with frequency beyond it. The exact inverse up to a
+        frequency the drive allows tracks the band below it as the full inverse would
+        (above it the design's own transition runs, as outside any band), where the
+        last good inverse, built on a loop that has since changed, may track worse;
+        which of the two leaves less over the whole band, by the model's account,
+        decides (:meth:`_checked_drive`). The tops are searched by bisection, a
+        design and a drive each: the drive's demand grows with the band broadly but
+        not strictly (its peak moves with the reference's content), so the band found
+        passes and the band one point wider does not, but a wider one may pass
+        again."""
+        g = self.guard
+        found = None
+        first, last = 0, narrowing.tops.size - 1
+        while first <= last:
+            mid = (first + last) // 2
+            try:
+                design = narrowing.design(float(narrowing.tops[mid]))
+                drive = run_compensator(design, r)
+                skip = min(design.settle_samples, r.size // 2)
+                check = check_drive(drive[skip:], r[skip:], self.fs_hz, max_gain=g.max_gain,
+                                    limits=g.limits, loop=self.loop, params=self.params)
+            except EhssError:
+                last = mid - 1
+                continue
+            found = (design, float(narrowing.tops[mid]), check)
+            first = mid + 1
+        return found
 
     def _passes(self, drive: np.ndarray, r: np.ndarray) -> bool:
         """Whether ``drive`` for ``r`` passes the checks of :meth:`_checked_drive`."""

@@ -136,6 +136,9 @@ class ChannelAdapter:
         # models refused in a row for missing the H1 estimate at the band's lowest
         # point (at least ``alarm_after`` of them: judged over the band above it)
         self._low_edge = 0
+        # validated models refused in a row for a drive beyond the gain checks or the
+        # rig's limits (at least ``alarm_after`` of them: narrowed to where it passes)
+        self._over = 0
         # the compensator sent last, and the one before it (None: none yet)
         self._running: CompensatorDesign | None = None
         self._running_model: ehss.ArmaxModel | None = None
@@ -523,7 +526,8 @@ class ChannelAdapter:
                         self._base if spans else None, spans, self.compensator.current,
                         self._ran_spans(), fresh, self.compensator.current_model,
                         unanchored, self._refitted if unanchored else None, floor, level,
-                        usual, self._low_edge >= self.settings.alarm_after)
+                        usual, self._low_edge >= self.settings.alarm_after,
+                        self._over >= self.settings.alarm_after)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator
@@ -587,6 +591,7 @@ class ChannelAdapter:
             self.chosen = verdict.chosen
         figures = verdict.decision.figures
         self._low_edge = _low_edge(self._low_edge, verdict.decision, self.settings.alarm_after)
+        self._over = _over(self._over, verdict.decision, self.settings.alarm_after)
         if "h1_phase_deg" in figures and not (verdict.decision.fault
                                               and not verdict.decision.accepted):
             self._misses.append((float(figures["h1_magnitude_db"]),
@@ -620,6 +625,26 @@ def _low_edge(count: int, decision: Decision, then: int) -> int:
     if decision.accepted:
         return count if "validated_from_hz" in f else 0
     if "h1_worst_hz" in f and f["h1_worst_hz"] == f.get("h1_lowest_hz"):
+        return count + 1 if count < then else count
+    return count
+
+
+def _over(count: int, decision: Decision, then: int) -> int:
+    """The validated models refused in a row for a drive beyond the gain checks or the
+    rig's limits (``drive_refused``), after ``decision``: one more for such a refusal,
+    none after a model accepted over the whole band; a model accepted over a narrower
+    band (``narrowed_to_hz``), or refused for another reason, leaves the count as it is.
+
+    Held there ``then`` times in a row (``alarm_after``, 3), the band reaches past what
+    the loop can follow within the rig's bounds, and a model's inverse is loaded up to
+    where its drive passes (:meth:`~ehss.compensation.adaptive.AdaptiveCompensator.
+    assess`, ``narrow_top``). A single refusal keeps the last good inverse over the
+    whole band: the rig's position loop under its default reference asks a peak
+    velocity just past its limit once in minutes (README)."""
+    f = decision.figures
+    if decision.accepted:
+        return count if "narrowed_to_hz" in f else 0
+    if f.get("drive_refused"):
         return count + 1 if count < then else count
     return count
 
