@@ -774,3 +774,31 @@ def test_a_narrowed_inverse_replaces_a_stale_compensator_not_a_good_one():
         kept = comp.assess(1.0, m, h1, r, running=running, narrow_top=True)
         assert not kept.accepted and not kept.fault and kept.figures["drive_refused"]
         assert "with the compensator that runs" in kept.reason
+
+
+def test_a_model_that_misses_only_the_bands_top_point_is_validated_below_it():
+    # the mirror of the low edge: the estimate 20 deg off at the band's highest point
+    # only (where a band reaching past the loop ends in noise), refused as a fault by
+    # default; with top_edge validated up to halfway to the point below, and designed
+    # over that band; the low edge's flag does not reach it, nor its figure
+    import dataclasses
+
+    m = _loop()
+    r, h1 = _h1(m)
+    highest = frf_error(m, h1, band_hz=BAND).compared_hz[1]
+    k = int(np.argmin(np.abs(h1.freq_hz - highest)))
+    response = h1.response.copy()
+    response[k] *= np.exp(1j * np.radians(20.0))
+    turned = dataclasses.replace(h1, response=response)
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    d = comp.assess(1.0, m, turned, r, low_edge=True)
+    assert not d.accepted and d.fault and d.figures["h1_worst_hz"] == highest
+    assert d.figures["h1_highest_hz"] == highest
+    v = comp.assess(1.0, m, turned, r, top_edge=True)
+    points = frf_error(m, turned, band_hz=BAND).freq_hz
+    below = float(np.max(points[points < highest]))
+    assert v.accepted and v.figures["validated_to_hz"] == pytest.approx(
+        0.5 * (highest + below), rel=1e-12)
+    assert "validated_from_hz" not in v.figures
+    assert v.figures["h1_phase_deg"] < 5.0 < 10.0 < v.figures["h1_edge_phase_deg"]
+    assert v.design.band_hz == (BAND[0], pytest.approx(v.figures["validated_to_hz"]))

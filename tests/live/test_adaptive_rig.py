@@ -499,7 +499,7 @@ def test_models_that_keep_missing_the_bands_lowest_point_are_judged_above_it():
     # that, one accepted over the whole band ends it, and a refusal for another reason
     # or elsewhere in the band counts nothing
     from ehss.compensation.adaptive import Decision
-    from ehss.live.compensate.adapter import _low_edge
+    from ehss.live.compensate.adapter import _at_edge
 
     def edge(at):
         return Decision(1.0, False, "misses", figures={"h1_worst_hz": at,
@@ -512,7 +512,16 @@ def test_models_that_keep_missing_the_bands_lowest_point_are_judged_above_it():
     for d, expected in [(edge(1.95), 1), (edge(19.5), 1), (other, 1), (edge(1.95), 2),
                         (edge(1.95), 3), (edge(1.95), 3), (above, 3), (edge(1.95), 3),
                         (whole, 0), (edge(1.95), 1)]:
-        count = _low_edge(count, d, 3)
+        count = _at_edge(count, d, 3)
+        assert count == expected, d
+    # the band's highest point: the same count, of refusals furthest there
+    top = [Decision(1.0, False, "misses", figures={"h1_worst_hz": 99.6,
+                                                   "h1_highest_hz": 99.6}),
+           Decision(1.0, True, "", figures={"validated_to_hz": 98.6})]
+    count = 0
+    for d, expected in [(edge(1.95), 0), (top[0], 1), (top[0], 2), (top[0], 3), (top[1], 3),
+                        (above, 0)]:
+        count = _at_edge(count, d, 3, top=True)
         assert count == expected, d
     settings = CompensationSettings(band_hz=BAND)
     assert settings.alarm_after == 3

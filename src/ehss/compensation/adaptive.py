@@ -129,9 +129,10 @@ NEAR_MISS = 2.0
 #: its centre, its sidelobes 32 dB down). Random references fill 7.4–8.3 of the 10
 #: points of 0.5–20 Hz in the H1 estimate of a 1.5-s window.
 SINE_POINTS = 2.16
-#: The share of the H1 estimate's points at the band's low edge that a model may miss
-#: and still be validated over the rest (:meth:`AdaptiveCompensator._validated_from`).
-LOW_EDGE_SHARE = 0.25
+#: The share of the H1 estimate's points at the band's low (or top) edge that a model
+#: may miss and still be validated over the rest
+#: (:meth:`AdaptiveCompensator._validated_from`).
+EDGE_SHARE = 0.25
 #: Frequencies over the band at which a narrowed inverse and the running compensator
 #: are compared by the model's account (:meth:`AdaptiveCompensator._tops`).
 NARROWING_GRID = 128
@@ -386,7 +387,8 @@ class AdaptiveCompensator:
                running: CompensatorDesign | None = None,
                residual_floor: float | None = None,
                usual_disagreement: tuple[float, float] | None = None,
-               low_edge: bool = False, narrow_top: bool = False) -> Decision:
+               low_edge: bool = False, top_edge: bool = False,
+               narrow_top: bool = False) -> Decision:
         """The decision of :meth:`propose`, without recording it: changes nothing, so
         it may run on another thread or process than the one that records it.
         ``running``: the compensator the target runs (default :attr:`current`), which
@@ -398,13 +400,14 @@ class AdaptiveCompensator:
         of that and the bounds is a near miss); ``low_edge``: the channel's models
         have missed the estimate at the band's lowest point again and again, so that a
         model that misses it only there is validated over the band above
-        (:meth:`_validated_from`); ``narrow_top``: the channel's validated models have
+        (:meth:`_validated_from`); ``top_edge``: the same at the band's top point;
+        ``narrow_top``: the channel's validated models have
         asked drives beyond the gain checks or the rig's limits again and again, so
         that a model whose drive over the band would fail them is compensated up to
         the highest frequency where it passes (:meth:`_narrowed`)."""
         running = self.current if running is None else running
         decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float), running,
-                               usual_disagreement, low_edge, narrow_top)
+                               usual_disagreement, low_edge, top_edge, narrow_top)
         if decision.accepted and window is not None:
             decision = self._judge_fit(decision, model, *window, residual_floor=residual_floor)
         excited, n_band, _ = _excitation(h1, self.band_hz)
@@ -527,7 +530,7 @@ class AdaptiveCompensator:
     def _judge(self, t_s: float, model: ArmaxModel, h1: Any, r: np.ndarray,
                running: CompensatorDesign | None = None,
                usual: tuple[float, float] | None = None, low_edge: bool = False,
-               narrow_top: bool = False) -> Decision:
+               top_edge: bool = False, narrow_top: bool = False) -> Decision:
         g = self.guard
         if not model.is_stable():
             radius = float(np.max(np.abs(np.roots(model.a))))
@@ -552,14 +555,17 @@ class AdaptiveCompensator:
         mag_db, ph_deg = err.beyond_uncertainty(acc.uncertainty_sigmas)
         figures.update(h1_magnitude_db=mag_db, h1_phase_deg=ph_deg)
         lo = self._validated_from(err) if low_edge else None
-        if lo is not None:
-            # validated from lo up: the inverse over that band only
-            kept_db, kept_deg = err.beyond_uncertainty(acc.uncertainty_sigmas,
-                                                       err.freq_hz >= lo)
-            figures.update(validated_from_hz=lo, h1_edge_magnitude_db=mag_db,
-                           h1_edge_phase_deg=ph_deg, h1_magnitude_db=kept_db,
-                           h1_phase_deg=kept_deg)
-            band = (lo, self.band_hz[1])
+        hi = self._validated_from(err, top=True) if top_edge and lo is None else None
+        if lo is not None or hi is not None:
+            # validated from lo up (or up to hi): the inverse over that band only
+            band = (self.band_hz[0] if lo is None else lo,
+                    self.band_hz[1] if hi is None else hi)
+            kept_db, kept_deg = err.beyond_uncertainty(
+                acc.uncertainty_sigmas, (err.freq_hz >= band[0]) & (err.freq_hz <= band[1]))
+            figures.update({"validated_from_hz" if hi is None else "validated_to_hz":
+                            band[0] if hi is None else band[1]})
+            figures.update(h1_edge_magnitude_db=mag_db, h1_edge_phase_deg=ph_deg,
+                           h1_magnitude_db=kept_db, h1_phase_deg=kept_deg)
             return self._checked_drive(
                 t_s, lambda: self._designed(model, figures, running, band), r, figures,
                 self._tops(err, band, model, running) if narrow_top else None)
@@ -571,7 +577,8 @@ class AdaptiveCompensator:
                      or ph_deg > NEAR_MISS * max(acc.max_phase_deg, usual_deg))
             worst = err.worst_beyond_uncertainty(acc.uncertainty_sigmas,
                                                  acc.max_magnitude_db, acc.max_phase_deg)
-            figures.update(h1_worst_hz=worst, h1_lowest_hz=err.compared_hz[0])
+            figures.update(h1_worst_hz=worst, h1_lowest_hz=err.compared_hz[0],
+                           h1_highest_hz=err.compared_hz[1])
             return Decision(t_s, False, f"{H1_DISAGREES} by "
                             f"{mag_db:.2f} dB / {ph_deg:.1f}° beyond its uncertainty, "
                             f"furthest at {worst:.3g} Hz (bounds "
@@ -603,12 +610,13 @@ class AdaptiveCompensator:
         return Narrowing(tops, lambda top: self._designed(model, figures, running,
                                                           (lo, float(top))), leaves, kept)
 
-    def _validated_from(self, err: FrfError) -> float | None:
+    def _validated_from(self, err: FrfError, *, top: bool = False) -> float | None:
         """The lower edge of the band over which a model is validated when it misses
         the H1 estimate (beyond its uncertainty and the bounds) only at the band's
-        lowest points, at most :data:`LOW_EDGE_SHARE` of them, and agrees with it at
+        lowest points, at most :data:`EDGE_SHARE` of them, and agrees with it at
         ``min_frf_points`` or more above: halfway between the last point it misses and
-        the first it meets. None when it misses nowhere or elsewhere too.
+        the first it meets. None when it misses nowhere or elsewhere too. With ``top``,
+        the upper edge of a model that misses only at the band's highest points.
 
         The band's lowest points are where a model fitted to a window of 1.5 s says
         least: a slow mode or a high-pass below the band (drift control, an
@@ -621,18 +629,27 @@ class AdaptiveCompensator:
         left the channel 9.6× better than uncompensated; compensated from 6 Hz up
         (``--band 6 50``), 16×. Such a model's inverse over the band it is validated
         over is the exact one there, and below it the compensator passes the
-        reference as the loop would run without it."""
+        reference as the loop would run without it.
+
+        The band's highest points are the other end of the same: a band that reaches
+        past what the loop follows (a specimen's resonance, a bandwidth that a heavier
+        payload lowered) ends where the loop's response is small, the feedback there
+        mostly noise, and a sixth-order model of a loop of higher order misses it
+        there first. The actuator on its specimen at 4 kHz under a 1–100 Hz reference,
+        compensated up to where its drive passes (near 72 Hz, :meth:`_narrowed`), had
+        its later models refused furthest at 99.6 Hz, the band's top, by up to 7 dB /
+        38°, which alarmed on a loop that was fine."""
         acc = self.guard.acceptance
         if err.n_points == 0:
             return None
-        order = np.argsort(err.freq_hz)
+        order = np.argsort(err.freq_hz)[::-1] if top else np.argsort(err.freq_hz)
         f = err.freq_hz[order]
         mag, ph = err.excess(acc.uncertainty_sigmas)
         beyond = ((mag > acc.max_magnitude_db) | (ph > acc.max_phase_deg))[order]
         if not beyond[0] or beyond.all():
             return None
         k = int(np.argmin(beyond))      # the first point the model meets
-        if beyond[k:].any() or k > LOW_EDGE_SHARE * f.size \
+        if beyond[k:].any() or k > EDGE_SHARE * f.size \
                 or f.size - k < acc.min_frf_points:
             return None
         return float(0.5 * (f[k - 1] + f[k]))

@@ -136,6 +136,7 @@ class ChannelAdapter:
         # models refused in a row for missing the H1 estimate at the band's lowest
         # point (at least ``alarm_after`` of them: judged over the band above it)
         self._low_edge = 0
+        self._top_edge = 0      # the same at its highest point (judged below it)
         # validated models refused in a row for a drive beyond the gain checks or the
         # rig's limits (at least ``alarm_after`` of them: narrowed to where it passes)
         self._over = 0
@@ -527,6 +528,7 @@ class ChannelAdapter:
                         self._ran_spans(), fresh, self.compensator.current_model,
                         unanchored, self._refitted if unanchored else None, floor, level,
                         usual, self._low_edge >= self.settings.alarm_after,
+                        self._top_edge >= self.settings.alarm_after,
                         self._over >= self.settings.alarm_after)
 
     def _ran_spans(self) -> tuple:
@@ -590,7 +592,9 @@ class ChannelAdapter:
         if verdict.model is not None:
             self.chosen = verdict.chosen
         figures = verdict.decision.figures
-        self._low_edge = _low_edge(self._low_edge, verdict.decision, self.settings.alarm_after)
+        self._low_edge = _at_edge(self._low_edge, verdict.decision, self.settings.alarm_after)
+        self._top_edge = _at_edge(self._top_edge, verdict.decision, self.settings.alarm_after,
+                                  top=True)
         self._over = _over(self._over, verdict.decision, self.settings.alarm_after)
         if "h1_phase_deg" in figures and not (verdict.decision.fault
                                               and not verdict.decision.accepted):
@@ -609,11 +613,12 @@ class ChannelAdapter:
             self._refitted = verdict.model     # Snapshot.refitted
 
 
-def _low_edge(count: int, decision: Decision, then: int) -> int:
+def _at_edge(count: int, decision: Decision, then: int, *, top: bool = False) -> int:
     """The models refused in a row for missing the H1 estimate furthest at the band's
-    lowest point, after ``decision``: one more for such a refusal, none after a model
-    accepted over the whole band; a model accepted over the band above that point
-    (``validated_from_hz``), or refused for another reason, leaves the count as it is.
+    lowest point (``top``: its highest), after ``decision``: one more for such a
+    refusal, none after a model validated over the whole band; a model accepted over
+    the band above that point (``validated_from_hz``; below it, ``validated_to_hz``),
+    or refused for another reason, leaves the count as it is.
 
     Held there ``then`` times in a row (``alarm_after``, 3), a channel's models miss
     the loop at that point, not by scatter: a healthy rig's models are refused by 4 %
@@ -622,9 +627,11 @@ def _low_edge(count: int, decision: Decision, then: int) -> int:
     judged every 0.75 s) even if every refusal fell at that point, against 53 of 61
     refusals at 4.88 Hz on the acceleration loop at 5 kHz."""
     f = decision.figures
+    edge, validated = ("h1_highest_hz", "validated_to_hz") if top else \
+        ("h1_lowest_hz", "validated_from_hz")
     if decision.accepted:
-        return count if "validated_from_hz" in f else 0
-    if "h1_worst_hz" in f and f["h1_worst_hz"] == f.get("h1_lowest_hz"):
+        return count if validated in f else 0
+    if "h1_worst_hz" in f and f["h1_worst_hz"] == f.get(edge):
         return count + 1 if count < then else count
     return count
 

@@ -60,7 +60,8 @@ class Snapshot:
     :data:`~ehss.live.compensate.adapter.RESIDUAL_LOADS` of them:
     :meth:`AdaptiveCompensator._judge_fit`, :meth:`Judging._quiet`); how far its models
     usually miss the H1 estimate (:data:`~ehss.live.compensate.adapter.USUAL_DISAGREEMENT`);
-    whether they keep missing it at the band's lowest point (``low_edge``), and whether
+    whether they keep missing it at the band's lowest point (``low_edge``) or at its
+    highest (``top_edge``), and whether
     their drives keep failing the gain checks or the rig's limits (``narrow_top``; both
     :meth:`AdaptiveCompensator.assess`)."""
 
@@ -80,6 +81,7 @@ class Snapshot:
     reference_level: float | None = None
     disagreement: tuple[float, float] | None = None
     low_edge: bool = False
+    top_edge: bool = False
     narrow_top: bool = False
 
 
@@ -336,6 +338,7 @@ class Judging:
                                            residual_floor=snap.residual_floor,
                                            usual_disagreement=snap.disagreement,
                                            low_edge=snap.low_edge,
+                                           top_edge=snap.top_edge,
                                            narrow_top=snap.narrow_top)
         if rows:
             decision.figures["refit_rows"] = rows
