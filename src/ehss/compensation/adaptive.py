@@ -766,14 +766,12 @@ class AdaptiveCompensator:
         accepted with its top (``narrowed_to_hz``) if by the model's account it tracks
         the whole band better than the compensator that runs; a refused drive is marked
         (``drive_refused``) so that the channel can count such refusals in a row."""
-        g = self.guard
         drive, skip = None, 0
         try:
             design = design_of()
             drive = run_compensator(design, r)
             skip = min(design.settle_samples, r.size // 2)
-            check = check_drive(drive[skip:], r[skip:], self.fs_hz, max_gain=g.max_gain,
-                                limits=g.limits, loop=self.loop, params=self.params)
+            check = self._check(drive[skip:], r[skip:])
         except KeptRunning as exc:
             return Decision(t_s, False, str(exc), figures=figures, fault=False)
         except EhssError as exc:
@@ -818,23 +816,27 @@ class AdaptiveCompensator:
         not strictly (its peak moves with the reference's content), so the band found
         passes and the band one point wider does not, but a wider one may pass
         again."""
-        g = self.guard
         found = None
         first, last = 0, narrowing.tops.size - 1
         while first <= last:
             mid = (first + last) // 2
             try:
                 design = narrowing.design(float(narrowing.tops[mid]))
-                drive = run_compensator(design, r)
                 skip = min(design.settle_samples, r.size // 2)
-                check = check_drive(drive[skip:], r[skip:], self.fs_hz, max_gain=g.max_gain,
-                                    limits=g.limits, loop=self.loop, params=self.params)
+                check = self._check(run_compensator(design, r)[skip:], r[skip:])
             except EhssError:
                 last = mid - 1
                 continue
             found = (design, float(narrowing.tops[mid]), check)
             first = mid + 1
         return found
+
+    def _check(self, drive: np.ndarray, r: np.ndarray) -> Any:
+        """The gain checks and the rig's limits of a new compensator's ``drive`` for
+        ``r`` (:func:`~ehss.compensation.check_drive`; raises if it fails)."""
+        g = self.guard
+        return check_drive(drive, r, self.fs_hz, max_gain=g.max_gain, limits=g.limits,
+                           loop=self.loop, params=self.params)
 
     def _passes(self, drive: np.ndarray, r: np.ndarray) -> bool:
         """Whether ``drive`` for ``r`` passes the checks of :meth:`_checked_drive`."""
