@@ -251,14 +251,16 @@ class KeptRunning(ParameterError):
 @dataclass(frozen=True)
 class Narrowing:
     """The bands a drive beyond the gain checks may be narrowed to: their tops (Hz,
-    lowest first), the design over the band up to a top, the relative tracking error
-    (RMS over the whole band) a design leaves by the model's account, and what the
-    compensator that runs leaves by it (inf: none runs)."""
+    lowest first), the design over the band up to a top (what its realisation says,
+    :meth:`AdaptiveCompensator._realisable`, in ``notes``, of the latest design), the
+    relative tracking error (RMS over the whole band) a design leaves by the model's
+    account, and what the compensator that runs leaves by it (inf: none runs)."""
 
     tops: np.ndarray
     design: Callable[[float], CompensatorDesign]
     leaves: Callable[[CompensatorDesign], float]
     kept: float
+    notes: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -401,10 +403,10 @@ class AdaptiveCompensator:
         have missed the estimate at the band's lowest point again and again, so that a
         model that misses it only there is validated over the band above
         (:meth:`_validated_from`); ``top_edge``: the same at the band's top point;
-        ``narrow_top``: the channel's validated models have
-        asked drives beyond the gain checks or the rig's limits again and again, so
-        that a model whose drive over the band would fail them is compensated up to
-        the highest frequency where it passes (:meth:`_narrowed`)."""
+        ``narrow_top``: the channel's validated models have asked drives beyond the
+        gain checks or the rig's limits again and again, so that a model whose drive
+        over the band would fail them is compensated up to where it passes
+        (:meth:`_narrowed`)."""
         running = self.current if running is None else running
         decision = self._judge(t_s, model, h1, np.asarray(reference, dtype=float), running,
                                usual_disagreement, low_edge, top_edge, narrow_top)
@@ -604,11 +606,15 @@ class AdaptiveCompensator:
             return float(np.sqrt(np.mean(np.abs(g * design.frequency_response(grid) - 1.0)
                                          ** 2)))
 
-        figures: dict[str, Any] = {}
+        notes: dict[str, Any] = {}
+
+        def design(top: float) -> CompensatorDesign:
+            notes.clear()
+            return self._designed(model, notes, running, (lo, top))
+
         kept = leaves(running) if running is not None and running.mode == self.mode \
             else math.inf
-        return Narrowing(tops, lambda top: self._designed(model, figures, running,
-                                                          (lo, float(top))), leaves, kept)
+        return Narrowing(tops, design, leaves, kept, notes)
 
     def _validated_from(self, err: FrfError, *, top: bool = False) -> float | None:
         """The lower edge of the band over which a model is validated when it misses
@@ -778,9 +784,8 @@ class AdaptiveCompensator:
             if drive is None:   # no design to drive with
                 return Decision(t_s, False, str(exc), figures=figures)
             figures["drive_refused"] = True
-            narrowed = None if narrowing is None else self._narrowed(narrowing, r)
-            if narrowing is not None and narrowed is not None:
-                design, top, check = narrowed
+            if narrowing is not None and (narrowed := self._narrowed(narrowing, r)):
+                design, top, check, notes = narrowed
                 left = narrowing.leaves(design)
                 if left >= narrowing.kept:
                     return Decision(t_s, False, (
@@ -789,7 +794,8 @@ class AdaptiveCompensator:
                         f"{narrowing.kept:.1%} with the compensator that runs"),
                         figures=figures, fault=False)
                 del figures["drive_refused"]
-                figures.update(narrowed_to_hz=top, rms_gain=check.rms_gain,
+                figures.pop("realisation", None)    # the whole band's, if any
+                figures.update(notes, narrowed_to_hz=top, rms_gain=check.rms_gain,
                                peak_gain=check.peak_gain, narrowed_leaves=left)
                 return Decision(t_s, True, "", design, figures)
             near = self._passes(drive[skip:] / NEAR_MISS, r[skip:])
@@ -798,10 +804,10 @@ class AdaptiveCompensator:
         return Decision(t_s, True, "", design, figures)
 
     def _narrowed(self, narrowing: Narrowing, r: np.ndarray
-                  ) -> tuple[CompensatorDesign, float, Any] | None:
+                  ) -> tuple[CompensatorDesign, float, Any, dict] | None:
         """The design over a band of ``narrowing`` whose drive for ``r`` passes the
-        gain checks and the rig's limits, with its top and its check; None if none
-        that the search tries does.
+        gain checks and the rig's limits, with its top, its check and its realisation's
+        notes; None if none that the search tries does.
 
         A model validated over the band whose inverse still asks too much there is
         right: the band reaches past what the loop can follow within the rig's bounds
@@ -827,7 +833,7 @@ class AdaptiveCompensator:
             except EhssError:
                 last = mid - 1
                 continue
-            found = (design, float(narrowing.tops[mid]), check)
+            found = (design, float(narrowing.tops[mid]), check, dict(narrowing.notes))
             first = mid + 1
         return found
 
