@@ -157,3 +157,24 @@ def test_an_ill_conditioned_fit_repeats_in_fresh_processes():
     outs = {subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,
                            text=True, check=True).stdout for _ in range(4)}
     assert len(outs) == 1 and ill_conditioned_fit() + "\n" in outs
+
+
+def test_a_reduction_that_overflows_is_not_finite_and_warns_nothing():
+    # J'J too ill-conditioned (here singular) sends the reduction to a QR of [J e],
+    # and a trial point whose errors overflow makes that QR not finite: the fits check
+    # that in what they return, and numpy's overflow warning does not reach the user
+    import warnings
+
+    from ehss.identification.pem import _reduced
+
+    gram = np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    big = np.full((6, 3), 1e308)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r, jr, by_qr = _reduced(gram, lambda: big * 10.0)
+    assert by_qr and not np.all(np.isfinite(r))
+    # a finite [J e] is reduced to the same R as numpy's own QR
+    x = np.random.default_rng(1).standard_normal((6, 3))
+    r, jr, by_qr = _reduced(gram, lambda: x)
+    assert by_qr and np.allclose(np.abs(jr[:2]), np.abs(np.linalg.qr(x, mode="r")[:2, :2]),
+                                 rtol=0, atol=1e-12)

@@ -305,7 +305,12 @@ def _reduced(G: np.ndarray, stacked: Callable[[], np.ndarray]
     if r.size:
         return r, Jr, False
     n = G.shape[0] - 1
-    Rq: np.ndarray = np.linalg.qr(stacked(), mode="r")  # type: ignore[assignment]
+    # a trial θ whose errors grow without bound over the rows overflows [J ε]: the
+    # reduction is then not finite, which the fits check in what they return (θ,
+    # the covariance) as they check every other way to diverge; numpy's warning of
+    # the overflow on its way there is no news to the user
+    with np.errstate(over="ignore", invalid="ignore"):
+        Rq: np.ndarray = np.linalg.qr(stacked(), mode="r")  # type: ignore[assignment]
     return (np.append(Rq[:n, n], abs(Rq[n, n])),
             np.vstack([Rq[:n, :n], np.zeros((1, n))]), True)
 
