@@ -113,6 +113,11 @@ def check_follows_a_payload_change(seeds, factor, *, noise):
     assert adapted.tracking_rms(22.0, 40.0)[1] <= 1.3 * before[1]
     # every compensator loaded was taken up and faded in by the target's filter
     assert adapted.loads and all(load["accepted"] for load in adapted.loads)
+    # each load's drive within the gain bound (3x) against its reference, and the
+    # filter's own largest gain beside it under its own name
+    checked = [ld for ld in adapted.loads if "rms_gain" in ld]
+    assert checked and all(max(ld["rms_gain"], ld["peak_gain"]) <= 3.0
+                           and ld["filter_peak_gain"] > 0.0 for ld in checked)
     for k in range(2):
         check_drive(adapted.drive[k], desired[k], FS, loop="position",
                     params=ehss.preset("default"))

@@ -172,10 +172,12 @@ class CompensatorDesign:
 
     def errors(self) -> dict[str, float]:
         """JSON-ready figures: max amplitude (dB) and phase (degrees) error over the band,
-        and the RMS relative error."""
+        the filter's largest gain at any frequency (``filter_peak_gain``: not the drive's
+        peak against the reference's, ``peak_gain`` of the drive checks, which a load's
+        figures carry beside it), and the RMS relative error."""
         return {"max_amplitude_error_db": self.max_amplitude_error_db,
                 "max_phase_error_deg": self.max_phase_error_deg,
-                "peak_gain": self.peak_gain,
+                "filter_peak_gain": self.peak_gain,
                 "rms_relative_error": float(np.sqrt(np.mean(np.abs(self.error) ** 2)))}
 
 
