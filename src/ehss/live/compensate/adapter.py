@@ -635,11 +635,8 @@ def _at_edge(count: int, decision: Decision, then: int, *, top: bool = False) ->
     f = decision.figures
     edge, validated = ("h1_highest_hz", "validated_to_hz") if top else \
         ("h1_lowest_hz", "validated_from_hz")
-    if decision.accepted:
-        return count if validated in f else 0
-    if "h1_worst_hz" in f and f["h1_worst_hz"] == f.get(edge):
-        return count + 1 if count < then else count
-    return count
+    return _in_a_row(count, decision, then, validated,
+                     "h1_worst_hz" in f and f["h1_worst_hz"] == f.get(edge))
 
 
 def _over(count: int, decision: Decision, then: int) -> int:
@@ -654,12 +651,19 @@ def _over(count: int, decision: Decision, then: int) -> int:
     assess`, ``narrow_top``). A single refusal keeps the last good inverse over the
     whole band: the rig's position loop under its default reference asks a peak
     velocity just past its limit once in minutes (README)."""
-    f = decision.figures
+    return _in_a_row(count, decision, then, "narrowed_to_hz",
+                     bool(decision.figures.get("drive_refused")))
+
+
+def _in_a_row(count: int, decision: Decision, then: int, kept_by: str, counts: bool
+              ) -> int:
+    """A count of refusals in a row, capped at ``then``, after ``decision``: one more
+    for a refusal that ``counts``; kept by a model accepted with the figure
+    ``kept_by`` (accepted under the rule the count enables), reset by any other
+    accepted; a refusal for another reason leaves it as it is."""
     if decision.accepted:
-        return count if "narrowed_to_hz" in f else 0
-    if f.get("drive_refused"):
-        return count + 1 if count < then else count
-    return count
+        return count if kept_by in decision.figures else 0
+    return min(count + 1, then) if counts else count
 
 
 @dataclass(frozen=True)
