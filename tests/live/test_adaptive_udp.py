@@ -73,13 +73,16 @@ class _OneByOne(_Arrived):
         return [self.blocks.pop(0)] if self.blocks else []
 
 
-@pytest.mark.parametrize("runs", [False, True, "off"])
+@pytest.mark.parametrize("runs", [False, True, "off", "late", "lone"])
 def test_a_target_that_runs_no_compensator_is_told(runs):
     # a target refuses every compensator whose preview is not its own, and its drive
     # stays its desired reference (the compensator it starts with): the host says so,
-    # once, when the first one sent should have been running for IGNORED_AFTER_S; a
-    # compensator that passes the reference (compensation switched off) tells nothing
-    from ehss.live.compensate.udp_target import IGNORED_AFTER_S
+    # once, when the second one sent should have been running for IGNORED_AFTER_S
+    # (IGNORED_LONE_S after the first when it was the only one); a target that took the
+    # first one up too late for it to show by then ("late": a host or target that lost
+    # the processor for a while) and ran the second, or one sent a compensator that
+    # passes the reference (compensation switched off), tells nothing
+    from ehss.live.compensate.udp_target import IGNORED_AFTER_S, IGNORED_LONE_S
     from ehss.target import Compensator
 
     fir = Compensator(sos=np.zeros((0, 6)), taps=np.r_[np.zeros(128), 0.9, 0.1],
@@ -87,8 +90,10 @@ def test_a_target_that_runs_no_compensator_is_told(runs):
     first = Compensator.delay(128, fs_hz=1000.0) if runs == "off" else fir
 
     fs, n = 1000.0, 50
-    des = np.sin(np.arange(3000) / 30.0)
+    des = np.sin(np.arange(4000) / 30.0)
     drive = 1.01 * des if runs is True else des.copy()
+    if runs == "late":
+        drive[1000:] *= 1.01      # the first never showed, the second from its apply index
     blocks = [Block(k, np.column_stack([np.arange(k, k + n) / fs, drive[k:k + n],
                                         np.zeros(n), des[k:k + n]]), 0.0)
               for k in range(0, des.size, n)]
@@ -96,15 +101,21 @@ def test_a_target_that_runs_no_compensator_is_told(runs):
     target = UdpTarget(_OneByOne(blocks), _Sent(), fs=fs, preview=128, reference_rms=[1.0],
                        warn=told.append)
     target.load(0, first, apply_index=200, crossfade=100)
-    target.step(250)                                  # before the fade's end + 0.5 s
-    assert not told and not target.ignored
-    target.load(0, fir, apply_index=900, crossfade=100)   # later ones change nothing
-    target.step(3000)
-    if runs:
+    target.step(250)
+    if runs != "lone":
+        target.load(0, fir, apply_index=1000, crossfade=100)
+    due = 1100 + IGNORED_AFTER_S * fs if runs != "lone" else 300 + IGNORED_LONE_S * fs
+    target.step(int(due) - 250 - n)                # up to the block that reaches past it
+    assert target.index == due - n and not told and not target.ignored
+    target.load(0, fir, apply_index=2500, crossfade=100)   # later ones change nothing
+    target.step(4000 - target.index)
+    if runs in (True, "off", "late"):
         assert not told and not target.ignored
     else:
         assert len(told) == 1 and target.ignored == {0: told[0]}
-        assert "128 samples ahead at 1000 Hz" in told[0] and f"{IGNORED_AFTER_S:g} s" in told[0]
+        after = f"{IGNORED_AFTER_S:g} s after the second" if runs is False \
+            else f"{IGNORED_LONE_S:g} s after the first"
+        assert "128 samples ahead at 1000 Hz" in told[0] and after in told[0], told[0]
 
 
 def _run(speed: float, **settings):
@@ -126,9 +137,11 @@ def _run(speed: float, **settings):
         proc.stdin.write("go\n")
         proc.stdin.flush()
         rec = loop.run()
-        # the target ran what it was sent: the host did not take it for one that refuses
-        assert not target.ignored, target.ignored
         counters = json.loads(proc.stdout.readline())
+        # the target ran what it was sent: the host did not take it for one that refuses
+        assert not target.ignored, (target.ignored, counters["inbox"], counters["filter"],
+                                    [(e["channel"], e["t_s"], e["apply_index"])
+                                     for e in loop.loads][:6])
         proc.wait(timeout=30)
     finally:
         proc.kill()

@@ -14,9 +14,15 @@ import numpy as np
 
 from ehss.errors import ParameterError
 
-#: How long after its first compensator should have been faded in a target's drive may
-#: still be its desired reference before the target is taken to refuse them, s.
+#: How long after the second compensator sent to it should have been faded in a target's
+#: drive may still be its desired reference, unchanged since the first one's apply
+#: index, before the target is taken to refuse them, s. One missed compensator is not
+#: enough: a datagram that reached the target late (a host or a target that lost the
+#: processor for a while) is taken up late, and a second one may replace it before it
+#: was faded in.
 IGNORED_AFTER_S = 0.5
+#: The same when no second compensator was sent: from the first one's fade-in, s.
+IGNORED_LONE_S = 2.0
 
 
 class DatagramSender:
@@ -100,17 +106,19 @@ class UdpTarget:
     idle_stop_s : float
         The run ends when no data came for this long after the first.
     warn : callable, optional
-        Called once per channel with one line when the target does not run the first
-        compensator sent to it (:attr:`ignored`).
+        Called once per channel with one line when the target runs none of the
+        compensators sent to it (:attr:`ignored`).
 
     Attributes
     ----------
     ignored : dict
         Channel index → why the target is taken not to run its compensators: its
-        drive was still exactly its desired reference (the compensator a target starts
-        with, drive = reference) :data:`IGNORED_AFTER_S` after the first one sent should
-        have been faded in. A target refuses every compensator whose preview or sample
-        rate is not its own, and says so only in its own counters.
+        drive stayed exactly its desired reference (the compensator a target starts
+        with, drive = reference) from the first one's apply index until
+        :data:`IGNORED_AFTER_S` after the second one sent should have been faded in
+        (:data:`IGNORED_LONE_S` after the first when no second was sent). A target
+        refuses every compensator whose preview or sample rate is not its own, and says
+        so only in its own counters.
     """
 
     def __init__(self, source: Any, sender: DatagramSender, *, fs: float, preview: int,
@@ -136,8 +144,9 @@ class UdpTarget:
         self._latest_arrival: tuple[int, float] | None = None
         self._largest_block = 0
         self._warn = warn
-        # channel index -> sample from which its first compensator was fully faded in
-        self._expected: dict[int, int] = {}
+        # channel index -> (apply index, end of the fade-in) of the first two
+        # compensators sent to it, while its drive is still watched
+        self._expected: dict[int, list[tuple[int, int]]] = {}
         self._checked: set[int] = set()
         self.ignored: dict[int, str] = {}
 
@@ -152,26 +161,41 @@ class UdpTarget:
                 self._expected.pop(channel, None)
                 self._checked.add(channel)
             else:
-                self._expected.setdefault(channel, int(apply_index) + max(1, int(crossfade)))
+                sent = self._expected.setdefault(channel, [])
+                if len(sent) < 2:
+                    sent.append((int(apply_index), int(apply_index) + max(1, int(crossfade))))
         return self.sender.send(channel, compensator, apply_index, crossfade)
 
     def _check_applied(self, first: int, desired: np.ndarray, drive: np.ndarray) -> None:
-        """Whether each channel's first compensator shows in its drive, on the samples
-        of this block from :data:`IGNORED_AFTER_S` after it was faded in."""
+        """Whether each watched channel's drive, on the samples of this block from its
+        first compensator's apply index, shows any compensator; told when none has
+        shown by :data:`IGNORED_AFTER_S` after the second one's fade-in
+        (:data:`IGNORED_LONE_S` after the first's)."""
         end = first + desired.shape[1]
-        for k, at in list(self._expected.items()):
-            start = at + int(round(IGNORED_AFTER_S * self.fs))
+        for k, sent in list(self._expected.items()):
+            start = sent[0][0]
             if end <= start:
+                continue
+            d, u = desired[k, max(0, start - first):], drive[k, max(0, start - first):]
+            scale = float(np.max(np.abs(d))) if d.size else 0.0
+            if scale == 0.0:
+                continue                # nothing to tell it by
+            if np.max(np.abs(u - d)) > 1e-12 * scale:
+                del self._expected[k]   # it runs something
+                self._checked.add(k)
+                continue
+            lone = sent[0][1] + int(round(IGNORED_LONE_S * self.fs))
+            second = sent[1][1] + int(round(IGNORED_AFTER_S * self.fs)) if len(sent) > 1 \
+                else lone
+            if end <= min(lone, second):
                 continue
             del self._expected[k]
             self._checked.add(k)
-            d, u = desired[k, max(0, start - first):], drive[k, max(0, start - first):]
-            scale = float(np.max(np.abs(d))) if d.size else 0.0
-            if scale == 0.0 or np.max(np.abs(u - d)) > 1e-12 * scale:
-                continue          # it runs something, or nothing to tell it by
+            when = (f"{IGNORED_AFTER_S:g} s after the second compensator" if second < lone
+                    else f"{IGNORED_LONE_S:g} s after the first compensator")
             why = (f"channel {self.channels[k]}: the target's drive is still its desired "
-                   f"reference {IGNORED_AFTER_S:g} s after the first compensator should "
-                   f"have been faded in: it refuses them (its filter must read "
+                   f"reference {when} should have been faded in: it refuses them (its "
+                   f"filter must read "
                    f"{self.preview} samples ahead at {self.fs:g} Hz; see its counters)")
             self.ignored[k] = why
             if self._warn is not None:
