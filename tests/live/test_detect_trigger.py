@@ -161,3 +161,57 @@ def test_restarted_with_a_hold_it_neither_tests_nor_learns_the_held_samples(rng)
     times = _run(held, e)
     assert len(times) == 1 and 8.0 < times[0] <= 8.5
     assert held.onset_censored
+
+
+def _band_limited(rng, n, band_hz=(0.5, 20.0)):
+    """White noise band-limited to ``band_hz`` by an FFT mask, unit RMS."""
+    spectrum = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1.0 / FS)
+    spectrum[(f < band_hz[0]) | (f > band_hz[1])] = 0.0
+    x = np.fft.irfft(spectrum, n)
+    return x / np.std(x)
+
+
+def _run_with(trigger, error, reference, step=50):
+    return [(k + step) / FS for k in range(0, error.size, step)
+            if trigger(error[k:k + step], reference[k:k + step])]
+
+
+def _loop_error(rng, r):
+    """The error a compensated loop leaves on ``r``: what its inverse misses (a small
+    lag: a first difference of the reference) and white sensor noise of a third of it
+    at the reference's first level."""
+    miss = 10.0 * np.diff(r, prepend=0.0)
+    return miss + 0.3 * np.std(miss[:5000]) * rng.standard_normal(r.size)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_rise_of_the_test_level_is_not_a_change_of_the_loop(seed):
+    # the test level rises 3x at 20 s and 2x more at 30 s, and the error with it. Told
+    # the reference, the trigger learns the new level instead of flagging it; not told,
+    # it flags the rise (ln 9 of ln median e², several standard deviations of a block)
+    rng = np.random.default_rng(seed)
+    n = 40_000
+    k = np.arange(n)
+    r = np.where(k < 20_000, 1.0, np.where(k < 30_000, 3.0, 6.0)) * _band_limited(rng, n)
+    e = _loop_error(rng, r)
+    told = TrackingTrigger(FS)
+    assert _run_with(told, e, r) == []
+    assert told.level_rises >= 1
+    assert len(_run(TrackingTrigger(FS), e)) >= 1
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_change_of_the_loop_on_a_steady_reference_is_still_flagged(seed):
+    # the same loop whose error rises 4x at 20 s (the rig's after -30 % payload) on a
+    # reference of one level: flagged within 1.5 s, as without the reference, at the
+    # same time
+    rng = np.random.default_rng(seed)
+    n = 30_000
+    r = _band_limited(rng, n)
+    e = _loop_error(rng, r)
+    e[20_000:] *= 4.0
+    told = TrackingTrigger(FS)
+    times = _run_with(told, e, r)
+    assert len(times) == 1 and 20.0 < times[0] <= 21.5 and told.level_rises == 0
+    assert times == _run(TrackingTrigger(FS), e)

@@ -361,12 +361,13 @@ class Display:
     a session publishes and logs goes there."""
 
     #: kinds of event printed as they happen (``compensator_change``: the compensator's
-    #: trigger flagged a change of the loop; a ``compensator`` with ``"model":
+    #: trigger flagged a change of the loop, ``compensator_level`` a rise of the error it
+    #: took for a new test level instead; a ``compensator`` with ``"model":
     #: "correction"`` is the correction that follows it; ``compensator_rollback``: a
     #: load that raised the error, undone)
     LOGGED = ("alarm", "clear", "message", "compensator", "compensator_refused",
               "compensator_alarm", "compensator_clear", "compensator_change",
-              "compensator_rollback")
+              "compensator_level", "compensator_rollback")
 
     def __init__(self, args: argparse.Namespace) -> None:
         from ehss.live.summary import TerminalSummary

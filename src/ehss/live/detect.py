@@ -178,6 +178,10 @@ CLEAR_LEVEL = 0.5
 ONSET_Z = 2.0
 #: Fewest independent blocks of learning the test is calibrated from.
 MIN_EFFECTIVE_BLOCKS = 5
+#: One-sided z of the two tests that take a trigger of :class:`TrackingTrigger` for a
+#: rise of the reference's level (:meth:`TrackingTrigger._level_rose`): 1 % each, under
+#: the Gaussian model of the blocks' statistics.
+LEVEL_Z = 2.326
 #: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
 _MAX_RHO = 0.9
 #: Siegmund's correction of the threshold for the overshoot of Gaussian increments.
@@ -570,6 +574,13 @@ class TrackingTrigger:
         self.settings = settings if settings is not None else TriggerSettings()
         s = self.settings
         self._n_block = max(1, int(round(s.block_s * fs)))
+        # the reference's samples of the current block, and ln of its mean square in
+        # each block of self._x
+        self._rbuf = np.empty(self._n_block)
+        self._levels: list[float] = []
+        self._kept_levels: list[float] = []
+        #: triggers taken for a rise of the reference's level (:meth:`_level_rose`)
+        self.level_rises = 0
         self._n_learn = max(MIN_EFFECTIVE_BLOCKS, int(round(s.learn_s / s.block_s)))
         self._n_lag = int(round(s.lag_s / s.block_s))
         self._arl = s.false_alarm_hours * 3600.0 / s.block_s
@@ -608,6 +619,7 @@ class TrackingTrigger:
         test waits ``learn_s`` of blocks; the next ``hold`` samples are neither tested
         nor learnt."""
         self._x = []
+        self._levels = []
         self._cusum = 0.0
         self._run = []
         self._held = None
@@ -622,6 +634,7 @@ class TrackingTrigger:
         fading in) are neither tested nor learnt. A change still there after them is
         flagged within a few blocks (two for a rise of 7 standard deviations)."""
         self._x = list(self._kept)
+        self._levels = list(self._kept_levels)
         self._held = self._flagged
         self._cusum = 0.0
         self._run = []
@@ -633,21 +646,28 @@ class TrackingTrigger:
         """True while the test runs on a calibration held by :meth:`rearm`."""
         return self._held is not None
 
-    def __call__(self, error: np.ndarray) -> bool:
-        """Take the next samples of the tracking error; True if a change is flagged
-        in them (the test then restarts)."""
+    def __call__(self, error: np.ndarray, reference: np.ndarray | None = None) -> bool:
+        """Take the next samples of the tracking error (and of the desired reference
+        they belong to, if given: :meth:`_level_rose`); True if a change is flagged in
+        them (the test then restarts)."""
         flagged = False
         i = 0
         while i < error.size:
             take = min(self._n_block - self._fill, error.size - i)
             self._buf[self._fill:self._fill + take] = error[i:i + take]
+            if reference is not None:
+                self._rbuf[self._fill:self._fill + take] = reference[i:i + take]
             self._fill += take
             self._seen += take
             i += take
             if self._fill == self._n_block:
                 self._fill = 0
+                level = math.nan
+                if reference is not None:
+                    mean_square = float(np.mean(np.square(self._rbuf)))
+                    level = math.log(mean_square) if mean_square > 0 else math.nan
                 if self._seen - self._n_block >= self._hold_until:
-                    flagged |= self._block(block_statistic(self._buf))
+                    flagged |= self._block(block_statistic(self._buf), level)
         return flagged
 
     def _calibration(self) -> Calibration | None:
@@ -661,20 +681,51 @@ class TrackingTrigger:
         except ParameterError:  # blocks that do not vary: nothing to test against
             return None
 
-    def _block(self, x: float) -> bool:
-        """Test one block's statistic against the blocks before it, then learn it."""
+    def _block(self, x: float, level: float = math.nan) -> bool:
+        """Test one block's statistic against the blocks before it, then learn it (with
+        ``level``, ln of the reference's mean square over the block)."""
         if not math.isfinite(x):
             return False
         cal = self._calibration()
-        if cal is not None and self._test(x, cal):
+        if cal is not None and self._test(x, cal, level):
             return True
         if len(self._x) >= self._n_learn + self._n_lag:
             self._x.pop(0)
+            self._levels.pop(0)
         self._x.append(x)
+        self._levels.append(level)
         return False
 
-    def _test(self, x: float, cal: Calibration) -> bool:
-        """One step of the CUSUM; True (dated, and the test restarted) at a trigger."""
+    def _level_rose(self, n_onset: int, level: float) -> bool:
+        """Whether the reference's level rose with the rise the CUSUM just flagged: over
+        the ``n_onset`` blocks since it began (the latest, of ``level``, not yet learnt),
+        its mean level (ln of the reference's mean square per block) lies above the
+        learnt blocks' by more than :data:`LEVEL_Z` (1 %) of their standard deviation
+        over √``n_onset``.
+
+        A compensated loop's error grows with its reference: a test run stepped from
+        25 % to 50 % to 100 % of its level raises ln(median e²) by about ln 4 at each
+        step (more while the step passes: its error overshot the reference's rise by up
+        to 3×), and the rig flagged every step as a change of the loop within 0.4–1.1 s.
+        Such a rise is taken for a new test level: the test learns anew there, as after
+        a trigger, and nothing is flagged. A change of the loop at the very moment the
+        reference rises is then not flagged either; the models follow it, as they do a
+        change while the test learns. On a steady reference 1 % of triggers are taken
+        so, and a run that triggers nowhere keeps its course."""
+        learnt = np.array(self._levels[:min(self._n_learn, len(self._levels))])
+        recent = self._levels[max(0, len(self._levels) - (n_onset - 1)):] \
+            if n_onset > 1 else []
+        now = np.r_[recent, level]
+        if learnt.size < MIN_EFFECTIVE_BLOCKS or not (np.all(np.isfinite(learnt))
+                                                     and np.all(np.isfinite(now))):
+            return False
+        rise = float(np.mean(now) - np.mean(learnt))
+        return rise > LEVEL_Z * float(np.std(learnt, ddof=1)) / math.sqrt(now.size)
+
+    def _test(self, x: float, cal: Calibration, level: float = math.nan) -> bool:
+        """One step of the CUSUM; True (dated, and the test restarted) at a trigger,
+        unless the reference's level rose as much (:meth:`_level_rose`: the test then
+        learns anew at the new level)."""
         # S_k = max(0, S_{k−1} + z_k − κ), alarm at S_k ≥ h
         z = (x - cal.mean) / cal.sd
         self._tested += 1
@@ -683,8 +734,12 @@ class TrackingTrigger:
         self._run = self._run + [z] if self._cusum > 0.0 else []
         if self._cusum < cal.threshold:
             return False
-        self.triggers += 1
         n_onset = _onset_blocks(self._run)
+        if self._level_rose(n_onset, level):
+            self.level_rises += 1
+            self.restart()
+            return False
+        self.triggers += 1
         self.onset_censored = len(self._run) == self._tested and _first_onset(self._run) == 0
         self.onset_s = n_onset * self.settings.block_s
         self.onset_index = self._seen - n_onset * self._n_block
@@ -692,6 +747,7 @@ class TrackingTrigger:
         self.rise = math.exp(0.5 * cal.sd * float(np.mean(self._run[-n_onset:])))
         # the blocks before the change (this one is not among them yet)
         self._kept = self._x[:max(0, len(self._x) - (n_onset - 1))]
+        self._kept_levels = self._levels[:len(self._kept)]
         self._flagged = cal
         self.restart()
         return True

@@ -54,7 +54,7 @@ __all__ = ["LiveReport", "LiveSession"]
 #: Kinds of event the displays list (the latest 50).
 _SHOWN = ("alarm", "clear", "message", "compensator", "compensator_refused",
           "compensator_alarm", "compensator_clear", "compensator_change",
-          "compensator_rollback")
+          "compensator_level", "compensator_rollback")
 
 
 @dataclass(frozen=True)

@@ -182,7 +182,8 @@ class SessionSnapshot:
         The latest alarms, clears and messages, and with adaptive compensation its
         events: compensators loaded (``"compensator"``; ``"model": "correction"`` for a
         correction after a change), refused, its alarms and clears, and the changes of
-        a loop its trigger flagged (``"compensator_change"``); at most 50.
+        a loop its trigger flagged (``"compensator_change"``) or took for a new test
+        level (``"compensator_level"``); at most 50.
     channels : tuple of ChannelSnapshot
     history : HistorySnapshot
     theta_names : tuple of str

@@ -193,7 +193,7 @@ class ChannelAdapter:
         self._thetas.append((self._n, np.array(thetas)))
         while self._thetas and self._thetas[0][0] < self._n - self._n_average:
             self._thetas.popleft()
-        changed = self.trigger is not None and self.trigger(desired - feedback)
+        changed = self.trigger is not None and self.trigger(desired - feedback, desired)
         if changed:
             self._began = None
             self.undo = self._load_that_rose()
@@ -202,6 +202,12 @@ class ChannelAdapter:
             self.follow_change(None if self._began is None
                                else (self._n - self._began) / self.fs)
         return changed
+
+    @property
+    def level_rises(self) -> int:
+        """Rises of the error the trigger took for a new test level, not a change
+        (:attr:`~ehss.live.detect.TrackingTrigger.level_rises`)."""
+        return 0 if self.trigger is None else self.trigger.level_rises
 
     def _load_that_rose(self) -> _Load | None:
         """The load whose rise of the error the trigger just flagged, if it is one of

@@ -341,10 +341,16 @@ class AdaptiveLoop:
                 continue
             parts.append(block)
             for k, ad in enumerate(self.adapters):
+                rises = ad.level_rises
                 if ad.feed(block.drive[k], block.feedback[k], block.desired[k]):
                     self._event({"kind": "compensator_change", "channel": ad.name,
                                  "t_s": self.target.index / self.fs,
                                  "at_load": ad.change_at_load})
+                if ad.level_rises > rises:
+                    self._event({"kind": "compensator_level", "channel": ad.name,
+                                 "t_s": self.target.index / self.fs,
+                                 "text": "the error rose with the reference's level (a new "
+                                         "test level): the change trigger learns it anew"})
                 if ad.undo is not None:
                     self._roll_back(k)
             self._collect()
