@@ -215,3 +215,19 @@ def test_a_change_of_the_loop_on_a_steady_reference_is_still_flagged(seed):
     times = _run_with(told, e, r)
     assert len(times) == 1 and 20.0 < times[0] <= 21.5 and told.level_rises == 0
     assert times == _run(TrackingTrigger(FS), e)
+
+
+def test_a_reference_of_one_amplitude_explains_no_rise(rng):
+    # a sine dwell: every block holds whole periods, its level does not scatter, and a
+    # step of its amplitude by 1 % lies many of its standard deviations above it; with
+    # it, a rise of the error 4x at 20 s is a change of the loop, flagged as without the
+    # reference
+    n = 30_000
+    r = np.sin(2 * np.pi * 5.0 * np.arange(n) / FS)
+    r[20_000:] *= 1.01
+    e = 0.01 * r + 0.005 * rng.standard_normal(n)
+    e[20_000:] *= 4.0
+    told = TrackingTrigger(FS)
+    times = _run_with(told, e, r)
+    assert len(times) == 1 and 20.0 < times[0] <= 21.5 and told.level_rises == 0
+    assert times == _run(TrackingTrigger(FS), e)
