@@ -24,6 +24,7 @@ from ehss.live.detect import (
     BaselineResidual,
     DetectionSettings,
     Detector,
+    block_level,
     block_statistic,
     calibrate,
     check_baseline,
@@ -239,6 +240,13 @@ class ChannelProcessor:
         self._res_block: list[np.ndarray] = []
         self._res_whole = False
         self.block_stat = math.nan
+        # the reference of the current block (its level: :func:`block_level`), and
+        # while the test is calibrated anew at a new test level, the blocks' statistics
+        # and levels so far and how many it needs
+        self._u_block: list[np.ndarray] = []
+        self.block_lvl = math.nan
+        self._recal: tuple[list[float], list[float], int] | None = None
+        self._arl_blocks = math.inf
         self._marks: list[int] = []
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
         # the sample the learning time began at (later than 0 after a re-learning), and
@@ -277,6 +285,7 @@ class ChannelProcessor:
             self._learn[1][r0:r0 + m] = y[:m]
         if self.residual is not None:
             self._res_block.append(self.residual(u, y))
+            self._u_block.append(u.copy())
         elif r0 + n > n_learn:
             m = max(0, n_learn - r0)
             self._pending.append((u[m:].copy(), y[m:].copy()))
@@ -389,15 +398,18 @@ class ChannelProcessor:
             return
         x = np.array([block_statistic(eps[a:b]) for a, b in zip(marks[:-1], marks[1:],
                                                                   strict=True)])
+        levels = np.array([block_level(self._learn[0][a:b])
+                           for a, b in zip(marks[:-1], marks[1:], strict=True)])
         block_s = float(np.median(np.diff(marks))) / self.fs
         arl_blocks = self.det.false_alarm_hours * 3600.0 / block_s
+        self._arl_blocks = arl_blocks
         try:
             cal = calibrate(x, arl_blocks=arl_blocks, two_sided=self.det.compare == "recent")
         except EhssError as exc:
             self.messages.append(f"detection off: {exc}")
             return
         lag = int(round(self.det.recent_s / block_s)) if self.det.compare == "recent" else 0
-        self.detector.start(cal, lag_blocks=max(lag, 1) if lag else 0)
+        self.detector.start(cal, lag_blocks=max(lag, 1) if lag else 0, levels=levels)
         self.messages.append(
             f"detection started: CUSUM threshold {cal.threshold:.2f} for one false alarm per "
             f"{self.det.false_alarm_hours:g} h, calibrated on {cal.n_blocks} blocks of learning "
@@ -415,10 +427,11 @@ class ChannelProcessor:
         if self.grid_hz is None:            # block boundaries until the set-up
             self._marks.append(self.n_samples - self._learn_from)
         # x = ln(median ε²) of the block since the last capture (a whole block only)
-        self.block_stat = math.nan
+        self.block_stat = self.block_lvl = math.nan
         if self._res_whole and self._res_block:
             self.block_stat = block_statistic(np.concatenate(self._res_block))
-        self._res_block = []
+            self.block_lvl = block_level(np.concatenate(self._u_block))
+        self._res_block, self._u_block = [], []
         self._res_whole = self.residual is not None
         return None if self.estimator is None else self.estimator.theta
 
@@ -448,7 +461,8 @@ class ChannelProcessor:
             self.just_set_up = True
         h, s = self._response(theta)
         self.dominant = s
-        test = self.detector.statistic(self.block_stat)
+        self._recalibrate()
+        test = self.detector.statistic(self.block_stat, self.block_lvl)
         ref = self._reference(t_s, h, s)
         shown = np.full(3, np.nan) if ref is None else figures(h, *ref)
         self.figures = np.append(shown, test)
@@ -456,6 +470,16 @@ class ChannelProcessor:
         if not self.detector.active:
             self.peak_figures = np.maximum(self.peak_figures, finite)
         change = self.detector.step(t_s, self.figures)
+        if change == "level":
+            cal = self.detector.calibration
+            assert cal is not None
+            self.messages.append(
+                f"at {t_s:.2f} s the prediction errors rose with the reference's level (a "
+                f"new test level, not a change of the loop): the test is calibrated anew "
+                f"on the next {cal.n_blocks} blocks")
+            self.detector.restart()
+            self._recal = ([], [], cal.n_blocks)
+            change = None
         if change == "alarm":
             self._alarm_t = t_s
         if self.det.compare == "recent" and self.detector.active and \
@@ -467,6 +491,28 @@ class ChannelProcessor:
             self._relearn()
         return change
 
+    def _recalibrate(self) -> None:
+        """While the test is calibrated anew at a new test level (the baseline stays),
+        take this block; start the test once it has as many as the first calibration
+        had."""
+        if self._recal is None:
+            return
+        x, levels, need = self._recal
+        if math.isfinite(self.block_stat):
+            x.append(self.block_stat)
+            levels.append(self.block_lvl)
+        if len(x) < need:
+            return
+        self._recal = None
+        try:
+            cal = calibrate(np.array(x), arl_blocks=self._arl_blocks)
+        except EhssError as exc:
+            self.messages.append(f"detection off: {exc}")
+            return
+        self.detector.start(cal, levels=levels)
+        self.messages.append(f"detection started again at the new test level: CUSUM "
+                             f"threshold {cal.threshold:.2f}")
+
     def _relearn(self) -> None:
         """Learn the baseline and calibrate the test anew, from the loop as it is now
         (``compare="recent"``, once a change has lasted ``recent_s``: the test's
@@ -476,6 +522,7 @@ class ChannelProcessor:
         self.baseline, self._theta_sum, self._theta_count = None, None, 0
         self.grid_hz, self._h_ref, self._s_ref = None, None, complex("nan")
         self.residual, self._res_block, self._res_whole = None, [], False
+        self._u_block, self._recal = [], None
         self._marks, self._pending = [], []
         self._alarm_t = math.nan
         self.detector.restart()

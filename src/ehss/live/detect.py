@@ -297,7 +297,9 @@ class Detector:
     Call :meth:`statistic` with each block's x = ln(median ε²) (NaN: no block), then
     :meth:`step` with the figures;
     it returns ``"alarm"`` when an alarm is raised, ``"clear"`` when one
-    clears, else None. Before :meth:`start` it decides nothing.
+    clears, ``"level"`` when the test would alarm but the reference's level rose as
+    much (:func:`level_rose`, with the levels given to :meth:`start`; the caller then
+    calibrates the test anew), else None. Before :meth:`start` it decides nothing.
     """
 
     def __init__(self, settings: DetectionSettings) -> None:
@@ -311,6 +313,10 @@ class Detector:
         self._past: list[float] = []
         self._lag = 0
         self._clear_on_start = False
+        # the learnt blocks' levels (None: no level test), and those of the blocks
+        # since the upward sum was last zero
+        self._learnt_levels: np.ndarray | None = None
+        self._rising: list[float] = []
 
     def restart(self) -> None:
         """Stop testing until :meth:`start` with a new calibration; an alarm that is on
@@ -319,13 +325,18 @@ class Detector:
         self._up = self._down = 0.0
         self._since = None
         self._past = []
+        self._rising = []
         self._clear_on_start = self.active
 
-    def start(self, calibration: Calibration, *, lag_blocks: int = 0) -> None:
+    def start(self, calibration: Calibration, *, lag_blocks: int = 0,
+              levels: Any = None) -> None:
         """Start testing with ``calibration``; ``lag_blocks`` > 0: two-sided on the
-        statistic against its value that many blocks ago (``compare="recent"``)."""
+        statistic against its value that many blocks ago (``compare="recent"``);
+        ``levels``: the levels of the reference in the blocks it was calibrated on
+        (:func:`block_level`), for :meth:`step` to tell a rise of the test level."""
         self.calibration = calibration
         self._lag = int(lag_blocks)
+        self._learnt_levels = None if levels is None else np.asarray(levels, dtype=float)
 
     @property
     def started(self) -> bool:
@@ -351,9 +362,10 @@ class Detector:
         diff = (x - self._past.pop(0)) / (math.sqrt(2.0) * cal.sd)
         return diff, -diff
 
-    def statistic(self, x: float) -> float:
-        """Update the CUSUM with block x; returns S/h (the ``test`` figure; NaN before
-        the test starts)."""
+    def statistic(self, x: float, level: float = math.nan) -> float:
+        """Update the CUSUM with block x (run at the reference's ``level``,
+        :func:`block_level`); returns S/h (the ``test`` figure; NaN before the test
+        starts)."""
         if self.calibration is None:
             return math.nan
         inc = self._increment(x, self.calibration)
@@ -363,6 +375,7 @@ class Detector:
             # falls below h soon after the loop is back (the alarm then clears)
             self._up = min(h, max(0.0, self._up + inc[0] - DRIFT))
             self._down = min(h, max(0.0, self._down + inc[1] - DRIFT))
+            self._rising = [*self._rising, level] if self._up > 0.0 else []
         s = max(self._up, self._down)
         return s / h if h > 0 else (1.0 if s > 0 else 0.0)
 
@@ -376,6 +389,10 @@ class Detector:
             return "clear"
         if not self.active:
             if values[-1] >= 1.0 and (not self._gated or self.exceeded(values)[:-1]):
+                if self._learnt_levels is not None and self._lag == 0 and level_rose(
+                        self._learnt_levels, self._rising, self.calibration.sd):
+                    # the reference's level rose with the statistic: a new test level
+                    return "level"
                 self.active, self._since = True, None
                 return "alarm"
             return None
@@ -499,6 +516,43 @@ def figures(h: np.ndarray, h_ref: np.ndarray, s: complex, s_ref: complex) -> np.
         gain = float(ratio_db[0])
         shift = abs(s - s_ref) / abs(s_ref) if abs(s_ref) > 0 else math.inf
     return np.array([frf, gain, shift])
+
+
+def block_level(u: np.ndarray) -> float:
+    """ln of the mean square of one block of the reference (NaN for an empty or silent
+    block): the level a block of the test was run at (:func:`level_rose`)."""
+    if not u.size:
+        return math.nan
+    ms = float(np.mean(np.square(u)))
+    return math.log(ms) if ms > 0 and math.isfinite(ms) else math.nan
+
+
+def level_rose(learnt: Any, now: Any, sd_statistic: float) -> bool:
+    """Whether the reference's level rose with a rise of the test's statistic: the mean
+    of the blocks' levels ``now`` (ln mean square, :func:`block_level`: the blocks since
+    the rise began) lies above the mean of the ``learnt`` blocks' by more than
+    :data:`LEVEL_Z` (1 %) standard errors of a mean of ``now.size`` of them (their
+    standard deviation over √n: the blocks taken as independent; where they are
+    correlated, in a narrow band, more than 1 % of steady levels pass; with the AR(1)
+    model of :func:`calibrate` instead, the rig's step from 50 % to 100 % on seeds 1,
+    2 was flagged as a change), and by more than the smallest rise of the statistic the
+    CUSUM is set to flag (its drift, κ ``sd_statistic``): a reference of one amplitude
+    (a sine dwell), whose levels hardly scatter, explains no rise.
+
+    A loop's error grows with its reference: a test run stepped from 25 % to 50 % to
+    100 % of its level raises ln(median e²) at each step, by about ln 4 under
+    compensation (more while the step passes) and through the nonlinearity the
+    baseline misses in the prediction errors of the live detection. A rise the level
+    explains is a new test level, not a change of the loop.
+    """
+    learnt = np.asarray(learnt, dtype=np.float64)
+    now = np.asarray(now, dtype=np.float64)
+    if learnt.size < MIN_EFFECTIVE_BLOCKS or not now.size or not (
+            np.all(np.isfinite(learnt)) and np.all(np.isfinite(now))):
+        return False
+    rise = float(np.mean(now) - np.mean(learnt))
+    se = float(np.std(learnt, ddof=1)) / math.sqrt(now.size)
+    return rise > max(LEVEL_Z * se, DRIFT * sd_statistic)
 
 
 # ------------------------------------------------------------------ the quick trigger
@@ -662,10 +716,7 @@ class TrackingTrigger:
             i += take
             if self._fill == self._n_block:
                 self._fill = 0
-                level = math.nan
-                if reference is not None:
-                    mean_square = float(np.mean(np.square(self._rbuf)))
-                    level = math.log(mean_square) if mean_square > 0 else math.nan
+                level = math.nan if reference is None else block_level(self._rbuf)
                 if self._seen - self._n_block >= self._hold_until:
                     flagged |= self._block(block_statistic(self._buf), level)
         return flagged
@@ -697,37 +748,21 @@ class TrackingTrigger:
         return False
 
     def _level_rose(self, n_onset: int, level: float, cal: Calibration) -> bool:
-        """Whether the reference's level rose with the rise the CUSUM just flagged: over
-        the ``n_onset`` blocks since it began (the latest, of ``level``, not yet learnt),
-        its mean level (ln of the reference's mean square per block) lies above the
-        learnt blocks' by more than :data:`LEVEL_Z` (1 %) standard errors of a mean of
-        ``n_onset`` of them (their standard deviation over √``n_onset``: the blocks
-        taken as independent; where they are correlated, in a narrow band, more than
-        1 % of steady levels pass; with the AR(1) model of :func:`calibrate` instead,
-        the rig's step from 50 % to 100 % at 24 s on seeds 1, 2 did not), and by more
-        than the smallest rise of the
-        statistic the CUSUM is set to flag (its drift, κ σ of ``cal``): a reference of
-        one amplitude (a sine dwell), whose levels hardly scatter, explains no rise.
+        """Whether the rise the CUSUM just flagged is the reference's own
+        (:func:`level_rose`), over the ``n_onset`` blocks since it began (the latest,
+        of ``level``, not yet learnt) against the learnt blocks.
 
-        A compensated loop's error grows with its reference: a test run stepped from
-        25 % to 50 % to 100 % of its level raises ln(median e²) by about ln 4 at each
-        step (more while the step passes: its error overshot the reference's rise by up
-        to 3×), and the rig flagged every step as a change of the loop within 0.4–1.1 s.
-        Such a rise is taken for a new test level: the test learns anew there, as after
-        a trigger, and nothing is flagged. A change of the loop at the very moment the
-        reference rises is then not flagged either; the models follow it, as they do a
-        change while the test learns. On a steady reference 1 % of triggers are taken
-        so, and a run that triggers nowhere keeps its course."""
-        learnt = np.array(self._levels[:min(self._n_learn, len(self._levels))])
+        The rig flagged 7 of 8 channel-steps of a test run stepped from 25 % to 50 % to
+        100 % as changes of the loop, 0.4–1.1 s after them. Such a rise is taken for a
+        new test level: the test learns anew there, as after a trigger, and nothing is
+        flagged. A change of the loop at the very moment the reference rises is then
+        not flagged either; the models follow it, as they do a change while the test
+        learns. Only a trigger is tested, so a run that triggers nowhere keeps its
+        course."""
+        learnt = self._levels[:min(self._n_learn, len(self._levels))]
         recent = self._levels[max(0, len(self._levels) - (n_onset - 1)):] \
             if n_onset > 1 else []
-        now = np.r_[recent, level]
-        if learnt.size < MIN_EFFECTIVE_BLOCKS or not (np.all(np.isfinite(learnt))
-                                                     and np.all(np.isfinite(now))):
-            return False
-        rise = float(np.mean(now) - np.mean(learnt))
-        se = float(np.std(learnt, ddof=1)) / math.sqrt(now.size)
-        return rise > max(LEVEL_Z * se, DRIFT * cal.sd)
+        return level_rose(learnt, [*recent, level], cal.sd)
 
     def _test(self, x: float, cal: Calibration, level: float = math.nan) -> bool:
         """One step of the CUSUM; True (dated, and the test restarted) at a trigger,
