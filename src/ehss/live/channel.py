@@ -30,6 +30,7 @@ from ehss.live.detect import (
     check_baseline,
     dominant_pole,
     figures,
+    level_of,
 )
 
 __all__ = ["EstimatorSettings", "ChannelProcessor", "reference_band"]
@@ -240,10 +241,10 @@ class ChannelProcessor:
         self._res_block: list[np.ndarray] = []
         self._res_whole = False
         self.block_stat = math.nan
-        # the reference of the current block (its level: :func:`block_level`), and
-        # while the test is calibrated anew at a new test level, the blocks' statistics
-        # and levels so far and how many it needs
-        self._u_block: list[np.ndarray] = []
+        # the reference's sum of squares and samples in the current block (its level:
+        # :func:`block_level`), and while the test is calibrated anew at a new test
+        # level, the blocks' statistics and levels so far and how many it needs
+        self._u_sq, self._u_n = 0.0, 0
         self.block_lvl = math.nan
         self._recal: tuple[list[float], list[float], int] | None = None
         self._arl_blocks = math.inf
@@ -285,7 +286,8 @@ class ChannelProcessor:
             self._learn[1][r0:r0 + m] = y[:m]
         if self.residual is not None:
             self._res_block.append(self.residual(u, y))
-            self._u_block.append(u.copy())
+            self._u_sq += float(np.dot(u, u))
+            self._u_n += u.size
         elif r0 + n > n_learn:
             m = max(0, n_learn - r0)
             self._pending.append((u[m:].copy(), y[m:].copy()))
@@ -430,8 +432,8 @@ class ChannelProcessor:
         self.block_stat = self.block_lvl = math.nan
         if self._res_whole and self._res_block:
             self.block_stat = block_statistic(np.concatenate(self._res_block))
-            self.block_lvl = block_level(np.concatenate(self._u_block))
-        self._res_block, self._u_block = [], []
+            self.block_lvl = level_of(self._u_sq, self._u_n)
+        self._res_block, self._u_sq, self._u_n = [], 0.0, 0
         self._res_whole = self.residual is not None
         return None if self.estimator is None else self.estimator.theta
 
@@ -522,7 +524,7 @@ class ChannelProcessor:
         self.baseline, self._theta_sum, self._theta_count = None, None, 0
         self.grid_hz, self._h_ref, self._s_ref = None, None, complex("nan")
         self.residual, self._res_block, self._res_whole = None, [], False
-        self._u_block, self._recal = [], None
+        self._u_sq, self._u_n, self._recal = 0.0, 0, None
         self._marks, self._pending = [], []
         self._alarm_t = math.nan
         self.detector.restart()

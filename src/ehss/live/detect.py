@@ -521,9 +521,14 @@ def figures(h: np.ndarray, h_ref: np.ndarray, s: complex, s_ref: complex) -> np.
 def block_level(u: np.ndarray) -> float:
     """ln of the mean square of one block of the reference (NaN for an empty or silent
     block): the level a block of the test was run at (:func:`level_rose`)."""
-    if not u.size:
+    return level_of(float(np.dot(u, u)), u.size)
+
+
+def level_of(sum_of_squares: float, n: int) -> float:
+    """:func:`block_level` of a block given by its sum of squares and length."""
+    if n <= 0:
         return math.nan
-    ms = float(np.mean(np.square(u)))
+    ms = sum_of_squares / n
     return math.log(ms) if ms > 0 and math.isfinite(ms) else math.nan
 
 
