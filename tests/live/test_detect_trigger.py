@@ -231,3 +231,23 @@ def test_a_reference_of_one_amplitude_explains_no_rise(rng):
     times = _run_with(told, e, r)
     assert len(times) == 1 and 20.0 < times[0] <= 21.5 and told.level_rises == 0
     assert times == _run(TrackingTrigger(FS), e)
+
+
+def test_the_level_is_judged_on_the_blocks_that_flagged_the_rise(rng):
+    # a slow rise of the statistic began 14 blocks before a step of the reference's
+    # level by ln 4 (its blocks a little below the learnt level): over all 19 blocks
+    # since the onset the step is hidden (mean 0.1, against 2.33 σ/√19 = 0.27 of the
+    # learnt levels' σ 0.5); over the last h/(2 - κ) blocks, as many as the CUSUM takes
+    # to flag a rise of 2 σ, it is not
+    from ehss.live.detect import DRIFT, LEVEL_Z, calibrate, level_rose
+
+    cal = calibrate(rng.standard_normal(50), arl_blocks=36_000)
+    learnt = 0.5 * rng.standard_normal(50)
+    learnt = (learnt - learnt.mean()) / learnt.std(ddof=1) * 0.5   # σ 0.5 exactly
+    now = np.r_[np.full(14, -0.3), np.full(5, 1.39)]
+    assert np.mean(now) < LEVEL_Z * 0.5 / np.sqrt(now.size)
+    last = int(np.ceil(cal.threshold / (2.0 - DRIFT)))
+    assert 5 <= last < now.size
+    assert level_rose(learnt, now, cal)
+    # the same blocks with no step: no rise
+    assert not level_rose(learnt, np.full(19, -0.3), cal)
