@@ -375,7 +375,9 @@ class Detector:
             # falls below h soon after the loop is back (the alarm then clears)
             self._up = min(h, max(0.0, self._up + inc[0] - DRIFT))
             self._down = min(h, max(0.0, self._down + inc[1] - DRIFT))
-            self._rising = [*self._rising, level] if self._up > 0.0 else []
+            # only the latest blocks of a rise are judged (level_rose): keep no more
+            self._rising = [*self._rising, level][-rise_blocks(h):] if self._up > 0.0 \
+                else []
         s = max(self._up, self._down)
         return s / h if h > 0 else (1.0 if s > 0 else 0.0)
 
@@ -532,6 +534,12 @@ def level_of(sum_of_squares: float, n: int) -> float:
     return math.log(ms) if ms > 0 and math.isfinite(ms) else math.nan
 
 
+def rise_blocks(threshold: float) -> int:
+    """Blocks a CUSUM of threshold h and drift κ takes to flag a rise of 2 σ:
+    ⌈h / (2 − κ)⌉, at least 1 (the blocks :func:`level_rose` judges)."""
+    return max(1, math.ceil(threshold / (2.0 - DRIFT)))
+
+
 def level_rose(learnt: Any, now: Any, cal: Calibration) -> bool:
     """Whether the reference's level rose with a rise of the test's statistic (``cal``
     its calibration): the mean of the blocks' levels ``now`` (ln mean square,
@@ -558,7 +566,7 @@ def level_rose(learnt: Any, now: Any, cal: Calibration) -> bool:
     explains is a new test level, not a change of the loop.
     """
     learnt = np.asarray(learnt, dtype=np.float64)
-    now = np.asarray(now, dtype=np.float64)[-max(1, math.ceil(cal.threshold / (2.0 - DRIFT))):]
+    now = np.asarray(now, dtype=np.float64)[-rise_blocks(cal.threshold):]
     if learnt.size < MIN_EFFECTIVE_BLOCKS or not now.size or not (
             np.all(np.isfinite(learnt)) and np.all(np.isfinite(now))):
         return False
