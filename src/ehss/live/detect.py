@@ -178,9 +178,9 @@ CLEAR_LEVEL = 0.5
 ONSET_Z = 2.0
 #: Fewest independent blocks of learning the test is calibrated from.
 MIN_EFFECTIVE_BLOCKS = 5
-#: One-sided z of the two tests that take a trigger of :class:`TrackingTrigger` for a
-#: rise of the reference's level (:meth:`TrackingTrigger._level_rose`): 1 % each, under
-#: the Gaussian model of the blocks' statistics.
+#: One-sided z of the test that takes a rise of the statistic for a rise of the
+#: reference's level (:func:`level_rose`: the compensator's trigger and the live
+#: detection's alarm): 1 %, under the Gaussian model of the blocks' levels.
 LEVEL_Z = 2.326
 #: Largest lag-1 autocorrelation of the blocks taken into the long-run variance.
 _MAX_RHO = 0.9
