@@ -9,7 +9,9 @@ change-detection tests: each returns a live record ``(layout, samples, fs)`` lik
   spring, proportional position control;
 * :data:`HIGH_PASS` (:func:`loop_record`): a 30 Hz mode behind a 0.5 Hz
   second-order high-pass (an AC-coupled sensor, an acceleration generator), at 1 kHz;
-* :data:`DELAYED`: a 12 Hz, ζ = 0.5 loop behind 2 ms of delay, at 1 kHz.
+* :data:`DELAYED`: a 12 Hz, ζ = 0.5 loop behind 2 ms of delay, at 1 kHz;
+* :data:`OIL_COLUMN`: a 15 Hz, ζ = 0.7 loop with a lightly damped oil-column mode
+  (40 Hz, ζ = 0.15), at 2 kHz.
 
 Each channel's reference is band-pass filtered random noise and its feedback carries white
 sensor noise of 1 % of the feedback's RMS (seeds per channel). A change multiplies one
@@ -30,7 +32,8 @@ from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
 from ehss.live.rig import rig_layout
 
 __all__ = ["servo_record", "specimen_record", "loop_record", "LoopSpec", "SERVO",
-           "SPECIMEN", "HIGH_PASS", "DELAYED", "discrete", "simulate_states", "reference"]
+           "SPECIMEN", "HIGH_PASS", "DELAYED", "OIL_COLUMN", "discrete", "simulate_states",
+           "reference"]
 
 
 def _servo_ss(wn_scale: float) -> StateSpace:
@@ -92,6 +95,15 @@ def _delayed_ss(mass_factor: float) -> StateSpace:
     num = np.polymul([w * w], num_d)
     den = np.polymul([mass_factor, 2 * 0.5 * w, w * w], den_d)
     return StateSpace(*tf2ss(num, den))
+
+
+def _oil_column_ss(mass_factor: float) -> StateSpace:
+    """A 15 Hz, ζ 0.7 position loop in series with the oil column's mode (40 Hz, ζ 0.15),
+    both natural frequencies 1/√ ``mass_factor``: a heavier payload on the same column."""
+    w = 2 * math.pi * 15.0 / math.sqrt(mass_factor)
+    o = 2 * math.pi * 40.0 / math.sqrt(mass_factor)
+    den = np.polymul([1.0, 1.4 * w, w * w], [1.0, 0.3 * o, o * o])
+    return StateSpace(*tf2ss([w * w * o * o], den))
 
 
 def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
@@ -189,6 +201,8 @@ SPECIMEN = LoopSpec("specimen", _specimen_ss, 4000.0, 1e-3, (1.0, 100.0), "stiff
 HIGH_PASS = LoopSpec("high-pass", _high_pass_ss, 1000.0, 1e-3, (1.0, 40.0), "mass")
 #: The 12 Hz loop behind 2 ms of delay at 1 kHz; its factor scales the moving mass.
 DELAYED = LoopSpec("delayed", _delayed_ss, 1000.0, 1e-3, (0.5, 20.0), "mass")
+#: The 15 Hz loop with its 40 Hz oil-column mode at 2 kHz; its factor scales the mass.
+OIL_COLUMN = LoopSpec("oil-column", _oil_column_ss, 2000.0, 1e-3, (1.0, 50.0), "mass")
 
 
 def servo_record(*, n_channels: int = 2, duration_s: float, seed: int,

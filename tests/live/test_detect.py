@@ -23,6 +23,8 @@ from ehss.live.detect import (
     cusum_threshold,
     dominant_pole,
     figures,
+    output_error_predictor,
+    whitening_filter,
 )
 
 
@@ -211,6 +213,32 @@ def test_recent_mode_flags_a_step_and_forgets_it():
     assert kinds.count("alarm") == 1
 
 
+def test_either_predictor_raises_the_alarm_and_a_level_must_explain_both():
+    cal = Calibration(mean=0.0, sd=1.0, mean_hat=0.0, sd_hat=1.0, n_blocks=100,
+                      n_effective=100.0, threshold=5.0, arl_blocks=1e3)
+    det = Detector(DetectionSettings())
+    det.start([cal, cal])
+    # the second predictor alone rises: an alarm; S/h is the larger of the two
+    assert det.statistic([0.0, 0.0]) == 0.0
+    assert det.statistic([0.0, 3.0]) == pytest.approx(2.5 / 5.0)
+    assert det.step(0.2, np.array([0, 0, 0, det.statistic([0.0, 20.0])])) == "alarm"
+    # a rise of the reference's level explains it only where it explains every test
+    # at its threshold: with the levels, a rise at a new level is a new level
+    det = Detector(DetectionSettings())
+    det.start([cal, cal], levels=np.zeros(20) + 0.01 * np.arange(20))
+    assert det.step(0.1, np.array([0, 0, 0, det.statistic([20.0, 20.0], level=5.0)])) \
+        == "level"
+    # the first test rose over three blocks at the learnt level, the second at the
+    # last block, 1.0 above it: the last four levels (h/(2 − κ) = 4) of the first are
+    # 0.15 above the learnt ones, within its drift (0.5 σ); the second's, 0.9
+    det = Detector(DetectionSettings())
+    det.start([cal, cal], levels=np.zeros(20) + 0.01 * np.arange(20))
+    for _ in range(3):
+        det.statistic([20.0, 0.0], level=0.0)
+    assert det.step(0.2, np.array([0, 0, 0, det.statistic([20.0, 20.0], level=1.0)])) \
+        == "alarm"
+
+
 # ---------------------------------------------------------------- prediction errors
 def test_prediction_errors_of_the_true_model_are_its_noise():
     # y from A y = q^{-1} B u + C e, all from rest: the filter returns e exactly (to
@@ -253,3 +281,55 @@ def test_a_baseline_that_cannot_be_a_running_loop_is_refused(a, b, word):
                             dt=1e-3)
     with pytest.raises(ParameterError, match=word):
         check_baseline(model)
+
+
+def test_after_samples_lost_the_predictor_gives_no_error_until_its_start_has_died_out():
+    # an output-error filter (C = A, poles at radius 0.95) of the exact model on
+    # noise-free data: ε = 0. 100 samples lost: carried on, its state is that of the
+    # samples before and ε rings for tens of samples; restarted, its history is filled
+    # from the samples that come, no error is given over its settling time (its
+    # history and 7 time constants of 0.95: 2 + ⌈7/0.0513⌉ = 139 samples), and then ε is
+    # 0 again
+    rng = np.random.default_rng(3)
+    a, b = np.array([1.0, -1.6, 0.9025]), np.array([0.2, 0.1])
+    u = rng.standard_normal(3000)
+    y = lfilter(np.r_[0.0, b], a, u)
+    keep = np.r_[0:1000, 1100:3000]
+    carried = BaselineResidual(a, b, a, 1)
+    restarted = BaselineResidual(a, b, a, 1)
+    assert restarted.settle == 2 + math.ceil(7.0 / -math.log(0.95))
+    for res in (carried, restarted):
+        np.testing.assert_allclose(res(u[:1000], y[:1000]), 0.0, atol=1e-12)
+    restarted.restart()
+    eps_c = carried(u[keep[1000:]], y[keep[1000:]])
+    eps_r = restarted(u[keep[1000:]], y[keep[1000:]])
+    assert np.max(np.abs(eps_c[:50])) > 0.1 * np.std(y)       # the jump rings on
+    assert np.all(np.isnan(eps_r[:restarted.settle]))
+    np.testing.assert_allclose(eps_r[restarted.settle:], 0.0, atol=1e-9 * np.std(y))
+
+
+def test_whitening_filter_of_an_autoregression_is_its_polynomial():
+    # AR(2) with poles 0.9 and 0.5: D = 1 − 1.4 q⁻¹ + 0.45 q⁻²; Yule–Walker on 10⁵
+    # samples, standard error of the coefficients about √((1 − 0.45²)/n) < 0.003
+    e = np.random.default_rng(6).standard_normal(100_000)
+    v = lfilter([1.0], [1.0, -1.4, 0.45], e)
+    np.testing.assert_allclose(whitening_filter(v, 2), [1.0, -1.4, 0.45], atol=0.01)
+    with pytest.raises(ParameterError, match="do not vary"):
+        whitening_filter(np.zeros(100), 2)
+
+
+def test_the_output_error_predictor_of_a_loop_is_its_sensor_noise():
+    # y = q^-1 B/F u + white noise, a baseline off by 10 % in its gain and with a C far
+    # from its A: the refit finds B/F, its output errors are the noise (whitening leaves
+    # white noise white: its AR coefficients are O(1/√n)), ε₂ ≈ e to well under the
+    # noise's 1 % level of the output
+    rng = np.random.default_rng(8)
+    f, b = np.array([1.0, -1.6, 0.9025]), np.array([0.2, 0.1])
+    u = rng.standard_normal(20_000)
+    clean = lfilter(np.r_[0.0, b], f, u)
+    e = 0.01 * np.std(clean) * rng.standard_normal(u.size)
+    base = ehss.ArmaxModel(a=f, b=1.1 * b, c=[1.0, -0.5, 0.0], delay=1)
+    eps = output_error_predictor(base, u, clean + e)(u, clean + e)
+    # the difference: the refit's and D's estimation errors on e, O(1/√n) each
+    # (about 0.03 σ of e here)
+    assert np.sqrt(np.mean((eps[1000:] - e[1000:]) ** 2)) < 0.1 * np.std(e)

@@ -3,8 +3,9 @@ sliding H1 estimate and change detection.
 
 The estimator is :class:`ehss.RelsEstimator` (RELS, eqs (19)–(22), or RML) with
 forgetting λ, started from the baseline model's θ when one is given. The baseline's own
-prediction errors run beside it; every evaluation period their mean square over the
-period feeds the sequential test, and the current model is compared with the reference
+prediction errors, and the whitened output errors of its B/A refitted to the learning
+time, run beside it; every evaluation period the median of each one's square over the
+period feeds its sequential test, and the current model is compared with the reference
 model for the figures (:mod:`ehss.live.detect`).
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import collections
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -31,12 +33,30 @@ from ehss.live.detect import (
     dominant_pole,
     figures,
     level_of,
+    output_error_predictor,
 )
 
 __all__ = ["EstimatorSettings", "ChannelProcessor", "reference_band"]
 
 #: points of the frequency grid of the analysis band
 N_GRID = 64
+
+#: The test's second predictor (the output errors of the baseline's B/A refitted to the
+#: learning time) joins this long after the test starts: its refit runs off the
+#: stream's thread meanwhile (0.1–0.3 s of CPU a channel at 5 kHz, one channel after
+#: another; on the stream's thread, 8 such channels held it for 1.4 s), and is waited
+#: for there only if it is not in by then, so that a run is the same whatever the
+#: machine's speed.
+SECOND_PREDICTOR_AFTER_S = 2.0
+
+_REFITS: list[ThreadPoolExecutor] = []
+
+
+def _refits() -> ThreadPoolExecutor:
+    """The one thread the refits of every channel run on (started when first needed)."""
+    if not _REFITS:
+        _REFITS.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="ehss-refit"))
+    return _REFITS[0]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -234,19 +254,28 @@ class ChannelProcessor:
         self._recent: collections.deque = collections.deque()
         self.figures = np.full(4, np.nan)
         self.peak_figures = np.zeros(4)
-        # the sequential test: the baseline's prediction errors, their sum of squares
-        # over the current block, the block boundaries seen while learning, the samples
+        # the sequential test: its predictors' errors (the baseline's, and the whitened
+        # output errors of its B/A refitted to the learning time), their values over
+        # the current block, the block boundaries seen while learning, the samples
         # that came after the learning time before the test was set up
-        self.residual: BaselineResidual | None = None
-        self._res_block: list[np.ndarray] = []
+        self.residuals: list[BaselineResidual] = []
+        self._res_block: list[list[np.ndarray]] = []
+        # the second predictor while it is refitted: its future, the block it joins at,
+        # the learning time's block spans it is calibrated on, and the samples since
+        self._second: tuple[Future, int, list[tuple[int, int]]] | None = None
+        #: whether the test has started at any time (with ``compare="recent"`` it stops
+        #: while the loop is learnt anew)
+        self.detection_began = False
+        self._since: list[tuple[np.ndarray, np.ndarray] | None] = []   # None: a loss
+        self._blocks = 0
         self._res_whole = False
-        self.block_stat = math.nan
+        self.block_stat = np.full(0, math.nan)
         # the reference's sum of squares and samples in the current block (its level:
         # :func:`block_level`), and while the test is calibrated anew at a new test
         # level, the blocks' statistics and levels so far and how many it needs
         self._u_sq, self._u_n = 0.0, 0
         self.block_lvl = math.nan
-        self._recal: tuple[list[float], list[float], int] | None = None
+        self._recal: tuple[list[np.ndarray], list[float], int] | None = None
         self._arl_blocks = math.inf
         self._marks: list[int] = []
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
@@ -284,11 +313,14 @@ class ChannelProcessor:
             m = min(n, n_learn - r0)
             self._learn[0][r0:r0 + m] = u[:m]
             self._learn[1][r0:r0 + m] = y[:m]
-        if self.residual is not None:
-            self._res_block.append(self.residual(u, y))
+        if self.residuals:
+            for k, residual in enumerate(self.residuals):
+                self._res_block[k].append(residual(u, y))
+            if self._second is not None:
+                self._since.append((u.copy(), y.copy()))
             self._u_sq += float(np.dot(u, u))
             self._u_n += u.size
-        elif r0 + n > n_learn:
+        elif self.grid_hz is None and r0 + n > n_learn:
             m = max(0, n_learn - r0)
             self._pending.append((u[m:].copy(), y[m:].copy()))
         self._push_ring(u, y)
@@ -303,6 +335,14 @@ class ChannelProcessor:
         d = u - y
         self.track_sq += float(np.dot(d, d))
         self._acc_n += n
+
+    def lost(self) -> None:
+        """Samples were lost before the next ones fed: the test's predictors start their
+        history afresh (:meth:`~ehss.live.detect.BaselineResidual.restart`)."""
+        for residual in self.residuals:
+            residual.restart()
+        if self._second is not None:
+            self._since.append(None)
 
     def _start_on_learning(self, k0: int) -> ehss.RelsEstimator:
         """Start the estimator with the scales of the learning buffer so far, and run it
@@ -385,37 +425,83 @@ class ChannelProcessor:
 
     def _start_test(self, m: ehss.ArmaxModel) -> None:
         """Filter the learning time with the baseline, calibrate the test on its blocks'
-        statistics (the last three quarters), then catch up on the samples that came
-        since (:mod:`ehss.live.detect`)."""
-        self.residual = BaselineResidual(m.a, m.b, m.c, m.delay)
-        eps = self.residual(*self._learn)
-        pending, self._pending = self._pending, []
-        for u, y in pending:
-            self.residual(u, y)
-        n_learn = eps.size
+        statistics (the last three quarters), catch up on the samples that came since,
+        and start the refit of the second predictor on those three quarters, to join
+        :data:`SECOND_PREDICTOR_AFTER_S` later (:meth:`_join_second`;
+        :mod:`ehss.live.detect`)."""
+        u, y = self._learn
+        n_learn = u.size
         marks = np.array([k for k in self._marks if n_learn // 4 <= k <= n_learn])
         if marks.size < 2:
             self.messages.append("detection off: the learning time holds too few "
                                  "evaluations to calibrate the test")
             return
-        x = np.array([block_statistic(eps[a:b]) for a, b in zip(marks[:-1], marks[1:],
-                                                                  strict=True)])
-        levels = np.array([block_level(self._learn[0][a:b])
-                           for a, b in zip(marks[:-1], marks[1:], strict=True)])
+        residual = BaselineResidual(m.a, m.b, m.c, m.delay)
+        eps = residual(u, y)
+        for uu, yy in self._pending:
+            residual(uu, yy)
+        self._pending = []
+        spans = list(zip(marks[:-1].tolist(), marks[1:].tolist(), strict=True))
+        x = np.array([block_statistic(eps[a:b]) for a, b in spans])
+        levels = np.array([block_level(u[a:b]) for a, b in spans])
         block_s = float(np.median(np.diff(marks))) / self.fs
-        arl_blocks = self.det.false_alarm_hours * 3600.0 / block_s
+        # each of the two predictors' tests its half of the rate: the union's is the
+        # one set
+        arl_blocks = 2.0 * self.det.false_alarm_hours * 3600.0 / block_s
         self._arl_blocks = arl_blocks
         try:
             cal = calibrate(x, arl_blocks=arl_blocks, two_sided=self.det.compare == "recent")
         except EhssError as exc:
             self.messages.append(f"detection off: {exc}")
             return
+        self.residuals, self._res_block = [residual], [[]]
         lag = int(round(self.det.recent_s / block_s)) if self.det.compare == "recent" else 0
         self.detector.start(cal, lag_blocks=max(lag, 1) if lag else 0, levels=levels)
+        self.detection_began = True
+        future = _refits().submit(output_error_predictor, m, u[marks[0]:].copy(),
+                                  y[marks[0]:].copy())
+        join = self._blocks + max(1, int(round(SECOND_PREDICTOR_AFTER_S / block_s)))
+        self._second, self._since = (future, join, spans), []
         self.messages.append(
             f"detection started: CUSUM threshold {cal.threshold:.2f} for one false alarm per "
             f"{self.det.false_alarm_hours:g} h, calibrated on {cal.n_blocks} blocks of learning "
-            f"(worth {cal.n_effective:.0f} independent ones)")
+            f"(worth {cal.n_effective:.0f} independent ones), each of its two predictors "
+            f"set for half of that rate")
+
+    def _join_second(self) -> None:
+        """At its block, add the second predictor to the test (waiting for its refit if
+        it is not in yet): calibrated on the learning time's blocks, brought up to the
+        samples since, its CUSUM started."""
+        assert self._second is not None
+        future, _, spans = self._second
+        self._second = None
+        since, self._since = self._since, []
+        try:
+            residual = future.result()
+        except EhssError as exc:
+            self.messages.append(f"the test watches the baseline's prediction errors "
+                                 f"alone: the refit of its B/A failed ({exc})")
+            return
+        u, y = self._learn
+        eps = residual(u, y)
+        x = np.array([block_statistic(eps[a:b]) for a, b in spans])
+        try:
+            cal = calibrate(x, arl_blocks=self._arl_blocks,
+                            two_sided=self.det.compare == "recent")
+        except EhssError as exc:
+            self.messages.append(f"the test watches the baseline's prediction errors "
+                                 f"alone: {exc}")
+            return
+        for block in since:
+            if block is None:
+                residual.restart()
+            else:
+                residual(*block)
+        self.residuals.append(residual)
+        self._res_block.append([])
+        self.detector.add(cal)
+        self.messages.append("the test also watches the output errors of the baseline's "
+                             "B/A refitted to the learning time, from here")
 
     def capture(self) -> np.ndarray | None:
         """θ̂ now (a copy; None before the estimator starts), and the tracking and
@@ -429,12 +515,19 @@ class ChannelProcessor:
         if self.grid_hz is None:            # block boundaries until the set-up
             self._marks.append(self.n_samples - self._learn_from)
         # x = ln(median ε²) of the block since the last capture (a whole block only)
-        self.block_stat = self.block_lvl = math.nan
-        if self._res_whole and self._res_block:
-            self.block_stat = block_statistic(np.concatenate(self._res_block))
+        self.block_stat = np.full(len(self.residuals), math.nan)
+        self.block_lvl = math.nan
+        if self._res_whole and self._res_block and self._res_block[0]:
+            self.block_stat = np.array([block_statistic(np.concatenate(b))
+                                        for b in self._res_block])
             self.block_lvl = level_of(self._u_sq, self._u_n)
-        self._res_block, self._u_sq, self._u_n = [], 0.0, 0
-        self._res_whole = self.residual is not None
+        self._res_block = [[] for _ in self.residuals]
+        self._u_sq, self._u_n = 0.0, 0
+        self._res_whole = bool(self.residuals)
+        self._blocks += 1
+        if self._second is not None and self._blocks >= self._second[1] \
+                and self.detector.started:
+            self._join_second()       # at a block boundary: its first block is whole
         return None if self.estimator is None else self.estimator.theta
 
     def evaluate(self, t_s: float, theta: np.ndarray | None, *,
@@ -500,20 +593,23 @@ class ChannelProcessor:
         if self._recal is None:
             return
         x, levels, need = self._recal
-        if math.isfinite(self.block_stat):
+        if x and len(x[-1]) != self.block_stat.size:
+            x.clear()                 # the second predictor joined: gather anew
+            levels.clear()
+        if self.block_stat.size and np.all(np.isfinite(self.block_stat)):
             x.append(self.block_stat)
             levels.append(self.block_lvl)
         if len(x) < need:
             return
         self._recal = None
         try:
-            cal = calibrate(np.array(x), arl_blocks=self._arl_blocks)
+            cals = [calibrate(xk, arl_blocks=self._arl_blocks) for xk in np.array(x).T]
         except EhssError as exc:
             self.messages.append(f"detection off: {exc}")
             return
-        self.detector.start(cal, levels=levels)
+        self.detector.start(cals, levels=levels)
         self.messages.append(f"detection started again at the new test level: CUSUM "
-                             f"threshold {cal.threshold:.2f}")
+                             f"threshold {cals[0].threshold:.2f}")
 
     def _relearn(self) -> None:
         """Learn the baseline and calibrate the test anew, from the loop as it is now
@@ -523,7 +619,8 @@ class ChannelProcessor:
         self._captured_learning = True
         self.baseline, self._theta_sum, self._theta_count = None, None, 0
         self.grid_hz, self._h_ref, self._s_ref = None, None, complex("nan")
-        self.residual, self._res_block, self._res_whole = None, [], False
+        self.residuals, self._res_block, self._res_whole = [], [], False
+        self._second, self._since = None, []
         self._u_sq, self._u_n, self._recal = 0.0, 0, None
         self._marks, self._pending = [], []
         self._alarm_t = math.nan
