@@ -375,7 +375,7 @@ class Detector:
         """Add a predictor's test (calibrated for its share of the rate), its CUSUM
         from 0; the others go on as they were."""
         if not self.calibrations:
-            raise ParameterError("add a predictor to a test that has started")
+            raise ParameterError("a predictor joins a test that has started: call start first")
         self.calibrations = (*self.calibrations, calibration)
         self._up, self._down = np.append(self._up, 0.0), np.append(self._down, 0.0)
         self._past.append([])
