@@ -101,6 +101,7 @@ from typing import Any
 import numpy as np
 from scipy import linalg, optimize, stats
 
+from ehss._settle import decay_samples
 from ehss.errors import ParameterError
 from ehss.identification import oe_pem
 from ehss.live._kernels import prediction_errors
@@ -506,11 +507,8 @@ class BaselineResidual:
         # a restart, how many samples still go to the history, and how many more give
         # no error while the start dies out (7 time constants of C's slowest root)
         self._hy, self._hu, self._he = np.zeros(m - 1), np.zeros(m - 1), np.zeros(m - 1)
-        roots = np.abs(np.roots(self._c[:np.max(np.flatnonzero(self._c)) + 1])) \
-            if m > 1 else np.zeros(0)
-        radius = float(np.max(roots, initial=0.0))
-        self.settle = m - 1 + (0 if radius <= 0.0 else
-                               math.ceil(7.0 / max(-math.log(min(radius, 0.999)), 1e-12)))
+        radius = float(np.max(np.abs(np.roots(self._c)), initial=0.0))
+        self.settle = m - 1 + decay_samples(radius)
         self._fill = self._quiet = 0
 
     def restart(self) -> None:
