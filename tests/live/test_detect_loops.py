@@ -192,3 +192,20 @@ def test_the_second_predictor_joins_at_its_block_however_long_its_refit_takes(mo
     assert texts[0] == texts[1]
     joined = [t for t in texts[0] if "also watches the output errors" in t[2]]
     assert [c for _, c, _ in joined] == ["1", "2"]
+
+
+def test_a_refit_that_fails_leaves_the_first_predictor_testing_alone(monkeypatch):
+    # the refit cannot take its record: a message says so, and the baseline's
+    # prediction errors go on alone (the servo's change is flagged by them as well)
+    import ehss.live.channel as channel
+
+    def fails(*args):
+        raise np.linalg.LinAlgError("singular matrix")
+
+    monkeypatch.setattr(channel, "output_error_predictor", fails)
+    session, alarms = _run(_servo(24.0, 3, change_s=20.0))
+    assert [len(p.residuals) for p in session.channels] == [1, 1]
+    texts = [e["text"] for e in session.events if e["kind"] == "message"]
+    assert sum("alone: the refit of its B/A failed (singular matrix)" in t
+               for t in texts) == 2
+    assert [a["channel"] for a in alarms] == ["1"] and 20.0 < alarms[0]["t_s"] <= 21.5

@@ -478,7 +478,8 @@ class ChannelProcessor:
         since, self._since = self._since, []
         try:
             residual = future.result()
-        except EhssError as exc:
+        except (EhssError, np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+            # a record the fit cannot take (too short, singular, not finite)
             self.messages.append(f"the test watches the baseline's prediction errors "
                                  f"alone: the refit of its B/A failed ({exc})")
             return
