@@ -31,7 +31,7 @@ import ehss
 from ehss._warm import warm_up
 from ehss.errors import ParameterError
 from ehss.live.channel import ChannelProcessor, EstimatorSettings
-from ehss.live.detect import BaselineResidual, DetectionSettings, output_error_predictor
+from ehss.live.detect import BaselineResidual, DetectionSettings
 from ehss.live.meters import (
     Evaluation,
     EvaluationHistory,
@@ -528,19 +528,6 @@ def _warm_up(est: EstimatorSettings) -> None:
     warm_up(["streaming"], na=est.na, nb=est.nb, nc=est.nc, delay=est.delay,
             methods=[est.method])
     BaselineResidual(np.ones(1), np.zeros(1), np.ones(1), 1)(np.zeros(8), np.zeros(8))
-    # the test's second predictor: its refit's kernels loaded here, not on the refit's
-    # thread while it holds the interpreter (0.2 s of the stream's lag at 5 kHz). A
-    # first-order loop with a little noise, in the orders the channels use
-    rng = np.random.default_rng(0)
-    u = rng.standard_normal(400)
-    y = np.zeros_like(u)
-    for k in range(1, u.size):
-        y[k] = 0.5 * y[k - 1] + 0.5 * u[k - 1]
-    y += 0.01 * rng.standard_normal(u.size)
-    model = ehss.ArmaxModel(a=np.r_[1.0, -0.5, np.zeros(est.na - 1)],
-                            b=np.r_[0.5, np.zeros(est.nb)], c=np.r_[1.0, np.zeros(est.nc)],
-                            delay=est.delay)
-    output_error_predictor(model, u, y)(u, y)
 
 
 def _runs(blocks: list[Block]) -> list[tuple[int, np.ndarray]]:
