@@ -333,3 +333,15 @@ def test_the_output_error_predictor_of_a_loop_is_its_sensor_noise():
     # the difference: the refit's and D's estimation errors on e, O(1/√n) each
     # (about 0.03 σ of e here)
     assert np.sqrt(np.mean((eps[1000:] - e[1000:]) ** 2)) < 0.1 * np.std(e)
+
+
+def test_refits_take_turns_of_the_join_time():
+    from ehss.live.channel import RefitTurns
+
+    turns = RefitTurns()
+    # three channels whose tests start together join one turn after another
+    assert [turns.join_at(100, 20) for _ in range(3)] == [120, 140, 160]
+    # one that starts after the turns booked so far joins a turn after its own start
+    assert turns.join_at(300, 20) == 320
+    # one that starts within the last turn waits for it
+    assert turns.join_at(310, 20) == 340

@@ -192,6 +192,12 @@ def test_the_second_predictor_joins_at_its_block_however_long_its_refit_takes(mo
     assert texts[0] == texts[1]
     joined = [t for t in texts[0] if "also watches the output errors" in t[2]]
     assert [c for _, c, _ in joined] == ["1", "2"]
+    # the two refits share one thread and take turns: the second channel's test
+    # started before the first's predictor joined, and its own joins a turn after that
+    started = [t for t, _, text in texts[0] if text.startswith("detection started")]
+    assert len(started) == 2 and started[1] < joined[0][0]
+    assert joined[0][0] == pytest.approx(started[0] + channel.SECOND_PREDICTOR_AFTER_S)
+    assert joined[1][0] == pytest.approx(joined[0][0] + channel.SECOND_PREDICTOR_AFTER_S)
 
 
 def test_a_refit_that_fails_leaves_the_first_predictor_testing_alone(monkeypatch):

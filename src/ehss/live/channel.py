@@ -36,17 +36,17 @@ from ehss.live.detect import (
     output_error_predictor,
 )
 
-__all__ = ["EstimatorSettings", "ChannelProcessor", "reference_band"]
+__all__ = ["EstimatorSettings", "ChannelProcessor", "RefitTurns", "reference_band"]
 
 #: points of the frequency grid of the analysis band
 N_GRID = 64
 
 #: The test's second predictor (the output errors of the baseline's B/A refitted to the
-#: learning time) joins this long after the test starts: its refit runs off the
-#: stream's thread meanwhile (0.1–0.3 s of CPU a channel at 5 kHz, one channel after
-#: another; on the stream's thread, 8 such channels held it for 1.4 s), and is waited
-#: for there only if it is not in by then, so that a run is the same whatever the
-#: machine's speed.
+#: learning time) joins this long after the test starts, or after the turn of the
+#: refit before it (:class:`RefitTurns`): its refit runs off the stream's thread
+#: meanwhile (0.1–0.3 s of CPU a channel at 5 kHz, one channel after another; on the
+#: stream's thread, 8 such channels held it for 1.4 s), and is waited for there only if
+#: it is not in by then, so that a run is the same whatever the machine's speed.
 SECOND_PREDICTOR_AFTER_S = 2.0
 
 _REFITS: list[ThreadPoolExecutor] = []
@@ -57,6 +57,31 @@ def _refits() -> ThreadPoolExecutor:
     if not _REFITS:
         _REFITS.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="ehss-refit"))
     return _REFITS[0]
+
+
+class RefitTurns:
+    """The turns of the refits that share the one refit thread (:func:`_refits`): each
+    refit's predictor joins its test one turn (:data:`SECOND_PREDICTOR_AFTER_S`) after
+    it was submitted or after the turn before it, whichever is later.
+
+    The refits run one after another, so the k-th of N channels whose tests start
+    together has its refit in after k refits' time: with one turn of
+    :data:`SECOND_PREDICTOR_AFTER_S` each, the stream waits at a join only if one refit
+    takes longer than that (10–20 times what it takes here at 5 kHz), not when N of
+    them together do (8 channels at 5 kHz need 1.2 s here, more than 2 s on a machine
+    twice as slow). The turns depend on the stream alone, so a run stays the same
+    whatever the machine's speed. A session's channels share one.
+    """
+
+    def __init__(self) -> None:
+        self._last = -math.inf
+
+    def join_at(self, now: int, turn: int) -> int:
+        """Book the turn of a refit submitted at block ``now`` (the count of the
+        session's evaluations, which every channel shares), ``turn`` blocks long: the
+        block its predictor joins at."""
+        self._last = max(now, self._last) + turn
+        return int(self._last)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -206,11 +231,16 @@ class ChannelProcessor:
         difference of two estimators).
     h1_window_s : float
         Length of the sliding window of the H1 estimate.
+    refit_turns : RefitTurns, optional
+        The turns of the second predictor's refit, shared by a session's channels
+        (default: turns of this channel's own).
     """
 
     def __init__(self, name: str, fs: float, est: EstimatorSettings, det: DetectionSettings,
-                 baseline: ehss.ArmaxModel | None = None, *, h1_window_s: float = 8.0) -> None:
+                 baseline: ehss.ArmaxModel | None = None, *, h1_window_s: float = 8.0,
+                 refit_turns: RefitTurns | None = None) -> None:
         self.name = name
+        self._turns = RefitTurns() if refit_turns is None else refit_turns
         self.fs = float(fs)
         self.est = est
         self.det = det
@@ -426,9 +456,9 @@ class ChannelProcessor:
     def _start_test(self, m: ehss.ArmaxModel) -> None:
         """Filter the learning time with the baseline, calibrate the test on its blocks'
         statistics (the last three quarters), catch up on the samples that came since,
-        and start the refit of the second predictor on those three quarters, to join
-        :data:`SECOND_PREDICTOR_AFTER_S` later (:meth:`_join_second`;
-        :mod:`ehss.live.detect`)."""
+        and start the refit of the second predictor on those three quarters, to join at
+        its turn, :data:`SECOND_PREDICTOR_AFTER_S` later or more (:class:`RefitTurns`,
+        :meth:`_join_second`; :mod:`ehss.live.detect`)."""
         u, y = self._learn
         n_learn = u.size
         marks = np.array([k for k in self._marks if n_learn // 4 <= k <= n_learn])
@@ -460,7 +490,8 @@ class ChannelProcessor:
         self.detection_began = True
         future = _refits().submit(output_error_predictor, m, u[marks[0]:].copy(),
                                   y[marks[0]:].copy())
-        join = self._blocks + max(1, int(round(SECOND_PREDICTOR_AFTER_S / block_s)))
+        join = self._turns.join_at(
+            self._blocks, max(1, int(round(SECOND_PREDICTOR_AFTER_S / block_s))))
         self._second, self._since = (future, join, spans), []
         self.messages.append(
             f"detection started: CUSUM threshold {cal.threshold:.2f} for one false alarm per "

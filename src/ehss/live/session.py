@@ -30,7 +30,7 @@ import numpy as np
 import ehss
 from ehss._warm import warm_up
 from ehss.errors import ParameterError
-from ehss.live.channel import ChannelProcessor, EstimatorSettings
+from ehss.live.channel import ChannelProcessor, EstimatorSettings, RefitTurns
 from ehss.live.detect import BaselineResidual, DetectionSettings
 from ehss.live.meters import (
     Evaluation,
@@ -265,8 +265,10 @@ class LiveSession:
 
     def _setup(self, fs: float) -> None:
         self._scheduler = EvaluationScheduler(max(1, int(round(self._update_s * fs))), fs)
+        turns = RefitTurns()          # the channels' refits share one thread
         self.channels = [
-            ChannelProcessor(name, fs, self.est, self.det, self.baselines.get(name))
+            ChannelProcessor(name, fs, self.est, self.det, self.baselines.get(name),
+                             refit_turns=turns)
             for name in self.layout.channels
         ]
         if self._record_path is not None:
