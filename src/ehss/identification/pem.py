@@ -75,6 +75,7 @@ from ehss.identification._common import (
     root_radius,
     solver_budget,
     stabilise,
+    start_radius,
     theta_scale,
 )
 from ehss.identification.batch import els_theta
@@ -509,7 +510,7 @@ def _steiglitz_mcbride(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: 
         uf, yf = lfilter([1.0], f, us), lfilter([1.0], f, ys)
         phi, t, _ = regression_matrix(uf, yf, None, nf, nb, 0, delay)
         new = np.linalg.lstsq(phi, t, rcond=None)[0]
-        new[:nf] = stabilise(new[:nf], 0.95 * radius)
+        new[:nf] = stabilise(new[:nf], start_radius(radius))
         if not np.all(np.isfinite(new)):
             break
         theta = new
@@ -521,7 +522,7 @@ def _oe_starts(us: np.ndarray, ys: np.ndarray, nf: int, nb: int, delay: int,
     """The ARX fit and the Steiglitz–McBride iterations from it, on scaled data."""
     phi, t, _ = regression_matrix(us, ys, None, nf, nb, 0, delay)
     arx = np.linalg.lstsq(phi, t, rcond=None)[0]
-    arx[:nf] = stabilise(arx[:nf], 0.95 * radius)
+    arx[:nf] = stabilise(arx[:nf], start_radius(radius))
     return {"arx": arx, "steiglitz_mcbride": _steiglitz_mcbride(us, ys, nf, nb, delay,
                                                                  arx.copy(), radius)}
 
@@ -645,7 +646,7 @@ def oe_pem(
         starts = _oe_starts(us, ys, nf, nb, delay, radius)
     else:
         start = check_theta0(theta0, dvec.size) / dvec
-        start[:nf] = stabilise(start[:nf], 0.95 * radius)
+        start[:nf] = stabilise(start[:nf], start_radius(radius))
         starts = {"given": start}
     more = [(ur / su, yr / sy, w) for ur, yr, w in _check_records(records, o)]
     theta, name, losses, nfev_total, k0 = _oe_fit(us, ys, nf, nb, delay, radius, max_nfev,
