@@ -77,3 +77,24 @@ def test_its_own_starts_reach_the_loop_in_few_evaluations(seed):
     model = oe_pem(u, y, nf=6, nb=5, delay=1, dt=1.0 / FS, max_nfev=15, radius=0.995)
     mag, ph = _miss(model)
     assert mag < 0.1 and ph < 0.6
+
+
+def test_one_of_its_own_starts_can_be_chosen():
+    u, y = _record(1)
+    both = oe_pem(u, y, nf=4, nb=3, delay=1, dt=1.0 / FS, max_nfev=15)
+    assert set(both.meta["starts"]) == {"arx", "steiglitz_mcbride"}
+    for name in ("arx", "steiglitz_mcbride"):
+        one = oe_pem(u, y, nf=4, nb=3, delay=1, dt=1.0 / FS, max_nfev=15, starts=(name,))
+        assert one.meta["start"] == name and set(one.meta["starts"]) == {name}
+        # the same minimisation from that start as when both run
+        assert one.meta["starts"][name] == pytest.approx(both.meta["starts"][name],
+                                                         rel=1e-12)
+    # the winner of both is the better of the two alone
+    assert both.meta["start"] == min(both.meta["starts"], key=both.meta["starts"].get)
+
+
+@pytest.mark.parametrize("starts", [(), ("ls",), "armax", [1], None])
+def test_unknown_starts_are_refused(starts):
+    u, y = _record(1)
+    with pytest.raises(ehss.errors.ParameterError, match="starts="):
+        oe_pem(u, y, nf=2, nb=1, starts=starts)

@@ -20,6 +20,7 @@ import numpy as np
 from loops_for_detection import (
     DELAYED,
     HIGH_PASS,
+    OIL_COLUMN,
     SERVO,
     SPECIMEN,
     LoopSpec,
@@ -31,7 +32,7 @@ import ehss
 from ehss.target.filter import Compensator, CompensatorFilter
 
 __all__ = ["SteppingLoop", "LoopBlock", "loop_desired", "SERVO", "SPECIMEN", "HIGH_PASS",
-           "DELAYED"]
+           "DELAYED", "OIL_COLUMN"]
 
 
 def loop_desired(spec: LoopSpec, duration_s: float, seeds: tuple[int, ...], *,

@@ -11,7 +11,15 @@ import math
 
 import numpy as np
 import pytest
-from stepping_loops import DELAYED, HIGH_PASS, SERVO, SPECIMEN, SteppingLoop, loop_desired
+from stepping_loops import (
+    DELAYED,
+    HIGH_PASS,
+    OIL_COLUMN,
+    SERVO,
+    SPECIMEN,
+    SteppingLoop,
+    loop_desired,
+)
 
 from ehss.live.compensate import AdaptiveLoop, CompensationRecord, CompensationSettings
 
@@ -38,6 +46,11 @@ CASES = {
     # the 12 Hz loop behind 2 ms of delay: its error rises 20-25x; the first model
     # refitted since the change (0.8-1 s of rows) is in 1.5 s after it
     "delayed 1 kHz, +40 % mass": (DELAYED, (0.5, 20.0), 1.4, 1.5, 1.5),
+    # the 15 Hz loop whose 40 Hz, zeta 0.15 oil-column mode sits at the band's top: the
+    # refits from the recursive estimate stop in a local minimum there (1/13 of the
+    # error without compensation), the refit from the data alone does not (1/116-1/124;
+    # [22, 24) s 1.03-1.15x, later stretches within 1.04x, frozen 37-46x worse)
+    "oil column 2 kHz, +40 % mass": (OIL_COLUMN, (1.0, 40.0), 1.4, 1.5, 1.5),
 }
 
 
@@ -64,7 +77,7 @@ def test_adaptation_follows_a_change_of_another_loop(case: str) -> None:
 
     before = adapted.tracking_rms(10.0, CHANGE_S)
     # steady state: at least 20 times less error than without compensation (measured
-    # 109-129x on the servo, 46-51x on the specimen)
+    # 109-129x on the servo, 46-51x on the specimen, 116-124x on the oil column)
     assert np.all(before <= uncompensated / 20.0)
     # the change is flagged on channel 1 within 0.75 s (0.1-0.2 s measured), and not on
     # channel 2 after it
@@ -296,16 +309,19 @@ def test_a_loop_whose_first_models_all_miss_is_compensated_in_the_end() -> None:
     # recursive estimate misses the loop there by 2-3 dB / 20-35 deg; refits held to it
     # above the band by their record of it were refused for as long as the run lasted
     # (550-790 um, uncompensated). Refitted without that record once three judgements
-    # in a row have failed, each refit going on from the last, a model passes and its
-    # inverse is loaded (README, "Where the defaults stop": every channel of four pairs
-    # of references and two noise realisations, first at 2.9-3.75 s)
+    # in a row had failed, each refit going on from the last, a model passed and its
+    # inverse was loaded at 2.9-3.75 s (four pairs of references, two noise
+    # realisations). The refit from the data alone (no start, no record) misses the
+    # loop far less than the refits from the estimate, and is loaded at the first
+    # judgement (README, "Where the defaults stop")
     desired = _rolled_off(SPECIMEN, 20.0, (1, 2))
     rec = _run(SteppingLoop(SPECIMEN, desired, preview=128, seed=0))
-    # its first judgements fail (with the record), as they did before
-    assert not any(d["accepted"] for d in rec.decisions["1"][:3])
     for name in rec.channels:
+        first = next(d for d in rec.decisions[name] if d["accepted"])
+        assert first["refit_start"] in ("arx", "steiglitz_mcbride")
         loads = [ld["t_s"] for ld in rec.loads if ld["channel"] == name]
-        assert min(loads, default=math.inf) <= 5.0
+        assert min(loads, default=math.inf) <= 2.5
+    assert not [e for e in rec.events if e["kind"] == "alarm"]
     # before any compensator (the drive is the reference) against the last 5 s:
     # measured 21x and 25x (14-29x on the last 5 s of 30-s runs, README)
     early, late = rec.tracking_rms(0.5, 2.0), rec.tracking_rms(15.0, 20.0)

@@ -83,6 +83,10 @@ from ehss.identification.model import ArmaxModel
 
 __all__ = ["armax_pem", "oe_pem"]
 
+#: The starts of :func:`oe_pem` without a given one: the ARX fit, and the
+#: Steiglitz–McBride iterations from it
+OE_STARTS = ("arx", "steiglitz_mcbride")
+
 _BARRIER = 1e4  # residual (in RMS units of y) returned for a destabilising trial point
 
 
@@ -577,6 +581,7 @@ def oe_pem(
     theta0: Any = None,
     first: int = 0,
     records: Any = (),
+    starts: Any = OE_STARTS,
 ) -> ArmaxModel:
     """Output-error model y = q^-d B/F u + e by prediction-error minimisation.
 
@@ -609,6 +614,10 @@ def oe_pem(
         experiments, or a prior model's response to a probe that says what the data do
         not): each runs from rest at its own start, and its errors enter the loss
         times ``weight`` (> 0).
+    starts : sequence of {"arx", "steiglitz_mcbride"}
+        Without ``theta0``, the starts minimised from, each with ``max_nfev``
+        evaluations (the lowest loss wins): the ARX fit, and the Steiglitz–McBride
+        iterations from it. One of them halves the work.
 
     Returns
     -------
@@ -642,15 +651,17 @@ def oe_pem(
     if y.size - k0 <= dvec.size:
         raise DataError(f"first={first}: {y.size - k0} samples left in the loss for "
                         f"{dvec.size} parameters")
+    names = _check_starts(starts)
     if theta0 is None:
-        starts = _oe_starts(us, ys, nf, nb, delay, radius)
+        x0 = {k: v for k, v in _oe_starts(us, ys, nf, nb, delay, radius).items()
+              if k in names}
     else:
         start = check_theta0(theta0, dvec.size) / dvec
         start[:nf] = stabilise(start[:nf], start_radius(radius))
-        starts = {"given": start}
+        x0 = {"given": start}
     more = [(ur / su, yr / sy, w) for ur, yr, w in _check_records(records, o)]
     theta, name, losses, nfev_total, k0 = _oe_fit(us, ys, nf, nb, delay, radius, max_nfev,
-                                                  tol, starts, k0, more)
+                                                  tol, x0, k0, more)
     problem = _oe_problem(us, ys, nf, nb, delay, radius, k0, more)
     try:
         with np.errstate(over="ignore", invalid="ignore"):
@@ -677,6 +688,18 @@ def oe_pem(
         "y_scale": sy,
     }
     return _finish(full, M @ cov_s @ M.T, nv_s * sy * sy, nf, nb, nf, delay, dt, meta, k0)
+
+
+def _check_starts(starts: Any) -> tuple[str, ...]:
+    if isinstance(starts, str):
+        starts = (starts,)
+    try:
+        names = tuple(starts)
+    except TypeError:
+        names = ()
+    if not names or not all(isinstance(k, str) and k in OE_STARTS for k in names):
+        raise ParameterError(f"starts={starts!r} must name one or more of {OE_STARTS}")
+    return names
 
 
 def _check_records(records: Any, o: ArmaxOrders) -> list[tuple[np.ndarray, np.ndarray, float]]:

@@ -24,11 +24,13 @@ H1_WINDOW_S = 1.5
 H1_BAND_POINTS = 8
 #: Channels × sample rate (samples a second) up to which :class:`AdaptiveLoop` refits
 #: the models by default (``CompensationSettings.refine`` None). A refit's cost grows
-#: with the rows of its window: 7 ms a judgement at 1 kHz, 20 ms at 5 kHz on the
-#: machine of BENCHMARKS.md, every ``update_s`` per channel. Up to 16 000
-#: channel-samples a second (3 channels at 5 kHz, 8 at 2 kHz) that leaves the worker
-#: most of a core; 8 channels at 5 kHz would need more than one.
-REFINE_LOAD = 16_000.0
+#: with the rows of its window: with the refit from the data alone, 10 ms at 1 kHz,
+#: 26 ms at 5 kHz on the machine of BENCHMARKS.md (4 and 8 ms without it), and a
+#: judgement that refits takes 1.4–1.6× what it took, every ``update_s`` per channel.
+#: Up to 10 000 channel-samples a second (2 channels at 5 kHz, 5 at 2 kHz) that leaves
+#: the worker most of a core, as 16 000 did before that refit; 8 channels at 5 kHz
+#: would need more than one.
+REFINE_LOAD = 10_000.0
 
 #: where :class:`AdaptiveLoop` judges (:attr:`CompensationSettings.judge_in`)
 JUDGE_IN = ("process", "thread", "stream")
@@ -199,7 +201,9 @@ class CompensationSettings:
         not minimise. On the simulated rig it lowered the steady tracking error by
         11–13 % (18–31 % at the heavier payload), and on the 25 Hz servo it brought the
         error back to its level 2 s after +40 % mass (1.0–1.1× over [22, 24) s against
-        1.7–3.1×; README, "Adaptive compensation"). It adds 7–20 ms to a judgement (1 to
+        1.7–3.1×; README, "Adaptive compensation"); on a 15 Hz loop with a 40 Hz
+        oil-column mode at the band's top, its refit from the data alone cut the error
+        from 1/13 of the uncompensated to 1/120. It takes 10–26 ms a judgement (1 to
         5 kHz; BENCHMARKS.md). None: on while channels × fs ≤ :data:`REFINE_LOAD`.
     judge_in : {"process", "thread", "stream"}
         Where judgements run: a worker process, a worker thread or the stream's own
