@@ -24,9 +24,9 @@ H1_WINDOW_S = 1.5
 H1_BAND_POINTS = 8
 #: Channels × sample rate (samples a second) up to which :class:`AdaptiveLoop` refits
 #: the models by default (``CompensationSettings.refine`` None). A refit's cost grows
-#: with the rows of its window: with the refit from the data alone, 10 ms at 1 kHz,
-#: 26 ms at 5 kHz on the machine of BENCHMARKS.md (4 and 8 ms without it), and a
-#: judgement that refits takes 1.4–1.6× what it took, every ``update_s`` per channel.
+#: with the rows of its window: with the refit from the data alone, 10–11 ms at 1 kHz,
+#: 26–32 ms at 5 kHz on the machine of BENCHMARKS.md (4–7 and 8–13 ms without it), and
+#: a judgement that refits takes 1.2–1.7× what it took, every ``update_s`` per channel.
 #: Up to 10 000 channel-samples a second (2 channels at 5 kHz, 5 at 2 kHz) that leaves
 #: the worker most of a core, as 16 000 did before that refit; 8 channels at 5 kHz
 #: would need more than one.
@@ -203,7 +203,7 @@ class CompensationSettings:
         error back to its level 2 s after +40 % mass (1.0–1.1× over [22, 24) s against
         1.7–3.1×; README, "Adaptive compensation"); on a 15 Hz loop with a 40 Hz
         oil-column mode at the band's top, its refit from the data alone cut the error
-        from 1/13 of the uncompensated to 1/120. It takes 10–26 ms a judgement (1 to
+        from 1/13 of the uncompensated to 1/120. It takes 10–32 ms a judgement (1 to
         5 kHz; BENCHMARKS.md). None: on while channels × fs ≤ :data:`REFINE_LOAD`.
     judge_in : {"process", "thread", "stream"}
         Where judgements run: a worker process, a worker thread or the stream's own
