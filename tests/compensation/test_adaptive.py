@@ -130,12 +130,42 @@ def test_guard_keeps_the_last_good_inverse(fault):
         candidate = ArmaxModel(a=[1.0, -1.01], b=[0.01], delay=1, dt=m.dt)
         why = "unstable"
     else:
+        # a loop 5 % stiffer (the same one again would not be loaded at all: below)
+        candidate = ArmaxModel(a=m.a, b=1.05 * m.b, delay=m.delay, dt=m.dt)
         comp.guard = UpdateGuard(limits=DriveLimits(max_abs=0.5 * np.abs(r).max()))
         why = "exceeds"
     d = comp.propose(2.0, candidate, guard_h1, r)
     assert not d.accepted and why in d.reason
     assert comp.current is good
     assert comp.log[-1] is d
+
+
+def test_a_design_realised_no_better_than_the_running_one_is_not_loaded():
+    # by the model's own account, a design whose realisation leaves at least what the
+    # compensator that runs leaves cannot make the tracking better: the same model
+    # again, or the same model under a running compensator realised better (four
+    # times the taps and preview: 0.04 % of the reference left, against 0.3 %), is
+    # kept out as no fault; a model 5 % stiffer, under which the running compensator
+    # leaves 5 %, is loaded
+    m = _loop()
+    r, h1 = _h1(m)
+    comp = AdaptiveCompensator(FS, BAND, preview=128)
+    first = comp.propose(1.0, m, h1, r)
+    assert first.accepted, first.reason
+    again = comp.propose(2.0, m, h1, r)
+    assert not again.accepted and not again.fault
+    assert "the compensator that runs leaves" in again.reason
+    assert comp.current is first.design
+    finer = design_compensator(m, band_hz=BAND, preview=512, n_taps=1024)
+    own = float(np.sqrt(np.mean(np.abs(finer.error) ** 2)))
+    assert own < float(np.sqrt(np.mean(np.abs(first.design.error) ** 2))) / 4
+    comp.current = finer
+    assert not comp.propose(3.0, m, h1, r).accepted
+    stiffer = ArmaxModel(a=m.a, b=1.05 * m.b, delay=m.delay, dt=m.dt)
+    comp.current = first.design
+    d = comp.propose(4.0, stiffer, h1, r)
+    assert d.accepted, d.reason
+
 
 
 @pytest.mark.parametrize(("gain_db", "fault"), [(1.5, False), (3.0, True)])
@@ -474,9 +504,11 @@ def test_the_guard_takes_slow_sections_only_where_the_fir_cannot_be_loaded():
     first = comp.propose(1.0, m, h1, r)
     assert first.accepted, first.reason
     assert first.design.settle_samples < 300 and "realisation" in first.figures
-    # with a compensator running that leaves less, the FIR's design would be kept out;
-    # the one with the slow mode as a section is loaded instead
-    comp.current = design_compensator(m, band_hz=BAND)
+    # with a compensator running that leaves less (the inverse of a loop 3 % stiffer,
+    # its slow mode a section: 3 % left), the FIR's design would be kept out; the one
+    # with the slow mode as a section (0.5 %) is loaded instead
+    stiffer = ArmaxModel(a=m.a, b=1.03 * m.b, delay=m.delay, dt=m.dt)
+    comp.current = design_compensator(stiffer, band_hz=BAND)
     assert comp.current.settle_samples >= 7.0 / -np.log(0.998)
     comp.current_model = m
     d = comp.propose(2.0, m, h1, r)
@@ -770,10 +802,14 @@ def test_a_narrowed_inverse_replaces_a_stale_compensator_not_a_good_one():
 
     v = comp.assess(1.0, m, h1, r, running=stale(0.3), narrow_top=True)
     assert v.accepted and v.figures["narrowed_leaves"] < 2.0
-    for running in (stale(0.8), asked.design):
-        kept = comp.assess(1.0, m, h1, r, running=running, narrow_top=True)
-        assert not kept.accepted and not kept.fault and kept.figures["drive_refused"]
-        assert "with the compensator that runs" in kept.reason
+    kept = comp.assess(1.0, m, h1, r, running=stale(0.8), narrow_top=True)
+    assert not kept.accepted and not kept.fault and kept.figures["drive_refused"]
+    assert "with the compensator that runs" in kept.reason
+    # the model's own full inverse running: its design is that one again, kept out
+    # before its drive is checked
+    same = comp.assess(1.0, m, h1, r, running=asked.design, narrow_top=True)
+    assert not same.accepted and not same.fault and "drive_refused" not in same.figures
+    assert "the compensator that runs leaves" in same.reason
 
 
 def test_a_model_that_misses_only_the_bands_top_point_is_validated_below_it():
