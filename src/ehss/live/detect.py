@@ -96,6 +96,7 @@ Detection. Wiley. Siegmund, D. (1985) Sequential Analysis. Springer.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -841,6 +842,9 @@ class TrackingTrigger:
         self._kept: list[float] = []
         self._flagged: Calibration | None = None
         self._held: Calibration | None = None
+        # while a calibration moved up to a new test level is held: the learnt blocks'
+        # levels moved up as well (:meth:`_test_on_at`)
+        self._held_levels: list[float] | None = None
         self._hold_until = 0
 
     def restart(self, hold: int = 0) -> None:
@@ -852,6 +856,7 @@ class TrackingTrigger:
         self._cusum = 0.0
         self._run = []
         self._held = None
+        self._held_levels = None
         self._tested = 0
         self._hold_until = max(self._hold_until, self._seen + max(0, int(hold)))
 
@@ -865,6 +870,7 @@ class TrackingTrigger:
         self._x = list(self._kept)
         self._levels = list(self._kept_levels)
         self._held = self._flagged
+        self._held_levels = None
         self._cusum = 0.0
         self._run = []
         self._tested = 0
@@ -873,7 +879,7 @@ class TrackingTrigger:
     @property
     def held(self) -> bool:
         """True while the test runs on a calibration held by :meth:`rearm`."""
-        return self._held is not None
+        return self._held is not None and self._held_levels is None
 
     def __call__(self, error: np.ndarray, reference: np.ndarray | None = None) -> bool:
         """Take the next samples of the tracking error (and of the desired reference
@@ -900,8 +906,16 @@ class TrackingTrigger:
         """What a block is tested against: the ``learn_s`` of blocks ``lag_s`` before
         it (None while they are too few, unless a calibration is held)."""
         if len(self._x) < self._n_learn + self._n_lag:
-            return self._held
-        self._held = None
+            new = self._x[:max(0, len(self._x) - self._n_lag)]
+            held = self._held
+            if held is None or self._held_levels is None or len(new) < MIN_EFFECTIVE_BLOCKS:
+                return held
+            # at a new test level: its own blocks' mean (at its 97.5 % bound, with the
+            # long-run spread held), once there are enough of them
+            mu = float(np.mean(new))
+            bound = float(stats.t.ppf(0.975, len(new) - 1)) * held.sd_hat / math.sqrt(len(new))
+            return dataclasses.replace(held, mean=mu + bound, mean_hat=mu)
+        self._held = self._held_levels = None
         try:
             return calibrate(np.array(self._x[:self._n_learn]), arl_blocks=self._arl)
         except ParameterError:  # blocks that do not vary: nothing to test against
@@ -930,14 +944,41 @@ class TrackingTrigger:
         The rig flagged 7 of 8 channel-steps of a test run stepped from 25 % to 50 % to
         100 % as changes of the loop, 0.4–1.1 s after them. Such a rise is taken for a
         new test level: the test learns anew there, as after a trigger, and nothing is
-        flagged. A change of the loop at the very moment the reference rises is then
-        not flagged either; the models follow it, as they do a change while the test
-        learns. Only a trigger is tested, so a run that triggers nowhere keeps its
-        course."""
+        flagged; meanwhile it tests on at the new level (:meth:`_test_on_at`). A change
+        of the loop at the very moment the reference rises is not flagged either; the
+        models follow it. Only a trigger is tested, so a run that triggers nowhere
+        keeps its course. While a calibration moved to a new level is held, the levels
+        judged against are its own blocks' once there are
+        :data:`MIN_EFFECTIVE_BLOCKS` of them, before that the levels learnt before,
+        moved up by the level's rise."""
         learnt = self._levels[:min(self._n_learn, len(self._levels))]
+        if self._held_levels is not None and len(learnt) < MIN_EFFECTIVE_BLOCKS:
+            learnt = self._held_levels
         recent = self._levels[max(0, len(self._levels) - (n_onset - 1)):] \
             if n_onset > 1 else []
         return level_rose(learnt, [*recent, level], cal)
+
+    def _test_on_at(self, n_onset: int, level: float, cal: Calibration) -> None:
+        """Learn anew at the reference's new level, and meanwhile test on against
+        ``cal`` moved up by the rise of the statistic that the level explained (the
+        mean of the blocks :func:`level_rose` judged; :meth:`_calibration` moves it to
+        the new level's own blocks as they come), with the learnt blocks' levels moved
+        up by the level's own rise for the next :meth:`_level_rose`.
+
+        Learning from nothing instead, the test was blind for ``learn_s + lag_s``: on
+        the oil-column loop, a load's rise of the error that came with a rise of the
+        reference's level 4.6 s before a +40 % mass hid the change, and the first 2 s
+        after it were at 19.7× the level before (README)."""
+        judged = self._run[-n_onset:][-rise_blocks(cal.threshold):]
+        learnt = self._levels[:min(self._n_learn, len(self._levels))]
+        recent = self._levels[max(0, len(self._levels) - (n_onset - 1)):] \
+            if n_onset > 1 else []
+        now = [*recent, level][-rise_blocks(cal.threshold):]
+        lift = float(np.mean(now) - np.mean(learnt))
+        moved = dataclasses.replace(cal, mean=cal.mean + cal.sd * float(np.mean(judged)))
+        levels = [v + lift for v in learnt]
+        self.restart()
+        self._held, self._held_levels = moved, levels
 
     def _test(self, x: float, cal: Calibration, level: float = math.nan) -> bool:
         """One step of the CUSUM; True (dated, and the test restarted) at a trigger,
@@ -954,7 +995,7 @@ class TrackingTrigger:
         n_onset = _onset_blocks(self._run)
         if self._level_rose(n_onset, level, cal):
             self.level_rises += 1
-            self.restart()
+            self._test_on_at(n_onset, level, cal)
             return False
         self.triggers += 1
         self.onset_censored = len(self._run) == self._tested and _first_onset(self._run) == 0
