@@ -101,21 +101,25 @@ def _h1(model):
     return r, h1_estimate(r, y, fs=FS, nperseg=1024)
 
 
-def test_guard_accepts_a_model_its_data_confirm():
+def _proposed_once():
+    """The loop, its reference and H1 estimate, a compensator and its decision on
+    the loop's own model."""
     m = _loop()
     r, h1 = _h1(m)
     comp = AdaptiveCompensator(FS, BAND, preview=128)
-    d = comp.propose(1.0, m, h1, r)
+    return m, r, h1, comp, comp.propose(1.0, m, h1, r)
+
+
+def test_guard_accepts_a_model_its_data_confirm():
+    _, _, _, comp, d = _proposed_once()
     assert d.accepted, d.reason
     assert comp.current is d.design
 
 
 @pytest.mark.parametrize("fault", ["sign", "other_loop", "unstable", "limits"])
 def test_guard_keeps_the_last_good_inverse(fault):
-    m = _loop()
-    r, h1 = _h1(m)
-    comp = AdaptiveCompensator(FS, BAND, preview=128)
-    good = comp.propose(1.0, m, h1, r).design
+    m, r, h1, comp, first = _proposed_once()
+    good = first.design
     candidate, guard_h1 = m, h1
     if fault == "sign":
         # feedback wired inverted: model and H1 agree, both out of phase
@@ -147,10 +151,7 @@ def test_a_design_realised_no_better_than_the_running_one_is_not_loaded():
     # times the taps and preview: 0.04 % of the reference left, against 0.3 %), is
     # kept out as no fault; a model 5 % stiffer, under which the running compensator
     # leaves 5 %, is loaded
-    m = _loop()
-    r, h1 = _h1(m)
-    comp = AdaptiveCompensator(FS, BAND, preview=128)
-    first = comp.propose(1.0, m, h1, r)
+    m, r, h1, comp, first = _proposed_once()
     assert first.accepted, first.reason
     again = comp.propose(2.0, m, h1, r)
     assert not again.accepted and not again.fault
