@@ -951,12 +951,19 @@ class TrackingTrigger:
         judged against are its own blocks' once there are
         :data:`MIN_EFFECTIVE_BLOCKS` of them, before that the levels learnt before,
         moved up by the level's rise."""
+        return level_rose(*self._judged_levels(n_onset, level), cal)
+
+    def _judged_levels(self, n_onset: int, level: float) -> tuple[list[float], list[float]]:
+        """The levels a rise over ``n_onset`` blocks is judged on (:meth:`_level_rose`):
+        the learnt blocks' (those held, moved up to a new test level, while its own
+        are fewer than :data:`MIN_EFFECTIVE_BLOCKS`), and the blocks' since the rise
+        began, the latest of ``level`` (not yet learnt)."""
         learnt = self._levels[:min(self._n_learn, len(self._levels))]
         if self._held_levels is not None and len(learnt) < MIN_EFFECTIVE_BLOCKS:
             learnt = self._held_levels
         recent = self._levels[max(0, len(self._levels) - (n_onset - 1)):] \
             if n_onset > 1 else []
-        return level_rose(learnt, [*recent, level], cal)
+        return learnt, [*recent, level]
 
     def _test_on_at(self, n_onset: int, level: float, cal: Calibration) -> None:
         """Learn anew at the reference's new level, and meanwhile test on against
@@ -969,12 +976,10 @@ class TrackingTrigger:
         the oil-column loop, a load's rise of the error that came with a rise of the
         reference's level 4.6 s before a +40 % mass hid the change, and the first 2 s
         after it were at 19.7× the level before (README)."""
-        judged = self._run[-n_onset:][-rise_blocks(cal.threshold):]
-        learnt = self._levels[:min(self._n_learn, len(self._levels))]
-        recent = self._levels[max(0, len(self._levels) - (n_onset - 1)):] \
-            if n_onset > 1 else []
-        now = [*recent, level][-rise_blocks(cal.threshold):]
-        lift = float(np.mean(now) - np.mean(learnt))
+        last = rise_blocks(cal.threshold)   # the blocks level_rose judges
+        judged = self._run[-n_onset:][-last:]
+        learnt, now = self._judged_levels(n_onset, level)
+        lift = float(np.mean(now[-last:]) - np.mean(learnt))
         moved = dataclasses.replace(cal, mean=cal.mean + cal.sd * float(np.mean(judged)))
         levels = [v + lift for v in learnt]
         self.restart()
