@@ -52,7 +52,7 @@ CASES = {
     # other (each by its own account of the compensator that ran, which holds its own
     # change of model) they took the error from 1.2x its level before to 2-5.5x from
     # 24 s on over 40 s. A design that by its model's account leaves no less than the
-    # running one is now kept out: later stretches within 1.02-1.34x on four pairs
+    # running one is now kept out: later stretches within 1.03-1.34x on four pairs
     # (40 s). Its first models after the change scatter more than the other loops':
     # [22, 24) s at 1.15-1.79x (1.79x on these references; README)
     "oil column 2 kHz, +40 % mass": (OIL_COLUMN, (1.0, 40.0), 1.4, 2.0, 1.5, 40.0),
@@ -83,7 +83,7 @@ def test_adaptation_follows_a_change_of_another_loop(case: str) -> None:
 
     before = adapted.tracking_rms(10.0, CHANGE_S)
     # steady state: at least 20 times less error than without compensation (measured
-    # 109-129x on the servo, 46-51x on the specimen, 116-124x on the oil column)
+    # 109-129x on the servo, 46-51x on the specimen, 117-127x on the oil column over 40 s)
     assert np.all(before <= uncompensated / 20.0)
     # the change is flagged on channel 1 within 0.75 s (0.1-0.2 s measured), and not on
     # channel 2 after it
