@@ -292,6 +292,27 @@ def test_a_model_is_refitted_to_the_errors_its_inverse_will_leave() -> None:
     assert rows2 == rows and miss(fit2) < miss(start) / 5.0
 
 
+@pytest.mark.slow
+def test_a_model_off_the_estimate_only_by_its_averaging_raises_no_alarm() -> None:
+    # the oil column in steady running (nothing changes) under a 1-40 Hz reference: its
+    # models miss the H1 estimate's top point, 39.1 Hz, by 8-14 deg, more than twice
+    # the 5-deg bound on some judgements. That point averages the loop over its bin,
+    # where the reference ends and the 40 Hz mode turns the phase fast; the estimate
+    # of the model's own output through the same segments misses it alike. Three such
+    # refusals counted as faults raised an alarm at 7.25 s on these references
+    desired = loop_desired(OIL_COLUMN, 30.0, (3, 4), band_hz=(1.0, 40.0))
+    rec = _run(SteppingLoop(OIL_COLUMN, desired[:, :int(8.0 * OIL_COLUMN.fs)], preview=128,
+                            seed=0))
+    assert not [e for e in rec.events if e["kind"] == "alarm"]
+    explained = [d for ch in rec.decisions.values() for d in ch if "h1_seen_phase_deg" in d]
+    # refused beyond twice the bounds as the estimate is taken, within them as it
+    # sees the model (0.0 dB / 0.0 deg beyond its uncertainty measured)
+    assert explained
+    for d in explained:
+        assert not d["accepted"] and d["h1_phase_deg"] > 10.0
+        assert d["h1_seen_phase_deg"] <= 10.0 and d["h1_seen_magnitude_db"] <= 2.0
+
+
 def _rolled_off(spec, duration_s: float, seeds: tuple[int, ...]) -> np.ndarray:
     """White noise through a second-order Butterworth band-pass over 1-40 Hz, at
     ``spec``'s RMS, faded in over 0.2 s: a reference whose spectrum rolls off gently."""

@@ -574,9 +574,7 @@ class AdaptiveCompensator:
         if mag_db > acc.max_magnitude_db or ph_deg > acc.max_phase_deg:
             # a near miss is within NEAR_MISS of the bounds, or of the disagreements the
             # channel's own models usually show, if larger (``usual``)
-            usual_db, usual_deg = (0.0, 0.0) if usual is None else usual
-            gross = (mag_db > NEAR_MISS * max(acc.max_magnitude_db, usual_db)
-                     or ph_deg > NEAR_MISS * max(acc.max_phase_deg, usual_deg))
+            gross = self.gross(mag_db, ph_deg, usual)
             worst = err.worst_beyond_uncertainty(acc.uncertainty_sigmas,
                                                  acc.max_magnitude_db, acc.max_phase_deg)
             figures.update(h1_worst_hz=worst, h1_lowest_hz=err.compared_hz[0],
@@ -589,6 +587,17 @@ class AdaptiveCompensator:
         return self._checked_drive(
             t_s, lambda: self._designed(model, figures, running), r, figures,
             self._tops(err, self.band_hz, model, running) if narrow_top else None)
+
+    def gross(self, mag_db: float, ph_deg: float,
+              usual: tuple[float, float] | None = None) -> bool:
+        """Whether a model that misses the H1 estimate by ``mag_db`` / ``ph_deg``
+        beyond its uncertainty misses it by more than :data:`NEAR_MISS` times the
+        larger of the bounds and the channel's ``usual`` disagreement (a fault), not
+        within them (a near miss)."""
+        acc = self.guard.acceptance
+        usual_db, usual_deg = (0.0, 0.0) if usual is None else usual
+        return (mag_db > NEAR_MISS * max(acc.max_magnitude_db, usual_db)
+                or ph_deg > NEAR_MISS * max(acc.max_phase_deg, usual_deg))
 
     def _tops(self, err: FrfError, band: tuple[float, float], model: ArmaxModel,
               running: CompensatorDesign | None) -> Narrowing:

@@ -608,8 +608,10 @@ class ChannelAdapter:
         self._top_edge = _at_edge(self._top_edge, verdict.decision, self.settings.alarm_after,
                                   top=True)
         self._over = _over(self._over, verdict.decision, self.settings.alarm_after)
-        if "h1_phase_deg" in figures and not (verdict.decision.fault
-                                              and not verdict.decision.accepted):
+        # (a refusal whose miss the estimate's averaging explains, Judging.
+        # _bias_explained, tells how the estimate is biased, not how the models scatter)
+        if "h1_phase_deg" in figures and "h1_seen_phase_deg" not in figures \
+                and not (verdict.decision.fault and not verdict.decision.accepted):
             self._misses.append((float(figures["h1_magnitude_db"]),
                                  float(figures["h1_phase_deg"])))
         if verdict.decision.accepted:
