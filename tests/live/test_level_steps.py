@@ -69,3 +69,20 @@ def test_a_change_after_a_new_test_level_is_flagged(tmp_path):
     alarms = [e for e in rec["events"] if e["kind"] == "alarm"]
     assert [e["channel"] for e in alarms] == ["1"]
     assert 30.0 < alarms[0]["t_s"] <= 31.5
+
+
+def test_a_change_soon_after_a_new_test_level_is_flagged(tmp_path):
+    # 50 % to 100 % at 20 s, then +40 % payload on channel 1 at 23 s, while the test is
+    # calibrated anew at the new level: it goes on against the new level's own blocks
+    # from 1.4 s after the rise was told, and flags the change within 1.5 s (0.4-0.9 s
+    # on seeds 1, 3, 5; nothing on them without the change). Calibrated anew from
+    # nothing, the test took the changed loop's blocks in and never flagged it
+    change = (RigEvent(23.0, "load.mass_kg", 1.4 * ehss.preset("default").load.mass_kg,
+                       "1"),)
+    rec = _watch(_stepped(3, [0.5, 1.0], [20.0], 30.0, events=change), tmp_path / "r.h5")
+    taken = [e for e in rec["events"] if e["kind"] == "message"
+             and "new test level" in e["text"] and e["channel"] == "1"]
+    assert taken and 20.0 < taken[0]["t_s"] < 23.0
+    alarms = [e for e in rec["events"] if e["kind"] == "alarm"]
+    assert [e["channel"] for e in alarms] == ["1"]
+    assert 23.0 < alarms[0]["t_s"] <= 24.5

@@ -34,6 +34,7 @@ from ehss.live.detect import (
     figures,
     level_of,
     output_error_predictor,
+    rise_blocks,
 )
 
 __all__ = ["EstimatorSettings", "ChannelProcessor", "RefitTurns", "reference_band"]
@@ -602,9 +603,9 @@ class ChannelProcessor:
             assert cal is not None
             self.messages.append(
                 f"at {t_s:.2f} s the prediction errors rose with the reference's level (a "
-                f"new test level, not a change of the loop): the test is calibrated anew "
-                f"on the next {cal.n_blocks} blocks")
-            self.detector.restart()
+                f"new test level, not a change of the loop): the test goes on at the new "
+                f"level and is calibrated anew on the next {cal.n_blocks} blocks")
+            self.detector.hold_at_new_level()
             self._recal = ([], [], cal.n_blocks)
             change = None
         if change == "alarm":
@@ -621,8 +622,17 @@ class ChannelProcessor:
     def _recalibrate(self) -> None:
         """While the test is calibrated anew at a new test level (the baseline stays),
         take this block; start the test once it has as many as the first calibration
-        had."""
+        had, and those of a rise's flagging after them (:func:`~ehss.live.detect.
+        rise_blocks`: a change that comes at their end is tested, not learnt).
+        Meanwhile the test goes on at the new level, from
+        :data:`~ehss.live.detect.MIN_EFFECTIVE_BLOCKS` of its blocks on against their
+        mean (:meth:`~ehss.live.detect.Detector.recentre`, those of the latest rise's
+        flagging left out as well). An alarm meanwhile keeps that test: calibrated on
+        blocks that hold the change, the new test would take it for the loop."""
         if self._recal is None:
+            return
+        if self.detector.active:
+            self._recal = None
             return
         x, levels, need = self._recal
         if x and len(x[-1]) != self.block_stat.size:
@@ -631,15 +641,20 @@ class ChannelProcessor:
         if self.block_stat.size and np.all(np.isfinite(self.block_stat)):
             x.append(self.block_stat)
             levels.append(self.block_lvl)
-        if len(x) < need:
+        cal = self.detector.calibration
+        lag = rise_blocks(cal.threshold) if cal is not None else 0
+        if len(x) < need + lag:
+            if len(x) > lag:
+                self.detector.recentre(np.array(x[:len(x) - lag]), levels[:len(x) - lag])
             return
         self._recal = None
         try:
-            cals = [calibrate(xk, arl_blocks=self._arl_blocks) for xk in np.array(x).T]
+            cals = [calibrate(xk, arl_blocks=self._arl_blocks)
+                    for xk in np.array(x[:need]).T]
         except EhssError as exc:
             self.messages.append(f"detection off: {exc}")
             return
-        self.detector.start(cals, levels=levels)
+        self.detector.start(cals, levels=levels[:need])
         self.messages.append(f"detection started again at the new test level: CUSUM "
                              f"threshold {cals[0].threshold:.2f}")
 

@@ -314,6 +314,31 @@ def calibrate(x: np.ndarray, *, arl_blocks: float, two_sided: bool = False) -> C
                        n_effective=n_eff, threshold=cusum_threshold(arl), arl_blocks=arl)
 
 
+def recentred(held: Calibration, new: Any) -> Calibration:
+    """``held`` moved to a new test level's own blocks ``new`` (their statistics x),
+    ``held`` while they are fewer than :data:`MIN_EFFECTIVE_BLOCKS`: its mean their
+    mean at its one-sided 97.5 % bound, its σ the larger of the held one and the new
+    blocks' at its 97.5 % bound (the blocks taken as independent: too few to tell
+    their correlation).
+
+    The spread can change with the level as the mean does: at half the rig's test
+    level its prediction errors are mostly sensor noise and x hardly moves (σ 0.29);
+    at the full level they are mostly what the model misses, which follows the
+    reference, and x follows each block's level (2-3× the spread). Tested with the
+    spread held, a stationary channel rose to its threshold twice within 11 s of
+    doubling its test level."""
+    new = np.asarray(new, dtype=np.float64)
+    new = new[np.isfinite(new)]
+    n = new.size
+    if n < MIN_EFFECTIVE_BLOCKS:
+        return held
+    mu, s = float(np.mean(new)), float(np.std(new, ddof=1))
+    spread = max(held.sd_hat, s)
+    mean = mu + float(stats.t.ppf(0.975, n - 1)) * spread / math.sqrt(n)
+    sd = max(held.sd, s * math.sqrt((n - 1) / float(stats.chi2.ppf(0.025, n - 1))))
+    return dataclasses.replace(held, mean=mean, mean_hat=mu, sd=sd, sd_hat=spread)
+
+
 class Detector:
     """The sequential test and alarm logic of one channel.
 
@@ -345,6 +370,10 @@ class Detector:
         # the blocks since its upward sum was last zero
         self._learnt_levels: np.ndarray | None = None
         self._rising: list[list[float]] = []
+        # at a new test level (hold_at_new_level): the calibrations of before, and
+        # whether the test waits for the new level's blocks
+        self._held: tuple[Calibration, ...] | None = None
+        self._waiting = False
 
     @property
     def calibration(self) -> Calibration | None:
@@ -359,6 +388,8 @@ class Detector:
         self._since = None
         self._past = []
         self._rising = []
+        self._held = None
+        self._waiting = False
         self._clear_on_start = self.active
 
     def start(self, calibration: Calibration | Sequence[Calibration], *,
@@ -373,6 +404,8 @@ class Detector:
         self._up, self._down = np.zeros(len(cals)), np.zeros(len(cals))
         self._past = [[] for _ in cals]
         self._rising = [[] for _ in cals]
+        self._held = None
+        self._waiting = False
         self._lag = int(lag_blocks)
         self._learnt_levels = None if levels is None else np.asarray(levels, dtype=float)
 
@@ -385,10 +418,52 @@ class Detector:
         self._up, self._down = np.append(self._up, 0.0), np.append(self._down, 0.0)
         self._past.append([])
         self._rising.append([])
+        if self._held is not None:
+            self._held = (*self._held, calibration)
 
     @property
     def started(self) -> bool:
         return bool(self.calibrations)
+
+    @property
+    def held(self) -> bool:
+        """True while the test goes on at a new test level (:meth:`hold_at_new_level`)
+        until :meth:`start` calibrates it anew."""
+        return self._held is not None
+
+    def hold_at_new_level(self) -> None:
+        """Go on at a new test level (after :meth:`step` said ``"level"``) until
+        :meth:`start` calibrates the test there: the sums start from zero, and the test
+        waits until :meth:`recentre` has :data:`MIN_EFFECTIVE_BLOCKS` of the new
+        level's blocks to move the calibrations to (:func:`recentred`).
+
+        Calibrated anew from nothing instead, the test was blind for its whole learning
+        time (7.5 s by default) and took in what came meanwhile: on the simulated rig a
+        +40 % payload 3 s after the test level doubled was never flagged. Tested on
+        at once against the calibration of before moved up by the rise, it alarmed
+        falsely within a second: the spread of the statistic grows with the level too
+        (:func:`recentred`), and is not known before the new level's blocks show it."""
+        if not self.calibrations:
+            return
+        self._held, self._waiting = self.calibrations, True
+        self._up[:] = 0.0
+        self._down[:] = 0.0
+        self._rising = [[] for _ in self.calibrations]
+
+    def recentre(self, x: Any, levels: Any) -> None:
+        """At a new test level (:meth:`hold_at_new_level`): the calibrations of before
+        moved to the new level's own blocks ``x`` (shape (blocks, predictors);
+        :func:`recentred`), and the levels a further rise is judged against
+        (:func:`level_rose`) to theirs, ``levels``, once there are
+        :data:`MIN_EFFECTIVE_BLOCKS` of them; the test then runs again."""
+        x = np.asarray(x, dtype=np.float64)
+        if self._held is None or x.ndim != 2 or x.shape[0] < MIN_EFFECTIVE_BLOCKS \
+                or x.shape[1] != len(self._held):
+            return
+        self.calibrations = tuple(recentred(cal, x[:, k])
+                                  for k, cal in enumerate(self._held))
+        self._learnt_levels = np.asarray(levels, dtype=np.float64)
+        self._waiting = False
 
     def exceeded(self, values: np.ndarray) -> list[str]:
         """Names of the gated figures beyond their thresholds (NaN is not), and "test"
@@ -418,6 +493,8 @@ class Detector:
         ``test`` figure; NaN before the test starts)."""
         if not self.calibrations:
             return math.nan
+        if self._waiting:
+            return 0.0                   # at a new test level, until recentre
         xs = np.atleast_1d(np.asarray(x, dtype=np.float64))[:len(self.calibrations)]
         # a predictor that joined since the block began gives none for it
         xs = np.concatenate((xs, np.full(len(self.calibrations) - xs.size, math.nan)))
