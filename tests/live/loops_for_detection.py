@@ -11,7 +11,8 @@ change-detection tests: each returns a live record ``(layout, samples, fs)`` lik
   second-order high-pass (an AC-coupled sensor, an acceleration generator), at 1 kHz;
 * :data:`DELAYED`: a 12 Hz, ζ = 0.5 loop behind 2 ms of delay, at 1 kHz;
 * :data:`OIL_COLUMN`: a 15 Hz, ζ = 0.7 loop with a lightly damped oil-column mode
-  (40 Hz, ζ = 0.15), at 2 kHz.
+  (40 Hz, ζ = 0.15), at 2 kHz;
+* :data:`LAGGED`: an 8 Hz, ζ = 0.6 loop behind a 30 Hz first-order lag, at 1 kHz.
 
 Each channel's reference is band-pass filtered random noise and its feedback carries white
 sensor noise of 1 % of the feedback's RMS (seeds per channel). A change multiplies one
@@ -32,7 +33,8 @@ from scipy.signal import StateSpace, butter, cont2discrete, sosfilt, tf2ss
 from ehss.live.rig import rig_layout
 
 __all__ = ["servo_record", "specimen_record", "loop_record", "LoopSpec", "SERVO",
-           "SPECIMEN", "HIGH_PASS", "DELAYED", "OIL_COLUMN", "discrete", "simulate_states",
+           "SPECIMEN", "HIGH_PASS", "DELAYED", "OIL_COLUMN", "LAGGED", "discrete",
+           "simulate_states",
            "reference"]
 
 
@@ -104,6 +106,14 @@ def _oil_column_ss(mass_factor: float) -> StateSpace:
     o = 2 * math.pi * 40.0 / math.sqrt(mass_factor)
     den = np.polymul([1.0, 1.4 * w, w * w], [1.0, 0.3 * o, o * o])
     return StateSpace(*tf2ss([w * w * o * o], den))
+
+
+def _lagged_ss(mass_factor: float) -> StateSpace:
+    """An 8 Hz, ζ 0.6 position loop (its natural frequency 1/√ ``mass_factor``) behind
+    a first-order lag at 30 Hz (a valve's)."""
+    w = 2 * math.pi * 8.0 / math.sqrt(mass_factor)
+    p = 2 * math.pi * 30.0
+    return StateSpace(*tf2ss([w * w * p], np.polymul([1.0, 1.2 * w, w * w], [1.0, p])))
 
 
 def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
@@ -203,6 +213,8 @@ HIGH_PASS = LoopSpec("high-pass", _high_pass_ss, 1000.0, 1e-3, (1.0, 40.0), "mas
 DELAYED = LoopSpec("delayed", _delayed_ss, 1000.0, 1e-3, (0.5, 20.0), "mass")
 #: The 15 Hz loop with its 40 Hz oil-column mode at 2 kHz; its factor scales the mass.
 OIL_COLUMN = LoopSpec("oil-column", _oil_column_ss, 2000.0, 1e-3, (1.0, 50.0), "mass")
+#: The 8 Hz loop behind a 30 Hz lag at 1 kHz; its factor scales the moving mass.
+LAGGED = LoopSpec("lagged", _lagged_ss, 1000.0, 1e-3, (0.5, 15.0), "mass")
 
 
 def servo_record(*, n_channels: int = 2, duration_s: float, seed: int,

@@ -20,6 +20,7 @@ import numpy as np
 from loops_for_detection import (
     DELAYED,
     HIGH_PASS,
+    LAGGED,
     OIL_COLUMN,
     SERVO,
     SPECIMEN,
@@ -32,7 +33,7 @@ import ehss
 from ehss.target.filter import Compensator, CompensatorFilter
 
 __all__ = ["SteppingLoop", "LoopBlock", "loop_desired", "SERVO", "SPECIMEN", "HIGH_PASS",
-           "DELAYED", "OIL_COLUMN"]
+           "DELAYED", "OIL_COLUMN", "LAGGED"]
 
 
 def loop_desired(spec: LoopSpec, duration_s: float, seeds: tuple[int, ...], *,

@@ -541,7 +541,7 @@ class ChannelAdapter:
                         unanchored, self._refitted if unanchored else None, floor, level,
                         usual, self._low_edge >= self.settings.alarm_after,
                         self._top_edge >= self.settings.alarm_after and over,
-                        over)
+                        over, self._top_edge >= self.settings.alarm_after)
 
     def _ran_spans(self) -> tuple:
         """The spans of the windows (indices ``start, stop``) that each compensator
@@ -641,9 +641,11 @@ def _at_edge(count: int, decision: Decision, then: int, *, top: bool = False) ->
     judged every 0.75 s) even if every refusal fell at that point, against 53 of 61
     refusals at 4.88 Hz on the acceleration loop at 5 kHz."""
     f = decision.figures
-    edge, validated = ("h1_highest_hz", "validated_to_hz") if top else \
-        ("h1_lowest_hz", "validated_from_hz")
-    return _in_a_row(count, decision, then, validated,
+    # at the top, a model accepted against the estimate seen alike (``top_biased``,
+    # which the count enables) keeps it as well
+    edge, kept = ("h1_highest_hz", ("validated_to_hz", "h1_seen_alike")) if top else \
+        ("h1_lowest_hz", ("validated_from_hz",))
+    return _in_a_row(count, decision, then, kept,
                      "h1_worst_hz" in f and f["h1_worst_hz"] == f.get(edge))
 
 
@@ -659,18 +661,18 @@ def _over(count: int, decision: Decision, then: int) -> int:
     assess`, ``narrow_top``). A single refusal keeps the last good inverse over the
     whole band: the rig's position loop under its default reference asks a peak
     velocity just past its limit once in minutes (README)."""
-    return _in_a_row(count, decision, then, "narrowed_to_hz",
+    return _in_a_row(count, decision, then, ("narrowed_to_hz",),
                      bool(decision.figures.get("drive_refused")))
 
 
-def _in_a_row(count: int, decision: Decision, then: int, kept_by: str, counts: bool
-              ) -> int:
+def _in_a_row(count: int, decision: Decision, then: int, kept_by: tuple[str, ...],
+              counts: bool) -> int:
     """A count of refusals in a row, capped at ``then``, after ``decision``: one more
-    for a refusal that ``counts``; kept by a model accepted with the figure
-    ``kept_by`` (accepted under the rule the count enables), reset by any other
+    for a refusal that ``counts``; kept by a model accepted with one of the figures
+    ``kept_by`` (accepted under a rule the count enables), reset by any other
     accepted; a refusal for another reason leaves it as it is."""
     if decision.accepted:
-        return count if kept_by in decision.figures else 0
+        return count if any(k in decision.figures for k in kept_by) else 0
     return min(count + 1, then) if counts else count
 
 
