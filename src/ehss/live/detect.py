@@ -434,12 +434,6 @@ class Detector:
     def started(self) -> bool:
         return bool(self.calibrations)
 
-    @property
-    def held(self) -> bool:
-        """True while the test goes on at a new test level (:meth:`hold_at_new_level`)
-        until :meth:`start` calibrates it anew."""
-        return self._held is not None
-
     def hold_at_new_level(self) -> None:
         """Go on at a new test level (after :meth:`step` said ``"level"``) until
         :meth:`start` calibrates the test there: the sums start from zero, and the test
@@ -511,12 +505,12 @@ class Detector:
         ``test`` figure; NaN before the test starts)."""
         if not self.calibrations:
             return math.nan
+        self._history.append(level)
         if self._waiting:
             return 0.0                   # at a new test level, until recentre
         xs = np.atleast_1d(np.asarray(x, dtype=np.float64))[:len(self.calibrations)]
         # a predictor that joined since the block began gives none for it
         xs = np.concatenate((xs, np.full(len(self.calibrations) - xs.size, math.nan)))
-        self._history.append(level)
         out = 0.0
         for k, cal in enumerate(self.calibrations):
             inc = self._increment(k, float(xs[k]), cal)
