@@ -294,8 +294,9 @@ class Judging:
         over a bin where the drive ends, and the bias grows with the response's slope.
         An 8 Hz, ζ 0.6 loop behind a 30 Hz lag at 1 kHz under a 0.5–15 Hz reference,
         after +40 % mass, had 28 models in a row refused at 15.6 Hz by 1.1–1.75 dB
-        and stayed at 2.2–3.5× its level before for 8 s; seen alike, its models are
-        loaded again within a second."""
+        and stayed at 2.2–3.5× its level before for 8 s; judged seen alike once three
+        had missed there, its 2-s stretches from 4 s after the change were within 1.01×
+        (seeds 1, 2)."""
         uh, yh = u[fresh:], y[fresh:]
         nper = min(int(2 ** round(math.log2(max(16, uh.size / 3)))), uh.size)
         if not fresh:
@@ -423,8 +424,8 @@ class Judging:
         loop with a 40 Hz, ζ 0.15 oil-column mode under a 1–40 Hz reference, the
         models of a loop in steady running missed the point at 39.1 Hz by 8–14° (the
         bound of a near miss: 10°), and three such refusals raised an alarm 7 s into a
-        run. A feedback flipped, a stuck sensor or a drowned one put the model as far
-        off the estimate seen alike as taken as it is."""
+        run. A feedback flipped, a stuck sensor or a drowned one still alarm
+        (``tests/live/test_adaptive_rig.py``)."""
         if decision.accepted or not decision.fault \
                 or not decision.reason.startswith(H1_DISAGREES):
             return decision
