@@ -118,7 +118,8 @@ def _lagged_ss(mass_factor: float) -> StateSpace:
 
 def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
             rms: float, band_hz: tuple[float, float], change_s: float | None,
-            factor: float, channel: int, noise: float = 0.01):
+            factor: float, channel: int, noise: float = 0.01,
+            gain: np.ndarray | None = None):
     layout = rig_layout(n_channels)
     n = int(round(duration_s * fs))
     out = np.empty((n, layout.n_fields))
@@ -126,6 +127,8 @@ def _record(make, fs: float, *, n_channels: int, duration_s: float, seed: int,
     cut = n if change_s is None else int(round(change_s * fs))
     for k in range(1, n_channels + 1):
         r = reference(n, fs, band_hz, rms, seed + k)
+        if gain is not None:
+            r = r * gain
         y = np.empty(n)
         state = None
         for scale, (a, b) in ((1.0, (0, cut)),
@@ -239,9 +242,11 @@ def specimen_record(*, n_channels: int = 2, duration_s: float, seed: int,
 
 
 def loop_record(spec: LoopSpec, *, n_channels: int = 2, duration_s: float, seed: int,
-                change_s: float | None = None, factor: float = 1.0, channel: int = 1):
-    """Any loop of this module (``spec``) with its reference; from ``change_s`` the
-    parameter of ``channel`` is ``factor`` times what it was."""
+                change_s: float | None = None, factor: float = 1.0, channel: int = 1,
+                gain: np.ndarray | None = None):
+    """Any loop of this module (``spec``) with its reference (times ``gain``, sample
+    by sample, if given: a test level that steps); from ``change_s`` the parameter of
+    ``channel`` is ``factor`` times what it was."""
     return _record(spec.make, spec.fs, n_channels=n_channels, duration_s=duration_s,
                    seed=seed, rms=spec.rms, band_hz=spec.band_hz, change_s=change_s,
-                   factor=factor, channel=channel)
+                   factor=factor, channel=channel, gain=gain)

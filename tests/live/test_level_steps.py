@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 import pytest
-from loops_for_detection import DELAYED, discrete, reference, simulate_states
+from loops_for_detection import DELAYED, loop_record
 
 import ehss
 from ehss.live import DetectionSettings, EstimatorSettings, LiveSession, PacedSource, read_recording
@@ -90,31 +90,15 @@ def test_a_change_soon_after_a_new_test_level_is_flagged(tmp_path):
     assert 23.0 < alarms[0]["t_s"] <= 24.5
 
 
-def _stepped_loop(spec, seed: int, change_s: float) -> np.ndarray:
-    """Two channels of ``spec``'s linear loop under its reference stepped from 25 % to
-    50 % at 20 s and to 100 % at 30 s (0.2-s ramps), 45 s; from ``change_s`` channel 1's
-    parameter is 1.4x; sensor noise 1 % of the full level's feedback."""
-    fs = spec.fs
-    n = int(45.0 * fs)
-    t = np.arange(n) / fs
-    gain = np.full(n, 0.25)
+def _steps(fs: float, duration_s: float) -> np.ndarray:
+    """A test level stepped from 25 % to 50 % at 20 s and to 100 % at 30 s (0.2-s
+    raised-cosine ramps), sample by sample."""
+    t = np.arange(int(duration_s * fs)) / fs
+    gain = np.full(t.size, 0.25)
     for at, level in ((20.0, 0.5), (30.0, 1.0)):
         ramp = 0.5 - 0.5 * np.cos(np.pi * np.clip((t - at) / 0.2, 0.0, 1.0))
         gain += (level - gain[int(at * fs) - 1]) * ramp
-    columns = [t]
-    cut = int(change_s * fs)
-    for k in (1, 2):
-        r = reference(n, fs, spec.band_hz, spec.rms, seed + k) * gain
-        y = np.empty(n)
-        state = None
-        for factor, (a, b) in ((1.0, (0, cut)), (1.4 if k == 1 else 1.0, (cut, n))):
-            ad, bd, cd = discrete(spec.make, factor, fs)
-            state = simulate_states(ad, bd, cd, r[a:b],
-                                    np.zeros(ad.shape[0]) if state is None else state, y[a:b])
-        full = float(np.sqrt(np.mean(y[int(31 * fs):] ** 2)))
-        noise = 0.01 * full * np.random.default_rng(seed + 1000 + k).standard_normal(n)
-        columns += [r, y + noise]
-    return np.column_stack(columns)
+    return gain
 
 
 def test_a_change_after_a_level_the_errors_did_not_rise_with_is_flagged(tmp_path):
@@ -124,10 +108,10 @@ def test_a_change_after_a_level_the_errors_did_not_rise_with_is_flagged(tmp_path
     # only: the rise is judged against the level of the blocks just before it (100 %),
     # not of the learning time (25 %), which excused it as a new test level (7 changes
     # of 10 flagged on five loops, none before; no alarm without the change)
-    x = _stepped_loop(DELAYED, 3, 33.0)
-    LiveSession(PacedSource(rig_layout(2), x, DELAYED.fs, speed=math.inf),
-                est=EstimatorSettings(), det=DetectionSettings(),
-                record=tmp_path / "r.h5").run()
+    layout, x, fs = loop_record(DELAYED, duration_s=45.0, seed=3, change_s=33.0,
+                                factor=1.4, gain=_steps(DELAYED.fs, 45.0))
+    LiveSession(PacedSource(layout, x, fs, speed=math.inf), est=EstimatorSettings(),
+                det=DetectionSettings(), record=tmp_path / "r.h5").run()
     rec = read_recording(tmp_path / "r.h5")
     alarms = [e for e in rec["events"] if e["kind"] == "alarm"]
     assert [e["channel"] for e in alarms] == ["1"]
