@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from held_inverse import Sending, held
 
 import ehss
 from ehss.compensation.checks import check_drive
@@ -24,12 +25,16 @@ def _desired(duration_s: float, seeds: tuple[int, int] = (1, 2)) -> np.ndarray:
         for seed in seeds])
 
 
-def _run(desired, *, events=(), faults=(), adapt_until_s=np.inf, noise=0, duration_s=None):
+def _rig(desired, *, events=(), faults=(), noise=0):
+    return SteppingRig("position", desired, fs=FS, events=events, faults=faults, preview=128,
+                       seed=noise)
+
+
+def _run(desired, *, events=(), faults=(), noise=0, duration_s=None, rig=None):
     """The adaptive loop on the rig (sensor noise seed ``noise``), for ``duration_s`` of
-    the reference (default all of it)."""
-    rig = SteppingRig("position", desired, fs=FS, events=events, faults=faults, preview=128,
-                      seed=noise)
-    settings = CompensationSettings(band_hz=BAND, adapt_until_s=adapt_until_s)
+    the reference (default all of it); ``rig``: that rig, already made."""
+    rig = _rig(desired, events=events, faults=faults, noise=noise) if rig is None else rig
+    settings = CompensationSettings(band_hz=BAND)
     return AdaptiveLoop(rig, settings, loop="position",
                         params=ehss.preset("default")).run(duration_s=duration_s)
 
@@ -54,8 +59,11 @@ def check_follows_a_payload_change(seeds, factor, *, noise):
     desired = _desired(40.0, seeds)
     change = (RigEvent(20.0, "load.mass_kg", factor * ehss.preset("default").load.mass_kg,
                        "1"),)
-    adapted = _run(desired, events=change, noise=noise)
-    frozen = _run(desired, events=change, adapt_until_s=19.9, noise=noise)  # not adapted
+    sending = Sending(_rig(desired, events=change, noise=noise))
+    adapted = _run(desired, rig=sending)
+    # the inverse built before the change, held: up to it the adapted run again
+    frozen = held(lambda: _rig(desired, events=change, noise=noise), sending.sent, 20.0)
+    np.testing.assert_array_equal(frozen.feedback[:, :20_000], adapted.feedback[:, :20_000])
     # the same rig with the new payload from the start, adapted all along
     settled = _run(desired, events=(RigEvent(0.0, change[0].path, change[0].value,
                                              "1"),), noise=noise)
