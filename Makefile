@@ -26,10 +26,12 @@ test: $(STAMP)
 	     || (apt-get update -qq >/dev/null 2>&1 \
 	         && apt-get install -y -qq chromium chromium-driver >/dev/null 2>&1)) || true; fi
 	@# everything but the realtime tests on every core, then those alone (their pacing by
-	@# the wall clock must not compete for the cores); one fresh numba cache for both
+	@# the wall clock must not compete for the cores); one fresh numba cache for both.
+	@# Each test goes to whichever core is free (worksteal): a file of long tests on one
+	@# core no longer keeps the other idle at the end
 	cache=$$(mktemp -d) && trap 'rm -rf "$$cache"' EXIT \
 	    && export EHSS_TEST_NUMBA_CACHE="$$cache" \
-	    && $(BIN)/python -m pytest -q -n auto --dist loadfile -m "not realtime" \
+	    && $(BIN)/python -m pytest -q -n auto --dist worksteal -m "not realtime" \
 	    && $(BIN)/python -m pytest -q -m realtime
 
 lint: $(STAMP)
