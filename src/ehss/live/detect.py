@@ -901,7 +901,9 @@ class TrackingTrigger:
     (:func:`block_statistic`), tested by the one-sided CUSUM of :class:`Detector`
     against the ``learn_s`` of blocks that end ``lag_s`` before it (:func:`calibrate`,
     at the run length that ``false_alarm_hours`` asks). A trigger restarts the
-    learning: the next one can come ``learn_s + lag_s`` later at the earliest. A fall
+    learning; once a compensator that follows the change takes over
+    (:meth:`test_on`), the test goes on against the blocks since, and otherwise the
+    next trigger can come ``learn_s + lag_s`` later at the earliest. A fall
     of the error (a better compensator) is not a change; a rise from a worse
     compensator is flagged like a change of the loop, and dated (:attr:`onset_index`)
     so that the caller can tell it by its time and undo it
@@ -959,6 +961,10 @@ class TrackingTrigger:
         # levels moved up as well (:meth:`_test_on_at`)
         self._held_levels: list[float] | None = None
         self._hold_until = 0
+        # learning anew after a trigger (:meth:`test_on`), and whether, while it
+        # learns, the blocks since :meth:`test_on` alone are tested against
+        self._after_trigger = False
+        self._own_only = False
 
     def restart(self, hold: int = 0) -> None:
         """Learn anew (the loop changed, or the first compensator takes over): the
@@ -970,8 +976,30 @@ class TrackingTrigger:
         self._run = []
         self._held = None
         self._held_levels = None
+        self._after_trigger = self._own_only = False
         self._tested = 0
         self._hold_until = max(self._hold_until, self._seen + max(0, int(hold)))
+
+    def test_on(self, hold: int) -> None:
+        """A compensator that follows the change just flagged takes over in ``hold``
+        samples: while the test learns anew (``learn_s + lag_s``), test on against
+        the blocks from then on, once :data:`MIN_EFFECTIVE_BLOCKS` of them are past
+        ``lag_s`` (their mean at its 97.5 % bound, with the spread learnt before the
+        change: :meth:`_calibration`). Only the first call after a trigger acts.
+
+        Learning from nothing instead, the test was blind for ``learn_s + lag_s``
+        after a trigger: on the compensated rig a trigger 5 s before the test level
+        doubled and 5.1 s before +40 % payload left that change unflagged, and
+        channel 1 at 3–6× the level of the rig with that payload from the start over
+        the 3 s after it. Testing on from the trigger itself, the change's own rise
+        while the first models come flagged it anew twice, each time restarting
+        their following."""
+        if not self._after_trigger:
+            return
+        cal = self._flagged
+        levels = self._levels[:min(self._n_learn, len(self._levels))]
+        self.restart(hold)
+        self._held, self._held_levels, self._own_only = cal, levels, True
 
     def rearm(self, hold: int) -> None:
         """Test on as before the latest trigger, whose rise was not a change of the
@@ -1022,7 +1050,7 @@ class TrackingTrigger:
             new = self._x[:max(0, len(self._x) - self._n_lag)]
             held = self._held
             if held is None or self._held_levels is None or len(new) < MIN_EFFECTIVE_BLOCKS:
-                return held
+                return None if self._own_only else held
             # at a new test level: its own blocks' mean (at its 97.5 % bound, with the
             # long-run spread held), once there are enough of them. The live Detector
             # takes the spread anew as well (recentred): its prediction errors' spread
@@ -1131,4 +1159,5 @@ class TrackingTrigger:
         self._kept_levels = self._levels[:len(self._kept)]
         self._flagged = cal
         self.restart()
+        self._after_trigger = True
         return True

@@ -411,6 +411,10 @@ class ChannelAdapter:
             # blocks before it would widen the level the trigger tests against (a
             # change 6 s after the first load was flagged only 2.4 s after it came)
             self.trigger.restart(until - self._n)
+        elif self.trigger is not None:
+            # after a change flagged, the first compensator that follows it: the
+            # trigger tests on from the level it leaves
+            self.trigger.test_on(until - self._n)
         self.busy_from, self.busy_until = apply_index, until
         self._corrected_from = None if self._accepted_taps is None else until
         if self.compensator.current is not None:
