@@ -558,3 +558,30 @@ def test_drives_that_keep_failing_the_checks_narrow_the_band():
                         (narrowed, 3), (other, 3), (whole, 0), (over, 1)]:
         count = _over(count, d, 3)
         assert count == expected, d
+
+
+@pytest.mark.slow
+def test_a_change_soon_after_a_trigger_and_a_new_test_level_is_flagged():
+    # references of seeds 3, 4 at half level, doubled at 20 s (0.2-s ramp), +40 %
+    # payload on channel 1 at 23 s. A load's rise at 17.9 s is taken for a change of
+    # the loop; the trigger, blind for learn_s + lag_s after it before, left the payload
+    # change unflagged and channel 1 at 57-83 um per 0.5 s until 25 s. Tested on from the
+    # first compensator that follows the trigger, it flags the payload (measured at
+    # 23.7 s). On these 28 s of reference it also flags the doubled level (at 20.7 s),
+    # where the level test on 2 blocks cannot tell it (on the 40-s references it takes
+    # it for a new test level, and flags the payload at 23.3 s: README)
+    desired = _desired(28.0, (3, 4))
+    t = np.arange(desired.shape[1]) / FS
+    desired *= 0.5 + 0.25 * (1.0 - np.cos(np.pi * np.clip((t - 20.0) / 0.2, 0.0, 1.0)))
+    change = (RigEvent(23.0, "load.mass_kg", 1.4 * ehss.preset("default").load.mass_kg,
+                       "1"),)
+    rec = _run(desired, events=change)
+    kinds = [(e["kind"], e["t_s"]) for e in rec.events if e.get("channel") == "1"
+             and e["kind"] in ("compensator_change", "compensator_level")]
+    assert kinds[0][0] == "compensator_change" and 17.0 < kinds[0][1] < 20.0, kinds
+    assert any(kind == "compensator_change" and 23.0 < t_s <= 24.5 for kind, t_s in kinds), kinds
+    # followed: from 2 s after the change channel 1 within 2x channel 2 (the heavier
+    # loop's own level at the doubled test level is 1.5-2x the lighter's; measured
+    # 1.55x over [25, 28) s)
+    after = rec.tracking_rms(25.0, 28.0)
+    assert after[0] <= 2.0 * after[1], after
