@@ -990,14 +990,16 @@ class TrackingTrigger:
         Learning from nothing instead, the test was blind for ``learn_s + lag_s``
         after a trigger: on the compensated rig a trigger 5 s before the test level
         doubled and 5.1 s before +40 % payload left that change unflagged, and
-        channel 1 at 3–6× the level of the rig with that payload from the start over
-        the 3 s after it. Testing on from the trigger itself, the change's own rise
+        channel 1 at 4–6× the level of the rig with that payload from the start over
+        the 2 s after it. Testing on from the trigger itself, the change's own rise
         while the first models come flagged it anew twice, each time restarting
         their following."""
         if not self._after_trigger:
             return
         cal = self._flagged
-        levels = self._levels[:min(self._n_learn, len(self._levels))]
+        # the reference's levels before the change (the test begins only once the
+        # blocks since outnumber MIN_EFFECTIVE_BLOCKS: a rise is judged on theirs)
+        levels = self._kept_levels[-self._n_learn:]
         self.restart(hold)
         self._held, self._held_levels, self._own_only = cal, levels, True
 
