@@ -87,6 +87,30 @@ def test_followed_it_tests_on_from_the_level_the_change_leaves(seed):
     assert len(_run(TrackingTrigger(FS), e)) == 1
 
 
+def test_rearmed_after_testing_on_it_tests_against_the_level_before_the_rise(rng):
+    # a change (3x at 10 s) followed at 11 s, then a load's rise (3x more at 14 s)
+    # flagged on the blocks since: undone at 14.5 s, nothing more is flagged; kept, it is
+    # flagged again against the level the test went on from, within 2 blocks after
+    # 14.5 s (as without the change before: test_rearmed_it_tests_on_against_...)
+    for kept in (False, True):
+        e = rng.standard_normal(40_000)
+        e[10_000:] *= 3.0
+        e[14_000:None if kept else 14_500] *= 3.0
+        trigger, times = TrackingTrigger(FS), []
+        for k in range(0, e.size, 50):
+            if trigger(e[k:k + 50]):
+                times.append((k + 50) / FS)
+                if len(times) == 2:
+                    trigger.rearm(14_500 - (k + 50))
+                    assert trigger.held
+            if k + 50 == 11_000:
+                trigger.test_on(0)
+        assert len(times) == (3 if kept else 2), times
+        assert 14.0 < times[1] <= 14.5
+        if kept:
+            assert 14.5 < times[2] <= 14.7 + 0.025, times
+
+
 def test_it_takes_blocks_across_calls(rng):
     # the same samples fed one by one or in uneven pieces give the same triggers
     e = rng.standard_normal(30_000)

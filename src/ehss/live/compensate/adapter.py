@@ -158,6 +158,9 @@ class ChannelAdapter:
         self._began: int | None = None
         #: the sample the latest change was flagged at (-1: none)
         self.flagged_at = -1
+        # a change is followed and no compensator has been sent since: the first one
+        # sets the trigger on again (TrackingTrigger.test_on)
+        self._test_on_due = False
         # the reference as it is, sent when compensation was switched off (None: never)
         self._off: CompensatorDesign | None = None
 
@@ -322,6 +325,7 @@ class ChannelAdapter:
         if onset_s is None:
             onset_s = 0.0 if self.trigger is None else self.trigger.onset_s
         self.flagged_at = self._n
+        self._test_on_due = True
         self._since = self._n - int(round(onset_s * self.fs))
         self._changed_at = self._since
         est = self.estimator
@@ -411,10 +415,11 @@ class ChannelAdapter:
             # blocks before it would widen the level the trigger tests against (a
             # change 6 s after the first load was flagged only 2.4 s after it came)
             self.trigger.restart(until - self._n)
-        elif self.trigger is not None:
+        elif self.trigger is not None and self._test_on_due:
             # after a change flagged, the first compensator that follows it: the
             # trigger tests on from the level it leaves
             self.trigger.test_on(until - self._n)
+        self._test_on_due = False
         self.busy_from, self.busy_until = apply_index, until
         self._corrected_from = None if self._accepted_taps is None else until
         if self.compensator.current is not None:
@@ -452,6 +457,7 @@ class ChannelAdapter:
         assert load is not None
         self.undo = None
         self._undoable = []
+        self._test_on_due = False
         self.compensator.current = load.design
         self.compensator.current_model = load.model
         self.busy_from, self.busy_until = apply_index, until
@@ -498,6 +504,7 @@ class ChannelAdapter:
         anew from ``until`` (many times the compensated one: not a change)."""
         self.undo = None
         self._undoable = []
+        self._test_on_due = False
         self._correct_until = 0
         self._spans = []
         self._off = design
