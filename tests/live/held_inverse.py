@@ -12,12 +12,13 @@ simulation.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Sending", "HeldRun", "held"]
+from ehss.live.compensate import CompensationRecord
+
+__all__ = ["Sending", "held"]
 
 
 class Sending:
@@ -37,25 +38,11 @@ class Sending:
         return self.target.load(channel, compensator, apply_index, crossfade)
 
 
-@dataclass
-class HeldRun:
-    """Desired reference and feedback of every channel, each shape (n_channels, n)."""
-
-    fs: float
-    desired: np.ndarray = field(repr=False)
-    feedback: np.ndarray = field(repr=False)
-
-    def tracking_rms(self, t0_s: float, t1_s: float) -> np.ndarray:
-        """RMS of desired − feedback of each channel over ``[t0_s, t1_s)``."""
-        a, b = int(round(t0_s * self.fs)), int(round(t1_s * self.fs))
-        e = self.desired[:, a:b] - self.feedback[:, a:b]
-        return np.sqrt(np.mean(e * e, axis=1))
-
-
 def held(make_target: Callable[[], Any], sent: list[tuple[int, int, Any, int, int]],
-         until_s: float) -> HeldRun:
+         until_s: float) -> CompensationRecord:
     """Run a fresh ``make_target()`` to its end with the compensators of ``sent`` that
-    came before ``until_s``, each handed over at the index it came at."""
+    came before ``until_s``, each handed over at the index it came at: its record, with
+    no judgements of its own."""
     target = make_target()
     until = int(round(until_s * target.fs))
     blocks = []
@@ -67,5 +54,9 @@ def held(make_target: Callable[[], Any], sent: list[tuple[int, int, Any, int, in
         target.load(channel, compensator, apply_index, crossfade)
     while not target.finished:
         blocks.append(target.step(target.n_samples - target.index))
-    return HeldRun(float(target.fs), np.hstack([b.desired for b in blocks]),
-                   np.hstack([b.feedback for b in blocks]))
+    return CompensationRecord(
+        fs=float(target.fs), channels=tuple(target.channels),
+        desired=np.hstack([b.desired for b in blocks]),
+        drive=np.hstack([b.drive for b in blocks]),
+        feedback=np.hstack([b.feedback for b in blocks]),
+        decisions={}, loads=[], events=[], settings={})

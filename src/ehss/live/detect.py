@@ -1014,7 +1014,7 @@ class TrackingTrigger:
         self._levels = list(self._kept_levels)
         self._held = self._flagged
         self._held_levels = None
-        self._after_trigger = self._own_only = False
+        self._after_trigger = False   # a load's rise undone: no change to test on after
         self._cusum = 0.0
         self._run = []
         self._tested = 0
