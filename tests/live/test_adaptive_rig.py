@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.signal
 from held_inverse import Sending, held
+from linear_floor import fixed_linear_floor, stretch_rms
 
 import ehss
 from ehss.compensation.checks import check_drive
@@ -130,6 +132,52 @@ def check_follows_a_payload_change(seeds, factor, *, noise):
     for k in range(2):
         check_drive(adapted.drive[k], desired[k], FS, loop="position",
                     params=ehss.preset("default"))
+
+
+def test_the_aim_after_a_heavier_payload_lies_beyond_any_fixed_linear_inverse():
+    """The aim after +40 % payload (the heavier loop within 1.5x the lighter one's level,
+    in every 2-s stretch from 2 s after the change) against what the best fixed linear
+    inverse, found in hindsight on the whole record, leaves on each payload
+    (``linear_floor``): the rig's own nonlinear distortion at that drive."""
+    mass = ehss.preset("default").load.mass_kg
+    worst = []
+    for seeds in ((1, 2), (3, 4)):
+        desired = _desired(40.0, seeds)
+        floor = {}
+        for factor in (1.0, 1.4):
+            payload = tuple(RigEvent(0.0, "load.mass_kg", factor * mass, c) for c in "12")
+            errors = fixed_linear_floor(
+                lambda u, payload=payload: _rig(u, events=payload).step(u.shape[1]).feedback,
+                desired, FS, BAND)
+            last, before_last = (stretch_rms(e, FS, 10.0, 40.0) for e in errors[:-3:-1])
+            # the iteration is at its fixed point: the last run within 2 % of the one
+            # before (measured 0.0-0.2 %), and ~100x below the uncompensated error
+            assert np.all(np.abs(last / before_last - 1.0) < 0.02)
+            assert np.all(last < stretch_rms(errors[0], FS, 10.0, 40.0) / 50.0)
+            # what is left is uncorrelated with the reference: the share of its power
+            # that a linear filter of the reference explains is the coherence estimate's
+            # bias for none, about 1/13 with 13 segments (measured 0.056-0.068); a
+            # compensator off its inverse leaves about 0.6 (the adaptive run, seeds 1, 2)
+            for k in range(2):
+                d, e = desired[k, 10_000:], errors[-1][k, 10_000:]
+                _, s_dd = scipy.signal.welch(d, FS, nperseg=4096)
+                _, s_de = scipy.signal.csd(d, e, FS, nperseg=4096)
+                _, s_ee = scipy.signal.welch(e, FS, nperseg=4096)
+                assert np.sum(np.abs(s_de) ** 2 / s_dd) / np.sum(s_ee) < 2.0 / 13.0
+            floor[factor] = errors[-1]
+        # the heavier loop's own floor lies above the lighter one's (measured 1.23-1.25x
+        # over [22, 40) s): larger pressures at the same motion, more of the valve's and
+        # the cylinder's nonlinear flow
+        heavier = stretch_rms(floor[1.4], FS, 22.0, 40.0)
+        assert np.all(heavier > 1.1 * stretch_rms(floor[1.0], FS, 22.0, 40.0))
+        before = stretch_rms(floor[1.0], FS, 10.0, 20.0)
+        worst.append(np.max([stretch_rms(floor[1.4], FS, *w) / before for w in _WINDOWS_S],
+                            axis=0))
+    # and a 2-s stretch of it lies beyond the aim's 1.5x on some reference (measured
+    # 1.47, 1.67, 1.42 and 2.38x on the references of seeds 1-4): no linear compensator,
+    # however well adapted, meets the aim on every reference; a better one lowers the
+    # level before more than the heavier loop's distortion after
+    assert np.max(worst) > 1.5
 
 
 @pytest.mark.slow
