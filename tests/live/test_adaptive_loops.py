@@ -2,8 +2,8 @@
 rig (``stepping_loops.py``: two channels, 1 % sensor noise, the band taken from the
 reference): the 25 Hz servo at 2 kHz after +40 % moving mass, and the actuator on its
 specimen at 4 kHz after +40 % specimen stiffness, on channel 1 at t = 20 s. The figures
-asserted and their spread over other references are in the README ("Adaptive
-compensation", "On loops that are not the rig")."""
+asserted and their spread over other references are in docs/adaptive_compensation.md ("On loops
+that are not the rig")."""
 
 from __future__ import annotations
 
@@ -369,7 +369,7 @@ def test_a_loop_whose_first_models_all_miss_is_compensated_in_the_end() -> None:
     # realisations), with false alarms on three runs of four (seeds 1-4, noise 0, 1).
     # The refit from the data alone (no start, no record) misses the loop far less than
     # the refits from the estimate: loaded at 2.0-2.65 s on those runs, with no alarm
-    # (README, "Where the defaults stop")
+    # (docs/adaptive_compensation.md, "Where the defaults stop")
     desired = _rolled_off(SPECIMEN, 20.0, (1, 2))
     rec = _run(SteppingLoop(SPECIMEN, desired, preview=128, seed=0))
     assert any(d.get("refit_start") == "steiglitz_mcbride" and d["accepted"]

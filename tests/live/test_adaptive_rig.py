@@ -57,7 +57,7 @@ def test_adaptation_follows_a_payload_change(seeds, factor):
 def check_follows_a_payload_change(seeds, factor, *, noise):
     """The figures of a payload change on channel 1 at 20 s, with the rig's sensor noise
     ``noise``: a function of its own so that the bounds can be tried on other
-    realisations of the noise as well (README, "Adaptive compensation")."""
+    realisations of the noise as well (docs/adaptive_compensation.md)."""
     desired = _desired(40.0, seeds)
     change = (RigEvent(20.0, "load.mass_kg", factor * ehss.preset("default").load.mass_kg,
                        "1"),)
@@ -87,7 +87,7 @@ def check_follows_a_payload_change(seeds, factor, *, noise):
     assert len(first) == 1 and first[0][0] == "1" and 20.0 < first[0][1] <= 21.5
     assert all(c[0] == "1" for c in changes)
     # once flagged, the change is followed by a correction of the running compensator
-    # or a model refitted, both on the data since it (README, "Adaptive compensation")
+    # or a model refitted, both on the data since it (docs/adaptive_compensation.md)
     flagged = [ld for ld in adapted.loads if ld["channel"] == "1" and ld["t_s"] > first[0][1]]
     assert flagged[0]["model"] == "correction" \
         or 0 < flagged[0].get("refit_rows", 0) <= (flagged[0]["t_s"] - 20.0) * FS

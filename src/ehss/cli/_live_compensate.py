@@ -403,8 +403,8 @@ def _hint(refused: list[str]) -> str:
     h1 = sum(r.startswith(H1_DISAGREES) for r in refused)
     if 2 * h1 >= len(refused):
         # most refusals: models that miss the loop somewhere in the band, often where
-        # the reference's skirt reaches a resonance it hardly excites (README, "Where
-        # the defaults stop")
+        # the reference's skirt reaches a resonance it hardly excites
+        # (docs/adaptive_compensation.md, "Where the defaults stop")
         return (". Most models disagreed with the H1 estimate: a --band where the "
                 "reference holds its power (not where its spectrum only rolls off) lets "
                 "them be validated")

@@ -686,7 +686,7 @@ class AdaptiveCompensator:
         10 s of H1 disagreement, and left it 11× better than uncompensated against 25×.
         A loop behind a 0.5 Hz high-pass, whose FIR designs are refused as realised
         13–30 dB off, tracks 12.5–24× better than uncompensated with the sections,
-        6.8–8.6× without them (README, "Where the defaults stop")."""
+        6.8–8.6× without them (docs/adaptive_compensation.md, "Where the defaults stop")."""
         def design(within: tuple[float, float]) -> CompensatorDesign:
             return design_compensator(model, band_hz=band or self.band_hz, mode=self.mode,
                                       preview=self.preview, n_taps=self.n_taps,
@@ -734,7 +734,7 @@ class AdaptiveCompensator:
         to 34 Hz by +40 % mass, sampled at 2 kHz and compensated over 1–40 Hz, the
         realisation error of the loaded designs went from 0.9 % to 2.1, 3.9 and 5 % of
         the reference in 5 s, and the tracking error from 1.2× its level before the
-        change to 5× (README, "On loops that are not the rig").
+        change to 5× (docs/adaptive_compensation.md, "On loops that are not the rig").
 
         Raises
         ------

@@ -36,7 +36,7 @@ from ehss.validation import frf_error
 #: its answer (the recursive estimate, the running model) and its prior record holds
 #: the loop above the band, which the rows do not. Four made it come after the correction on the
 #: simulated rig (0.81 s against 1.23 s of data), which left −30 % payload on one pair
-#: of references at 2.6× over the first 2 s (README, "Adaptive compensation").
+#: of references at 2.6× over the first 2 s (docs/adaptive_compensation.md).
 REFINE_SAMPLES = 2
 #: A reference this far below its usual RMS (20 dB) is quiet (:meth:`Judging._quiet`).
 QUIET_REFERENCE = 0.1

@@ -118,7 +118,7 @@ class CompensationSettings:
         forgetting with detection), so that a long ``memory_s`` need not slow the
         following. Measured with ``memory_s`` of 0.6, 1 and 1.5 s, the tracker's and
         this one 0.3 s, it did not bring the error after a +40 % payload change on the
-        simulated rig closer to the level before (README, "Adaptive compensation"):
+        simulated rig closer to the level before (docs/adaptive_compensation.md):
         not the default.
     trigger : TriggerSettings or None
         The quick test for a change of the loop on its tracking error
@@ -201,7 +201,7 @@ class CompensationSettings:
         not minimise. On the simulated rig it lowered the steady tracking error by
         11–13 % (18–31 % at the heavier payload), and on the 25 Hz servo it brought the
         error back to its level 2 s after +40 % mass (1.0–1.1× over [22, 24) s against
-        1.7–3.1×; README, "Adaptive compensation"); on a 15 Hz loop with a 40 Hz
+        1.7–3.1×; docs/adaptive_compensation.md); on a 15 Hz loop with a 40 Hz
         oil-column mode at the band's top, its refit from the data alone cut the error
         from 1/13 of the uncompensated to 1/120. It takes 10–32 ms a judgement (1 to
         5 kHz; BENCHMARKS.md). None: on while channels × fs ≤ :data:`REFINE_LOAD`.
