@@ -11,9 +11,11 @@ datagrams on, then streams ``t, ref<k>, fb<k>, des<k>`` (drive, feedback, desire
 reference) in the ``ehss live`` wire format, paced at SPEED × real time, running each
 drive through ``ehss.target.CompensatorFilter`` with the reference known PREVIEW samples
 ahead and loading every datagram through ``ehss.target.datagram.Inbox``. Alongside, the
-same plants run on the desired reference itself (no compensation) for the comparison.
-At the end it prints, as JSON, its counters and each channel's tracking RMS without
-compensation over each second.
+same plants run on the desired reference itself (no compensation), and on it through a
+second set of filters that loads the datagrams that came before CHANGE_S and none after
+(the inverse built before the change, held), for the comparisons. At the end it prints,
+as JSON, its counters and each channel's tracking RMS without compensation and with the
+held inverse over each second.
 """
 
 from __future__ import annotations
@@ -89,8 +91,10 @@ def main() -> None:
     out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     filters = [CompensatorFilter(Compensator.delay(PREVIEW, fs_hz=FS)) for _ in range(n_ch)]
     inbox = Inbox(dict(enumerate(filters)))
-    loops, plain = [Loop() for _ in range(n_ch)], [Loop() for _ in range(n_ch)]
-    plain_err = np.empty((n_ch, n))
+    kept = [CompensatorFilter(Compensator.delay(PREVIEW, fs_hz=FS)) for _ in range(n_ch)]
+    kept_inbox = Inbox(dict(enumerate(kept)))
+    loops, plain, held = ([Loop() for _ in range(n_ch)] for _ in range(3))
+    plain_err, held_err = np.empty((n_ch, n)), np.empty((n_ch, n))
     rng = np.random.default_rng(6)
     names = ["t"] + [f"{f}{k + 1}" for k in range(n_ch) for f in ("ref", "fb", "des")]
     layout = RecordLayout(tuple(names))
@@ -100,31 +104,41 @@ def main() -> None:
     for k in range(0, n, BLOCK):
         while True:
             try:
-                inbox.accept(comp_sock.recv(65536))
+                datagram = comp_sock.recv(65536)
             except BlockingIOError:
                 break
+            inbox.accept(datagram)
+            if k / FS < change_s:
+                kept_inbox.accept(datagram)
         m = min(BLOCK, n - k)
         if not changed and k / FS >= change_s:
-            loops[0].set_mass(factor)
-            plain[0].set_mass(factor)
+            for loop in (loops[0], plain[0], held[0]):
+                loop.set_mass(factor)
             changed = True
         ahead = np.minimum(np.arange(k, k + m) + PREVIEW, n - 1)
         cols = [np.arange(k, k + m) / FS]
         for c in range(n_ch):
             u = filters[c].process(des[c, ahead])
-            y = loops[c].run(u) + 1e-6 * rng.standard_normal(m)
+            noise = 1e-6 * rng.standard_normal(m)
+            y = loops[c].run(u) + noise
             plain_err[c, k:k + m] = des[c, k:k + m] - plain[c].run(des[c, k:k + m])
+            held_err[c, k:k + m] = des[c, k:k + m] - held[c].run(
+                kept[c].process(des[c, ahead])) - noise
             cols += [u, y, des[c, k:k + m]]
         out.sendto(layout.encode(k, np.column_stack(cols)), (host, port))
         lag = (k + m) / FS / speed - (time.monotonic() - wall0)
         if lag > 0:
             time.sleep(lag)
     per_s = int(FS)
-    plain_rms = np.sqrt(np.mean(plain_err[:, : n // per_s * per_s].reshape(n_ch, -1, per_s)
-                                ** 2, axis=2))
+
+    def rms_per_s(err: np.ndarray) -> list:
+        return np.sqrt(np.mean(err[:, : n // per_s * per_s].reshape(n_ch, -1, per_s) ** 2,
+                               axis=2)).tolist()
+
     print(json.dumps({"inbox": inbox.counters,
                       "filter": [f.counters for f in filters],
-                      "plain_rms_per_s": plain_rms.tolist()}), flush=True)
+                      "plain_rms_per_s": rms_per_s(plain_err),
+                      "held_rms_per_s": rms_per_s(held_err)}), flush=True)
 
 
 if __name__ == "__main__":
