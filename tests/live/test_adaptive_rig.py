@@ -174,9 +174,9 @@ def test_the_aim_after_a_heavier_payload_lies_beyond_any_fixed_linear_inverse():
         worst.append(np.max([stretch_rms(floor[1.4], FS, *w) / before for w in _WINDOWS_S],
                             axis=0))
     # and a 2-s stretch of it lies beyond the aim's 1.5x on some reference (measured
-    # 1.47, 1.67, 1.42 and 2.38x on the references of seeds 1-4): no linear compensator,
-    # however well adapted, meets the aim on every reference; a better one lowers the
-    # level before more than the heavier loop's distortion after
+    # 1.47, 1.67, 1.42 and 2.38x on the references of seeds 1-4): no fixed linear
+    # inverse, even one fitted in hindsight, meets the aim on every reference; a better
+    # one lowers the level before more than the heavier loop's distortion after
     assert np.max(worst) > 1.5
 
 
