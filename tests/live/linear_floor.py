@@ -1,5 +1,5 @@
-"""The best fixed linear inverse of a rig, found in hindsight: what no linear compensator,
-adaptive or not, can beat on a record.
+"""The best fixed linear inverse of a rig, found in hindsight: the floor of what a fixed
+linear compensator that tracks closely can reach on a record.
 
 The drive is iterated on the whole record, ``u = W D / Ĥ + (1 - W) D`` in the frequency
 domain, with ``D`` the desired output's spectrum, ``W`` the reference's band and ``Ĥ``
@@ -7,10 +7,13 @@ the H1 estimate drive → feedback of the last run (the rig's best linear approx
 at that drive). At its fixed point the error ``d - y`` is uncorrelated with the drive
 at every frequency of the band, and so with the reference, which the drive is a linear
 filter of: a change ``δF`` of the inverse adds ``G δF d`` to the error, uncorrelated
-with what is there, and can only raise its power. What is left is the rig's nonlinear
-distortion and its sensor noise at that drive. It uses the whole record, the future
-included, and the rig's own simulation run again and again: an online compensator has
-neither.
+with what is there, and lowers it only through the distortion it changes. Where the
+loop tracks its reference closely, the distortion is a function of the motion, which
+any inverse that tracks as closely leaves nearly the same: what is left is the rig's
+nonlinear distortion and its sensor noise at that motion. (Where the drive itself is
+distorted far from the motion, as by a clipped valve, the fixed point is no optimum:
+an earlier iterate can leave less.) It uses the whole record, the future included, and
+the rig's own simulation run again and again: an online compensator has neither.
 """
 
 from __future__ import annotations
