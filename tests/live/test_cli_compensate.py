@@ -326,3 +326,20 @@ def test_compensating_a_loop_its_gains_leave_unstable_stops_before_the_run(tmp_p
     assert len(err.splitlines()) == 1, err
     assert "position loop is unstable" in err and "--tune" in err, err
     assert not report.exists() and not record.exists()
+
+
+def test_the_rigs_default_band_follows_a_low_rate(capsys):
+    # at 40 Hz the position rig's 0.5-20 Hz would reach fs/2: its top comes down to
+    # fs/3, where the inverse's band limit ends at fs/2, and the line says so
+    argv = ["live", "--rig", "position", "--channels", "1", "--duration", "4", "--fs", "40",
+            "--compensate", "preview", "--speed", "inf", "--quiet"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "default band 0.5-20 Hz ends at fs/3 = 13.3 Hz" in err
+    assert "samples ahead), band 0.5-13.3 Hz" in err
+    # a band whose bottom does not leave room below fs/3 stops with one line
+    argv = ["live", "--rig", "acceleration", "--channels", "1", "--duration", "4",
+            "--fs", "8", "--compensate", "preview", "--speed", "inf", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--fs 8" in err[0] and "--band" in err[0], err

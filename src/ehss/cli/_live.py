@@ -205,7 +205,7 @@ _OPTIONS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
             "spectrum is within 20 dB of its peak); with --rig --compensate also the "
             "band of the rig's reference and of its compensation (default 0.5-20 Hz "
             "for the position loop, 3-50 Hz for the acceleration loop, 1-50 Hz for "
-            "the force loop)"))),
+            "the force loop; its top at most fs/3)"))),
         ("--update", dict(type=float, default=0.1, metavar="S", help=(
             "evaluation period, s of stream time (default: %(default)s)"))),
     ),

@@ -53,7 +53,7 @@ def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, 
         raise ParameterError(f"{why}; --compensate needs a loop that follows its reference")
     fs = params.timing.control_rate_hz if args.fs is None else float(args.fs)
     rms, band = RIG_COMPENSATE_SIGNAL[args.rig]
-    band = band if args.band is None else tuple(args.band)
+    band = _band_at_rate(band, fs) if args.band is None else tuple(args.band)
     if args.rms is not None:
         rms = check_real(args.rms, "--rms", lo=0.0, lo_open=True)
     n = int(round(duration_s * fs))
@@ -64,6 +64,29 @@ def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, 
     target = SteppingRig(args.rig, desired, fs=fs, params=params, events=events,
                          preview=_preview(args, fs), seed=args.seed)
     return target, params, band
+
+
+def _band_at_rate(band: tuple[float, float], fs: float) -> tuple[float, float]:
+    """The rig's default band at ``fs``: its top at most fs/3, where the inverse's band
+    limit, which tapers to zero from the top to 1.5 times it, ends at the Nyquist
+    frequency (:func:`ehss.compensation.design_inverse`); said when it is lowered.
+
+    >>> _band_at_rate((0.5, 20.0), 1000.0), _band_at_rate((0.5, 20.0), 30.0)
+    ((0.5, 20.0), (0.5, 10.0))
+    """
+    lo, hi = band
+    top = fs / 3.0
+    if hi <= top:
+        return band
+    if lo >= 0.5 * top:
+        raise ParameterError(
+            f"--fs {fs:g}: the rig's default band {lo:g}-{hi:g} Hz does not fit below "
+            f"fs/3 = {top:.3g} Hz, where the inverse's band limit must end; give a higher "
+            "--fs or a --band below it")
+    print(f"ehss live: the rig's default band {lo:g}-{hi:g} Hz ends at fs/3 = {top:.3g} Hz "
+          f"at --fs {fs:g} (the inverse's band limit tapers to 1.5 times its top, below "
+          "fs/2); --band sets another", file=sys.stderr, flush=True)
+    return lo, float(f"{top:.3g}")
 
 
 def _check_within_limits(desired: np.ndarray, fs: float, loop: str, params: Any, rms: float,
