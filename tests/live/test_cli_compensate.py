@@ -63,6 +63,12 @@ def test_compensated_rig_run_reports_and_records_its_figures(tmp_path, capsys):
     (["live", "--rig", "position", "--taps", "512"], "--compensate only"),
     (["live", "--rig", "position", "--compensate", "preview", "--taps", "4096"], "--taps"),
     (["live", "--rig", "position", "--compensate", "preview", "--taps", "0"], "--taps"),
+    (["live", "--rig", "position", "--compensate", "preview", "--fs", "nan"], "--fs"),
+    (["live", "--rig", "position", "--compensate", "preview", "--fs", "inf"], "--fs"),
+    (["live", "--rig", "position", "--compensate", "preview", "--band", "5", "nan"],
+     "--band 5 nan"),
+    (["live", "--rig", "position", "--compensate", "preview", "--band", "1", "600"],
+     "--band 1 600"),
 ])
 def test_bad_compensation_input_exits_2_with_one_line(argv, word, capsys):
     assert main(argv) == 2

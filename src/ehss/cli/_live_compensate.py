@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 import ehss
-from ehss._checks import check_real
+from ehss._checks import check_band, check_real
 from ehss.errors import ParameterError
 from ehss.live.source import Block
 
@@ -53,7 +53,8 @@ def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, 
         raise ParameterError(f"{why}; --compensate needs a loop that follows its reference")
     fs = params.timing.control_rate_hz if args.fs is None else float(args.fs)
     rms, band = RIG_COMPENSATE_SIGNAL[args.rig]
-    band = _band_at_rate(band, fs) if args.band is None else tuple(args.band)
+    band = _band_at_rate(band, fs) if args.band is None \
+        else check_band(args.band, "--band", fs=fs, below_nyquist=True)
     if args.rms is not None:
         rms = check_real(args.rms, "--rms", lo=0.0, lo_open=True)
     n = int(round(duration_s * fs))
@@ -125,6 +126,7 @@ def _udp_target(args: argparse.Namespace) -> tuple[Any, tuple[float, float]]:
                              "and RMS of its reference, and where the compensators go")
     fs = check_real(args.fs, "--fs", lo=0.0, lo_open=True, unit="Hz")
     rms = check_real(args.rms, "--rms", lo=0.0, lo_open=True)
+    band = check_band(args.band, "--band", fs=fs, below_nyquist=True)
     layout = RecordLayout(parse_fields(args.fields))
     sender = DatagramSender(parse_address(args.target))
     source = UdpSource(layout, parse_address(args.udp), fs=fs)
@@ -138,7 +140,7 @@ def _udp_target(args: argparse.Namespace) -> tuple[Any, tuple[float, float]]:
         source.close()
         sender.close()
         raise
-    return target, tuple(args.band)
+    return target, band
 
 
 class _HandedSource:
@@ -234,6 +236,10 @@ def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
         raise ParameterError("--compensate runs with --rig (the simulated rig's filters "
                              "take the compensators) or --udp with --target (a remote "
                              "target takes them as ehss.target datagrams)")
+    if args.fs is not None:
+        args.fs = check_real(args.fs, "--fs", lo=0.0, lo_open=True)
+    if args.band is not None:
+        args.band = check_band(args.band, "--band")
     if args.udp is not None:
         target, band = _udp_target(args)
         try:
