@@ -325,3 +325,18 @@ def test_live_settings_that_mean_nothing_are_refused(tmp_path, capsys, extra, wo
     err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
     assert len(err) == 1 and all(w in err[0] for w in words), err
     assert not report.exists()
+
+
+@pytest.mark.parametrize(("argv", "word"), [
+    (["live", "--rig", "position", "--duration", "2", "--learn", "1e30"], "--learn"),
+    (["live", "--rig", "position", "--duration", "2", "--compare", "recent",
+      "--recent", "1e30"], "--recent"),
+    (["live", "--rig", "position", "--duration", "2", "--update", "inf"], "--update"),
+    (["stream", "--rig", "position", "--duration", "1e30", "--to", "127.0.0.1:9"],
+     "duration_s=1e+30"),
+])
+def test_a_time_too_long_for_memory_or_not_finite_is_refused(argv, word, capsys):
+    # a learning time or a record of 1e30 s would be an array of 1e33 samples, an
+    # evaluation every inf seconds a count that does not exist: one line, exit 2
+    assert main([*argv, "--speed", "inf"] if argv[0] == "live" else argv) == 2
+    _one_line(capsys.readouterr().err, word)

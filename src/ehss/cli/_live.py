@@ -447,6 +447,7 @@ def _check_options(args: argparse.Namespace) -> None:
         check_int(args.taps, "--taps", lo=1, hi=MAX_TAPS)
     if args.stop_after is not None:
         _check_positive("--stop-after", args.stop_after)
+    _check_positive("--update", args.update)
 
 
 def _check_at_rate(est: Any, det: Any, source: Any) -> None:
@@ -457,6 +458,12 @@ def _check_at_rate(est: Any, det: Any, source: Any) -> None:
     if fs is None:
         return
     est.lam(fs)
+    from ehss.signals import MAX_SAMPLES
+
+    for option, seconds in (("--learn", det.learn_s), ("--recent", det.recent_s)):
+        if seconds * fs > MAX_SAMPLES:
+            raise ParameterError(f"{option} {seconds:g} holds {seconds * fs:.3g} samples at "
+                                 f"{fs:g} Hz; at most {MAX_SAMPLES} are allowed")
     if det.band_hz is not None:
         check_band(det.band_hz, "--band", fs=fs)
 

@@ -266,6 +266,10 @@ class ChannelProcessor:
         self._captured_learning = True
         self.n_samples = 0
         self.messages: list[str] = []
+        if det.learn_s * self.fs > ehss.signals.MAX_SAMPLES:
+            raise ParameterError(f"learn_s={det.learn_s!r} at {self.fs:g} Hz holds "
+                                 f"{det.learn_s * self.fs:.3g} samples; at most "
+                                 f"{ehss.signals.MAX_SAMPLES} are allowed")
         n_learn = max(1, int(round(det.learn_s * self.fs)))
         self._learn = (np.empty(n_learn), np.empty(n_learn))
         self._n_scale = max(1, int(round(est.scale_s * self.fs)))

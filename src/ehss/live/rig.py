@@ -154,6 +154,22 @@ def rig_reference(n: int, fs: float, *, band_hz: tuple[float, float], rms: float
                                             fs=fs, seed=seed, fade_s=RIG_FADE_S).values[:n]
 
 
+def _check_duration(duration_s: Any, fs: float) -> None:
+    """A rig record's length: finite, long enough for its fades, short enough to hold."""
+    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s)
+            and duration_s > 0):
+        raise ParameterError(f"duration_s={duration_s!r} must be > 0")
+    if duration_s < 2 * RIG_FADE_S:
+        raise ParameterError(f"duration_s={duration_s!r} is too short: the rig's reference "
+                             f"fades in and out over {RIG_FADE_S:g} s at each end, so at "
+                             f"least {2 * RIG_FADE_S:g} s")
+    if duration_s * fs > ehss.signals.MAX_SAMPLES:
+        raise ParameterError(
+            f"duration_s={duration_s!r} at fs={fs!r} gives {duration_s * fs:.3g} samples; at "
+            f"most {ehss.signals.MAX_SAMPLES} are allowed (split the test into shorter "
+            "records)")
+
+
 def rig_record(
     loop: str, *, n_channels: int, duration_s: float, fs: float | None = None,
     params: ehss.RigParams | None = None, events: tuple[RigEvent, ...] = (),
@@ -190,13 +206,7 @@ def rig_record(
     layout = rig_layout(n_channels)
     params = ehss.preset("default") if params is None else params
     fs = params.timing.control_rate_hz if fs is None else float(fs)
-    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s)
-            and duration_s > 0):
-        raise ParameterError(f"duration_s={duration_s!r} must be > 0")
-    if duration_s < 2 * RIG_FADE_S:
-        raise ParameterError(f"duration_s={duration_s!r} is too short: the rig's reference "
-                             f"fades in and out over {RIG_FADE_S:g} s at each end, so at "
-                             f"least {2 * RIG_FADE_S:g} s")
+    _check_duration(duration_s, fs)
     d_rms, d_band = RIG_SIGNAL[loop]
     rms = d_rms if rms is None else rms
     band_hz = d_band if band_hz is None else band_hz

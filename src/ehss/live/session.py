@@ -212,8 +212,9 @@ class LiveSession:
         log: Callable[[dict], None] | None = None, batch_s: float = 0.002,
         compensation: Callable[[], CompensationSnapshot] | None = None,
     ) -> None:
-        if not (isinstance(update_s, (int, float)) and update_s > 0):
-            raise ParameterError(f"update_s={update_s!r} must be > 0 (s)")
+        if not (isinstance(update_s, (int, float)) and math.isfinite(update_s)
+                and update_s > 0):
+            raise ParameterError(f"update_s={update_s!r} must be finite and > 0 (s)")
         if not (isinstance(batch_s, (int, float)) and 0 <= batch_s < 1):
             raise ParameterError(f"batch_s={batch_s!r} must be in [0, 1) s")
         self.source = source
