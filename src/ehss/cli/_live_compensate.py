@@ -51,7 +51,8 @@ def _rig_target(args: argparse.Namespace, duration_s: float) -> tuple[Any, Any, 
                         f"--params {args.params}" if args.params else f"--preset {args.preset}")
     if why is not None:     # its closed loop follows no reference: no inverse to adapt
         raise ParameterError(f"{why}; --compensate needs a loop that follows its reference")
-    fs = params.timing.control_rate_hz if args.fs is None else float(args.fs)
+    fs = params.timing.control_rate_hz if args.fs is None \
+        else check_real(args.fs, "--fs", lo=0.0, lo_open=True, unit="Hz")
     rms, band = RIG_COMPENSATE_SIGNAL[args.rig]
     band = _band_at_rate(band, fs) if args.band is None \
         else check_band(args.band, "--band", fs=fs, below_nyquist=True)
@@ -236,10 +237,6 @@ def run_compensated(args: argparse.Namespace, duration_s: float) -> int:
         raise ParameterError("--compensate runs with --rig (the simulated rig's filters "
                              "take the compensators) or --udp with --target (a remote "
                              "target takes them as ehss.target datagrams)")
-    if args.fs is not None:
-        args.fs = check_real(args.fs, "--fs", lo=0.0, lo_open=True)
-    if args.band is not None:
-        args.band = check_band(args.band, "--band")
     if args.udp is not None:
         target, band = _udp_target(args)
         try:
