@@ -22,7 +22,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-import scipy.signal
+
+import ehss
 
 __all__ = ["fixed_linear_floor", "stretch_rms"]
 
@@ -63,12 +64,9 @@ def fixed_linear_floor(run: Callable[[np.ndarray], np.ndarray], desired: np.ndar
             break
         h = np.ones_like(d_spec)
         for k in range(desired.shape[0]):
-            fw, s_uu = scipy.signal.welch(drive[k, skip:], fs, nperseg=nperseg)
-            _, s_uy = scipy.signal.csd(drive[k, skip:], feedback[k, skip:], fs,
-                                       nperseg=nperseg)
-            h1 = s_uy / s_uu
-            h[k, inside] = (np.interp(f[inside], fw, h1.real)
-                            + 1j * np.interp(f[inside], fw, h1.imag))
+            h1 = ehss.h1_estimate(drive[k, skip:], feedback[k, skip:], fs, nperseg=nperseg)
+            h[k, inside] = (np.interp(f[inside], h1.freq_hz, h1.response.real)
+                            + 1j * np.interp(f[inside], h1.freq_hz, h1.response.imag))
         drive = np.fft.irfft(np.where(inside, d_spec / h, d_spec), n, axis=1)
     return errors
 
