@@ -25,7 +25,7 @@ import numpy as np
 
 import ehss
 
-__all__ = ["fixed_linear_floor", "stretch_rms"]
+__all__ = ["fixed_linear_floor", "stretch_rms", "stretch_refit_rms"]
 
 
 def fixed_linear_floor(run: Callable[[np.ndarray], np.ndarray], desired: np.ndarray, fs: float,
@@ -75,3 +75,30 @@ def stretch_rms(error: Any, fs: float, t0: float, t1: float) -> np.ndarray:
     """RMS of ``error`` (n_channels, n) over [t0, t1) s, per channel."""
     e = np.asarray(error)[:, int(round(t0 * fs)):int(round(t1 * fs))]
     return np.sqrt(np.mean(e ** 2, axis=1))
+
+
+def stretch_refit_rms(error: Any, reference: Any, fs: float, t0: float, t1: float, *,
+                      taps_s: float = 0.064) -> np.ndarray:
+    """RMS over [t0, t1) s of what is left of ``error`` (n_channels, n) once a linear
+    filter of ``reference`` (same shape), fitted by least squares on that stretch alone,
+    is taken from it: per channel.
+
+    The filter has taps from ``-taps_s`` to ``+taps_s`` (the future of the reference
+    too, as in preview mode). To first order this is what a linear inverse changed for
+    that stretch alone could take from the error, knowing the error beforehand: a bound
+    no online compensator, even one that changes every 2 s, can pass. It is optimistic:
+    its ``2 K + 1`` coefficients take about ``(2 K + 1) / N`` of an uncorrelated error's
+    power on ``N`` samples by chance. The reference is taken as zero outside the record
+    (a faded one is).
+    """
+    e = np.asarray(error)
+    i0, i1, lag = int(round(t0 * fs)), int(round(t1 * fs)), int(round(taps_s * fs))
+    padded = np.pad(np.asarray(reference), ((0, 0), (lag, lag)))  # r[t] is padded[t + lag]
+    out = np.empty(e.shape[0])
+    for k in range(e.shape[0]):
+        # column j + lag holds r[t - j] for t in the stretch, j = -lag ... lag
+        lagged = np.column_stack([padded[k, i0 - j + lag:i1 - j + lag]
+                                  for j in range(-lag, lag + 1)])
+        coef, *_ = np.linalg.lstsq(lagged, e[k, i0:i1], rcond=None)
+        out[k] = np.sqrt(np.mean((e[k, i0:i1] - lagged @ coef) ** 2))
+    return out

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.signal
 from held_inverse import Sending, held
-from linear_floor import fixed_linear_floor, stretch_rms
+from linear_floor import fixed_linear_floor, stretch_refit_rms, stretch_rms
 
 import ehss
 from ehss.compensation.checks import check_drive
@@ -140,7 +140,7 @@ def test_the_aim_after_a_heavier_payload_lies_beyond_any_fixed_linear_inverse():
     inverse, found in hindsight on the whole record, leaves on each payload
     (``linear_floor``): the rig's own nonlinear distortion at that drive."""
     mass = ehss.preset("default").load.mass_kg
-    worst = []
+    worst, worst_refit = [], []
     for seeds in ((1, 2), (3, 4)):
         desired = _desired(40.0, seeds)
         floor = {}
@@ -173,11 +173,27 @@ def test_the_aim_after_a_heavier_payload_lies_beyond_any_fixed_linear_inverse():
         before = stretch_rms(floor[1.0], FS, 10.0, 20.0)
         worst.append(np.max([stretch_rms(floor[1.4], FS, *w) / before for w in _WINDOWS_S],
                             axis=0))
+        # an inverse changed for each 2-s stretch alone, knowing its error beforehand
+        # (to first order: a filter of the reference fitted on the stretch, taken from
+        # the error), before the change and after it
+        refit_before = np.sqrt(np.mean([stretch_refit_rms(floor[1.0], desired, FS, t, t + 2.0)
+                                        ** 2 for t in np.arange(10.0, 20.0, 2.0)], axis=0))
+        refit_after = [stretch_refit_rms(floor[1.4], desired, FS, *w) for w in _WINDOWS_S]
+        # it takes more than chance from the heavier loop's stretches (129 coefficients
+        # on 2000 samples take 6.5 %; measured 20-28 %): the distortion's best linear
+        # approximation moves with each stretch's content
+        taken = 1.0 - np.mean([(a / stretch_rms(floor[1.4], FS, *w)) ** 2
+                               for a, w in zip(refit_after, _WINDOWS_S, strict=True)], axis=0)
+        assert np.all(taken > 0.13)
+        worst_refit.append(np.max(refit_after, axis=0) / refit_before)
     # and a 2-s stretch of it lies beyond the aim's 1.5x on some reference (measured
     # 1.47, 1.67, 1.42 and 2.38x on the references of seeds 1-4): no fixed linear
     # inverse, even one fitted in hindsight, meets the aim on every reference; a better
     # one lowers the level before more than the heavier loop's distortion after
     assert np.max(worst) > 1.5
+    # nor does an inverse fitted in hindsight for each stretch alone, a bound for any
+    # linear compensator that adapts, however fast (measured 1.45, 1.61, 1.53, 2.24x)
+    assert np.max(worst_refit) > 1.5
 
 
 @pytest.mark.slow
