@@ -59,6 +59,7 @@ __all__ = [
     "MODES",
     "CompensatorDesign",
     "design_compensator",
+    "fir_modes_hz",
     "fir_taps",
     "pass_through",
     "run_compensator",
@@ -207,6 +208,23 @@ def _fast_part(den: np.ndarray, n_taps: int, slowest: float = 0.0) -> np.ndarray
     roots = np.roots(den) if den.size > 1 else np.zeros(0, complex)
     fast = roots[np.abs(roots) <= max(math.exp(-8.0 / n_taps), slowest)]
     return np.real_if_close(np.poly(fast), tol=1e6).real if fast.size else np.ones(1)
+
+
+def fir_modes_hz(design: CompensatorDesign) -> np.ndarray:
+    """Frequencies (Hz, from 0 to fs/2) of the inverse's modes that ``design`` leaves to
+    its FIR: those that outlast an eighth of its span (:func:`design_compensator`).
+
+    Near 0 Hz such a mode is a model's zero close to ``z = 1``, whose effect lies below
+    the band; at the band's frequencies it is a lightly damped resonance of the inverse
+    (a model's zero pair beside a mode of the loop), which the FIR cannot realise."""
+    if design.inverse.den.size < 2:
+        return np.zeros(0)
+    roots = np.roots(design.inverse.den)
+    run = np.concatenate([np.roots(sec[3:]) for sec in design.sos])  # the sections' poles
+    left = [r for r in roots
+            if abs(r) > math.exp(-8.0 / design.taps.size)
+            and (run.size == 0 or np.min(np.abs(run - r)) > 1e-6)]
+    return np.abs(np.angle(np.asarray(left, complex))) * design.fs_hz / (2.0 * math.pi)
 
 
 def _slowest_section(fs: float, lo: float) -> float:
