@@ -697,9 +697,11 @@ class AdaptiveCompensator:
         moved the mode to 42 Hz; its models were right (within 0.1 dB / 1° of the loop
         to 42 Hz), but their inverses' resonance, radius 0.9694 against the FIR's
         0.9692, was left to the FIR, realised 3–10 dB off (28–38 % at the band's
-        bottom) and loaded as better than the running one: channel 1 stayed at 10–16×
-        its level before for 10 s, against 0.75× with the heavier mass from the start.
-        The sections realise it to 0.02 dB."""
+        bottom) and loaded as better than the running one: channel 1 stayed at 14× its
+        level before for 6 s, against 0.75× with the heavier mass from the start. The
+        sections realise it to 0.02 dB and settle in 482 samples instead of 265
+        (docs/adaptive_compensation.md, "A table mode that a change moves to the band's
+        top")."""
         def design(within: tuple[float, float]) -> CompensatorDesign:
             return design_compensator(model, band_hz=band or self.band_hz, mode=self.mode,
                                       preview=self.preview, n_taps=self.n_taps,
@@ -715,7 +717,11 @@ class AdaptiveCompensator:
         lo = (band or self.band_hz)[0]
         if (first.max_amplitude_error_db > bounds[0] or first.max_phase_error_deg > bounds[1]) \
                 and np.any(fir_modes_hz(first) >= lo):
-            sections = design(bounds)
+            try:
+                sections = design(bounds)
+            except ParameterError:      # more sections than the target runs
+                return first
+            # it realises the inverse better, so it passes where the first passed
             if np.mean(np.abs(sections.error) ** 2) < np.mean(np.abs(first.error) ** 2):
                 figures.pop("realisation", None)
                 return self._realisable(sections, model, figures, running)
