@@ -281,6 +281,40 @@ def test_models_refused_for_their_gain_point_to_the_band_and_near_misses_to_the_
     assert "up to 78.3×" in lines["channel 2"] and "narrower --band" in lines["channel 2"]
     assert "would let them through" not in lines["channel 2"]
 
+def test_a_channel_whose_later_drives_were_over_the_gain_bound_says_so(capsys):
+    # compensators ran on both channels; channel 1's later models all asked more drive
+    # than the bound (a change that slowed the loop), channel 2 had two such refusals
+    # among its loads, as a healthy rig's peaks do now and then: only channel 1 says so
+    from types import SimpleNamespace
+
+    from ehss.cli._live_compensate import _compare
+
+    def over(t_s, gain):
+        return {"accepted": False, "t_s": t_s,
+                "reason": f"the drive's RMS is {gain:.3g}× the reference's (bound 3×): the "
+                          "inverse amplifies where the model is not to be trusted; narrow "
+                          "the band or re-identify"}
+
+    ok = {"accepted": True, "t_s": 1.0, "reason": ""}
+    rec = SimpleNamespace(
+        desired=np.ones((2, 2000)), feedback=np.zeros((2, 2000)), fs=1000.0,
+        channels=("1", "2"),
+        loads=[{"channel": c, "model": "estimator", "t_s": 1.0} for c in "12"],
+        decisions={"1": [ok, over(21.5, 3.22), over(22.0, 3.88),
+                         {"accepted": False, "t_s": 22.5, "reason": "a model refused"},
+                         over(24.0, 3.41)],
+                   "2": [ok, over(5.0, 3.1), over(9.0, 3.05), ok]},
+        tracking_rms=lambda t0, t1: np.ones(2))
+    out = _compare(rec, [])
+    assert out["1"]["over_gain"] == {"refusals": 3, "max_ratio": 3.88, "bound": 3.0,
+                                     "latest_t_s": 24.0}
+    assert "over_gain" not in out["2"]
+    line = next(x for x in capsys.readouterr().err.splitlines() if "refusals were" in x)
+    assert line.startswith("ehss live: channel 1: 3 of its 4 refusals were drives over "
+                           "--max-gain 3× (up to 3.88×), the latest at 24.00 s")
+    assert "narrower --band" in line and "--max-gain 3.9 would let them through" in line
+
+
 def test_a_channel_switched_off_says_so_with_the_reason(capsys):
     from types import SimpleNamespace
 

@@ -380,6 +380,18 @@ def _compare(rec: Any, plain: list[np.ndarray], ignored: dict[int, str] | None =
             channels[name]["latest_refusal"] = refused[-1]
             print(f"ehss live: channel {name}: no compensator was loaded; the latest "
                   f"refusal: {refused[-1]}{_hint(refused)}", file=sys.stderr)
+        elif (over := _over_gain(refused)) is not None and len(over) >= _OVER_GAIN_SAID:
+            # compensators ran, but most later models asked more drive than the bound:
+            # the one before each ran on, which after a change of the loop is stale
+            gain, bound = max(over)
+            last = [d["t_s"] for d in rec.decisions[name]
+                    if not d["accepted"] and _OVER_GAIN.match(d["reason"])][-1]
+            channels[name]["over_gain"] = {"refusals": len(over), "max_ratio": gain,
+                                           "bound": bound, "latest_t_s": float(last)}
+            print(f"ehss live: channel {name}: {len(over)} of its {len(refused)} refusals "
+                  f"were drives over --max-gain {bound:g}× (up to {gain:.3g}×), the latest "
+                  f"at {last:.2f} s; the compensator before each ran on"
+                  f"{_gain_hint(gain, bound)}", file=sys.stderr)
     return channels
 
 
@@ -424,7 +436,7 @@ _OVER_GAIN = re.compile(
 
 def _hint(refused: list[str]) -> str:
     """What to try when every judgement of a channel was refused, if the reasons say."""
-    from ehss.compensation.adaptive import H1_DISAGREES, NEAR_MISS
+    from ehss.compensation.adaptive import H1_DISAGREES
 
     h1 = sum(r.startswith(H1_DISAGREES) for r in refused)
     if 2 * h1 >= len(refused):
@@ -434,16 +446,38 @@ def _hint(refused: list[str]) -> str:
         return (". Most models disagreed with the H1 estimate: a --band where the "
                 "reference holds its power (not where its spectrum only rolls off) lets "
                 "them be validated")
+    over = _over_gain(refused)
+    if over is None:
+        return ""
+    gain, bound = max(over)
+    return f". Most drives were over --max-gain {bound:g}× (up to {gain:.3g}×)" \
+        + _gain_hint(gain, bound)
+
+
+#: Refusals for the drive's gain a channel that ran compensators must have had, most of
+#: its refusals, for its summary to say so: as many as raise a fault's alarm in a row
+#: (``alarm_after``); a healthy rig's drive passes its bound but once in minutes.
+_OVER_GAIN_SAID = 3
+
+
+def _over_gain(refused: list[str]) -> list[tuple[float, float]] | None:
+    """The (ratio, bound) of each refusal for a drive over the gain bound, if they are
+    at least half of ``refused``; None otherwise. Most refusals such: inverses that need
+    more gain in the band than the bound allows (a lightly damped mode there, a band
+    reaching past the loop's own, a loop that a change slowed)."""
     over = [(float(m.group(1)), float(m.group(2)))
             for m in map(_OVER_GAIN.match, refused) if m]
-    if 2 * len(over) < len(refused):
-        return ""
-    # most refusals: inverses that need more gain in the band than the bound allows (a
-    # lightly damped mode there, a band reaching past the loop's own); a bound raised
-    # beyond NEAR_MISS times itself would let through what the guard calls a fault
-    gain, bound = max(over)
-    hint = (f". Most drives were over --max-gain {bound:g}× (up to {gain:.3g}×): a "
-            "narrower --band asks less of the inverse")
+    return over if over and 2 * len(over) >= len(refused) else None
+
+
+def _gain_hint(gain: float, bound: float) -> str:
+    """What to try for drives up to ``gain`` times the reference over the ``bound``: a
+    narrower band, and a bound that would let them through if they are within
+    ``NEAR_MISS`` times it (raised further, it would let through what the guard calls a
+    fault)."""
+    from ehss.compensation.adaptive import NEAR_MISS
+
+    hint = ": a narrower --band asks less of the inverse"
     if gain <= NEAR_MISS * bound:
         hint += f"; --max-gain {math.ceil(10 * gain) / 10:g} would let them through"
     return hint
