@@ -390,8 +390,8 @@ def test_a_loop_behind_a_high_pass_near_the_band_is_compensated() -> None:
     0.5 Hz; the 256-tap FIR, which resolves 4 Hz at 1 kHz, cannot realise it, and its
     designs are refused as realised 13-30 dB off. Run as a section when that happens,
     it is: measured 12.5-24.1x less error than without compensation over [15, 30) s
-    on 12 channels (references of seeds 1-6, sensor noise seeds 0 and 1; 12.5x and
-    14.3x here), against 6.8-8.6x with the FIR alone."""
+    on 12 channels (references of seeds 1-6, sensor noise seeds 0 and 1; 13.5x and
+    19.5x here), against 6.8-8.6x with the FIR alone."""
     desired = loop_desired(HIGH_PASS, DURATION_S, (1, 2))
 
     def target() -> SteppingLoop:
