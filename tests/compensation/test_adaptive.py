@@ -855,6 +855,28 @@ def test_a_narrowed_inverse_replaces_a_stale_compensator_not_a_good_one():
     assert "the compensator that runs leaves" in same.reason
 
 
+def test_a_narrowed_compensator_running_does_not_cut_the_search_for_a_band_short():
+    # with the narrowed inverse running, the search for the widest band whose drive
+    # passes finds the same top again: each band it tries is judged by its drive, and
+    # only the band found is compared with what runs, over the whole band. Judged
+    # against the running one over each narrower band instead, every band at or below
+    # its top was "no better" and taken for one whose drive fails: the search ended with
+    # none, and a channel after a change kept its first narrowed inverse (the 25 Hz
+    # servo under 1-60 Hz, +40 % mass: 145 µm over [22, 30) s instead of 59)
+    m = _loop()
+    r, h1 = _h1(m)
+    asked = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, h1, r)
+    guard = UpdateGuard(max_gain=0.9 * max(asked.figures["rms_gain"],
+                                           asked.figures["peak_gain"]))
+    comp = AdaptiveCompensator(FS, BAND, preview=128, guard=guard)
+    first = comp.assess(1.0, m, h1, r, narrow_top=True)
+    top = first.figures["narrowed_to_hz"]
+    again = comp.assess(2.0, m, h1, r, running=first.design, narrow_top=True)
+    assert not again.accepted and not again.fault
+    assert f"up to {top:.3g} Hz, where its drive passes" in again.reason
+    assert "with the compensator that runs" in again.reason
+
+
 def test_a_model_that_misses_only_the_bands_top_point_is_validated_below_it():
     # the mirror of the low edge: the estimate 20 deg off at the band's highest point
     # only (where a band reaching past the loop ends in noise), refused as a fault by

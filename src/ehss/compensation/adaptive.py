@@ -619,8 +619,14 @@ class AdaptiveCompensator:
         notes: dict[str, Any] = {}
 
         def design(top: float) -> CompensatorDesign:
+            # against no running compensator: each band is tried for its drive, and the
+            # one found is compared with what runs over the whole band (``kept``).
+            # Compared over each narrower band, a narrowed compensator that runs left
+            # less below its own top than any design there, the search took those
+            # bands for failing and ended with none (tests/compensation/
+            # test_adaptive.py, a narrowed compensator running)
             notes.clear()
-            return self._designed(model, notes, running, (lo, top))
+            return self._designed(model, notes, None, (lo, top))
 
         kept = leaves(running) if running is not None and running.mode == self.mode \
             else math.inf
