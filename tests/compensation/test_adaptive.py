@@ -827,18 +827,24 @@ def test_a_drive_beyond_the_gain_bound_is_narrowed_to_where_it_passes():
     assert not tight.assess(1.0, m, h1, r, narrow_top=True).accepted
 
 
+def _over_its_bound():
+    """The loop, its reference and H1 estimate, the design its model asks for, and a
+    compensator whose gain bound is 10 % below that design's drive."""
+    m = _loop()
+    r, h1 = _h1(m)
+    asked = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, h1, r)
+    guard = UpdateGuard(max_gain=0.9 * max(asked.figures["rms_gain"],
+                                           asked.figures["peak_gain"]))
+    return m, r, h1, asked, AdaptiveCompensator(FS, BAND, preview=128, guard=guard)
+
+
 def test_a_narrowed_inverse_replaces_a_stale_compensator_not_a_good_one():
     # by the model's account over the whole band: the inverse built for a loop a third
     # as responsive (it leaves 2.3 times the reference) leaves more than the narrowed
     # one and is replaced; one built for a loop 20 % less responsive leaves 25 %,
     # less than the narrowed one, which leaves the band above its top uncompensated,
     # and stays, as does the model's own full inverse (no fault: nothing is wrong)
-    m = _loop()
-    r, h1 = _h1(m)
-    asked = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, h1, r)
-    guard = UpdateGuard(max_gain=0.9 * max(asked.figures["rms_gain"],
-                                           asked.figures["peak_gain"]))
-    comp = AdaptiveCompensator(FS, BAND, preview=128, guard=guard)
+    m, r, h1, asked, comp = _over_its_bound()
     def stale(k):
         return design_compensator(ArmaxModel(a=m.a, b=k * m.b, delay=m.delay, dt=m.dt),
                                   band_hz=BAND, preview=128)
@@ -863,12 +869,7 @@ def test_a_narrowed_compensator_running_does_not_cut_the_search_for_a_band_short
     # its top was "no better" and taken for one whose drive fails: the search ended with
     # none, and a channel after a change kept its first narrowed inverse (the 25 Hz
     # servo under 1-60 Hz, +40 % mass: 145 µm over [22, 30) s instead of 59)
-    m = _loop()
-    r, h1 = _h1(m)
-    asked = AdaptiveCompensator(FS, BAND, preview=128).assess(1.0, m, h1, r)
-    guard = UpdateGuard(max_gain=0.9 * max(asked.figures["rms_gain"],
-                                           asked.figures["peak_gain"]))
-    comp = AdaptiveCompensator(FS, BAND, preview=128, guard=guard)
+    m, r, h1, asked, comp = _over_its_bound()
     first = comp.assess(1.0, m, h1, r, narrow_top=True)
     top = first.figures["narrowed_to_hz"]
     again = comp.assess(2.0, m, h1, r, running=first.design, narrow_top=True)
