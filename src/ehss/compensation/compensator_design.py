@@ -194,6 +194,12 @@ def _sections(num: np.ndarray, den: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(scipy.signal.tf2sos(b, a))
 
 
+def _fir_limit(n_taps: int) -> float:
+    """Radius of the slowest mode a section takes by default: one that dies out (by
+    e^-8) within the FIR's span; slower ones are left to the FIR."""
+    return math.exp(-8.0 / n_taps)
+
+
 def _fast_part(den: np.ndarray, n_taps: int, slowest: float = 0.0) -> np.ndarray:
     """The factor of ``den`` (monic, roots inside the unit circle) whose modes die out
     within an eighth of the FIR's span, or whose radius is at most ``slowest``; the
@@ -206,7 +212,7 @@ def _fast_part(den: np.ndarray, n_taps: int, slowest: float = 0.0) -> np.ndarray
     (:func:`design_compensator`).
     """
     roots = np.roots(den) if den.size > 1 else np.zeros(0, complex)
-    fast = roots[np.abs(roots) <= max(math.exp(-8.0 / n_taps), slowest)]
+    fast = roots[np.abs(roots) <= max(_fir_limit(n_taps), slowest)]
     return np.real_if_close(np.poly(fast), tol=1e6).real if fast.size else np.ones(1)
 
 
@@ -222,7 +228,7 @@ def fir_modes_hz(design: CompensatorDesign) -> np.ndarray:
     roots = np.roots(design.inverse.den)
     run = np.concatenate([np.roots(sec[3:]) for sec in design.sos])  # the sections' poles
     left = [r for r in roots
-            if abs(r) > math.exp(-8.0 / design.taps.size)
+            if abs(r) > _fir_limit(design.taps.size)
             and (run.size == 0 or np.min(np.abs(run - r)) > 1e-6)]
     return np.abs(np.angle(np.asarray(left, complex))) * design.fs_hz / (2.0 * math.pi)
 
